@@ -1,0 +1,33 @@
+# Two commands do all set-up on a fresh machine with Python >= 3.10:
+#   make train   -> venv, install, train PPO, evaluate against LQR, write policy + pictures
+#   make test    -> venv, install with test extras, run the test suite
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+RUN    ?= runs/ppo_stance
+
+.PHONY: train test bench evaluate clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+
+# torch is pinned and installed first: an unpinned torch (via SB3) would pull a multi-GB CUDA build
+$(VENV)/.installed-%: pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e '.[$*]'
+	touch $@
+
+train: $(VENV)/.installed-train
+	$(BIN)/python train/ppo.py --out $(RUN)
+	$(BIN)/python train/evaluate.py $(RUN) --baseline lqr --episodes 20 --gif --out $(RUN)/eval
+
+test: $(VENV)/.installed-test
+	$(BIN)/python -m pytest -q
+
+bench: $(VENV)/.installed-bench
+	$(BIN)/python benchmarks/bench_dynamics.py
+	$(BIN)/python benchmarks/bench_env.py
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

@@ -1,0 +1,504 @@
+r"""Analytic floating-base dynamics of the planar leg (lesson sections 1-5).
+
+Conventions, stated once:
+
+* ``q = [x_b, y_b, th_b, q1, q2]``: torso COM position (the hip sits there),
+  torso angle, hip angle (thigh relative to torso), knee angle (shank relative
+  to thigh). ``qd``, ``qdd`` are its first and second time derivatives.
+  Absolute link angles are ``th1 = th_b + q1`` and ``th2 = th1 + q2``; a link at
+  absolute angle ``th`` points along ``(cos th, sin th)`` from its proximal joint.
+* ``tau = [tau_hip, tau_knee]``; ``S = [0_{2x3} I_2]`` so ``S^T tau = [0, 0, 0, tau_hip, tau_knee]``
+  (section 2, Problem 2).
+* Equations of motion (section 4)::
+
+      M(q) qdd + h(q, qd) = S^T tau + Jc(q)^T lam
+      Jc(q) qdd + Jcdot(q, qd) qd = 0
+
+  ``h`` holds Coriolis, centrifugal **and** gravity terms. ``lam = [lam_x, lam_y]``
+  is the ground's force on the foot, world frame; ``lam_y > 0`` pushes up.
+  As the KKT system::
+
+      [ M   -Jc^T ] [qdd]   [S^T tau - h ]
+      [ Jc    0   ] [lam] = [-Jcdot qd   ]
+
+* Gravity acts along ``-y``; ``P = g (m_b y_b + m1 y_c1 + m2 y_c2)``.
+
+Every public function takes one robot (``q`` of shape ``(5,)``) or a batch with
+leading axes (``(..., 5)``); ``q``, ``qd`` and ``tau`` broadcast over the leading
+axes, and outputs carry the broadcast leading shape.
+
+How it is computed: in absolute coordinates ``z = (x_b, y_b, th_b, th1, th2) = T q``
+the mass matrix ``A`` is sparse, ``M = T^T A T`` and ``h = T^T h_z``. The hip is at
+the torso's COM, so the torso row decouples: ``th_b'' = -tau_hip / I_b`` in
+flight and in stance. In stance the contact fixes ``(x_b, y_b)'' = -Jcdot qd - J_leg
+(th1'', th2'')``, which leaves a 2x2 symmetric positive definite system in the leg
+angles, solved in closed form; flight leaves another 2x2 system. Nothing is
+inverted: each 2x2 system is solved by elimination.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .params import LegParams
+
+__all__ = [
+    "NQ",
+    "NU",
+    "S",
+    "mass_matrix",
+    "bias_forces",
+    "gravity_forces",
+    "contact_jacobian",
+    "contact_jdot_qd",
+    "foot_position",
+    "contact_inertia",
+    "stance_dynamics",
+    "flight_dynamics",
+    "kinetic_energy",
+    "potential_energy",
+    "com_position",
+    "params_array",
+]
+
+NQ = 5  # generalized coordinates
+NU = 2  # actuated joints
+S = np.array([[0.0, 0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0]])
+S.setflags(write=False)
+
+# z = T q with z = (x_b, y_b, th_b, th1, th2)
+_T = np.array(
+    [
+        [1.0, 0.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0, 1.0, 1.0],
+    ]
+)
+
+
+# ----------------------------------------------------------------------------
+# Single-robot kernels (one implementation of the math; batch loops call these)
+# ----------------------------------------------------------------------------
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _leg_terms(q, qd, p):
+    """Shared trigonometry, angular rates and inertial constants of one robot."""
+    m_b, m1, m2 = p[0], p[1], p[2]
+    l1, c1, c2 = p[6], p[8], p[9]
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    w1 = qd[2] + qd[3]
+    w2 = w1 + qd[4]
+    m = m_b + m1 + m2
+    a = m1 * c1 + m2 * l1  # first moment of the leg about the hip along the thigh
+    b = m2 * c2  # first moment of the shank about the knee
+    return np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), th1, th2, w1, w2, m, a, b
+
+
+@njit(cache=True, inline="always")
+def _stance_one(q, qd, tau, p, qdd, lam):
+    """Stance KKT solve for one robot; writes ``qdd`` (5,) and ``lam`` (2,)."""
+    I_b, I1, I2 = p[3], p[4], p[5]
+    m1, m2, l1, l2, c1, c2, g = p[1], p[2], p[6], p[7], p[8], p[9], p[10]
+    s1, co1, s2, co2, th1, th2, w1, w2, m, a, b = _leg_terms(q, qd, p)
+    k = m2 * l1 * c2
+    c12 = np.cos(th1 - th2)
+    s12 = np.sin(th1 - th2)
+    # leg block of A (absolute angles)
+    D11 = I1 + m1 * c1 * c1 + m2 * l1 * l1
+    D22 = I2 + m2 * c2 * c2
+    D12 = k * c12
+    # h_z: Coriolis/centrifugal + gravity in absolute coordinates
+    hx = -a * co1 * w1 * w1 - b * co2 * w2 * w2
+    hy = -a * s1 * w1 * w1 - b * s2 * w2 * w2 + m * g
+    h1 = k * s12 * w2 * w2 + a * g * co1
+    h2 = -k * s12 * w1 * w1 + b * g * co2
+    # foot Jacobian columns w.r.t. th1, th2 (J1, J2) and Jcdot qd (jx, jy)
+    J1x, J1y = -l1 * s1, l1 * co1
+    J2x, J2y = -l2 * s2, l2 * co2
+    jx = -l1 * co1 * w1 * w1 - l2 * co2 * w2 * w2
+    jy = -l1 * s1 * w1 * w1 - l2 * s2 * w2 * w2
+    # A's coupling columns between (x_b, y_b) and (th1, th2)
+    B1x, B1y = -a * s1, a * co1
+    B2x, B2y = -b * s2, b * co2
+    # reduced leg inertia K = D - J^T B - B^T J + m J^T J (SPD)
+    K11 = D11 - 2.0 * (J1x * B1x + J1y * B1y) + m * (J1x * J1x + J1y * J1y)
+    K22 = D22 - 2.0 * (J2x * B2x + J2y * B2y) + m * (J2x * J2x + J2y * J2y)
+    K12 = D12 - (J1x * B2x + J1y * B2y) - (B1x * J2x + B1y * J2y) + m * (J1x * J2x + J1y * J2y)
+    # right-hand side: Q - h + J^T h_xy + (B - m J)^T jd, with Q = (tau_hip - tau_knee, tau_knee)
+    r1 = (tau[0] - tau[1]) - h1 + (J1x * hx + J1y * hy) + ((B1x - m * J1x) * jx + (B1y - m * J1y) * jy)
+    r2 = tau[1] - h2 + (J2x * hx + J2y * hy) + ((B2x - m * J2x) * jx + (B2y - m * J2y) * jy)
+    # solve the 2x2 SPD system by elimination
+    f = K12 / K11
+    dd2 = (r2 - f * r1) / (K22 - f * K12)
+    dd1 = (r1 - K12 * dd2) / K11
+    xdd = -jx - (J1x * dd1 + J2x * dd2)
+    ydd = -jy - (J1y * dd1 + J2y * dd2)
+    lam[0] = m * xdd + B1x * dd1 + B2x * dd2 + hx
+    lam[1] = m * ydd + B1y * dd1 + B2y * dd2 + hy
+    thbdd = -tau[0] / I_b
+    qdd[0] = xdd
+    qdd[1] = ydd
+    qdd[2] = thbdd
+    qdd[3] = dd1 - thbdd
+    qdd[4] = dd2 - dd1
+
+
+@njit(cache=True, inline="always")
+def _flight_one(q, qd, tau, p, qdd):
+    """Unconstrained (flight) forward dynamics for one robot; writes ``qdd`` (5,)."""
+    I_b, I1, I2 = p[3], p[4], p[5]
+    m1, m2, l1, c1, c2, g = p[1], p[2], p[6], p[8], p[9], p[10]
+    s1, co1, s2, co2, th1, th2, w1, w2, m, a, b = _leg_terms(q, qd, p)
+    k = m2 * l1 * c2
+    c12 = np.cos(th1 - th2)
+    s12 = np.sin(th1 - th2)
+    D11 = I1 + m1 * c1 * c1 + m2 * l1 * l1
+    D22 = I2 + m2 * c2 * c2
+    D12 = k * c12
+    hx = -a * co1 * w1 * w1 - b * co2 * w2 * w2
+    hy = -a * s1 * w1 * w1 - b * s2 * w2 * w2 + m * g
+    h1 = k * s12 * w2 * w2 + a * g * co1
+    h2 = -k * s12 * w1 * w1 + b * g * co2
+    B1x, B1y = -a * s1, a * co1
+    B2x, B2y = -b * s2, b * co2
+    # (D - B^T B / m) thdd = Q - h_th + B^T h_xy / m
+    K11 = D11 - (B1x * B1x + B1y * B1y) / m
+    K22 = D22 - (B2x * B2x + B2y * B2y) / m
+    K12 = D12 - (B1x * B2x + B1y * B2y) / m
+    r1 = (tau[0] - tau[1]) - h1 + (B1x * hx + B1y * hy) / m
+    r2 = tau[1] - h2 + (B2x * hx + B2y * hy) / m
+    f = K12 / K11
+    dd2 = (r2 - f * r1) / (K22 - f * K12)
+    dd1 = (r1 - K12 * dd2) / K11
+    thbdd = -tau[0] / I_b
+    qdd[0] = -(B1x * dd1 + B2x * dd2 + hx) / m
+    qdd[1] = -(B1y * dd1 + B2y * dd2 + hy) / m
+    qdd[2] = thbdd
+    qdd[3] = dd1 - thbdd
+    qdd[4] = dd2 - dd1
+
+
+@njit(cache=True, inline="always")
+def _mass_matrix_one(q, p, M):
+    m_b, m1, m2, I_b, I1, I2 = p[0], p[1], p[2], p[3], p[4], p[5]
+    l1, c1, c2 = p[6], p[8], p[9]
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    m = m_b + m1 + m2
+    a = m1 * c1 + m2 * l1
+    b = m2 * c2
+    s1, co1, s2, co2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
+    D11 = I1 + m1 * c1 * c1 + m2 * l1 * l1
+    D22 = I2 + m2 * c2 * c2
+    D12 = m2 * l1 * c2 * np.cos(th1 - th2)
+    # M = T^T A T written out: columns 2, 3 of M see th1 and th2; column 4 sees th2 only
+    Mx1 = -a * s1 - b * s2  # d(p_com * m)/d th_b along x, = x-row coupling of q1 and th_b
+    My1 = a * co1 + b * co2
+    Mx2 = -b * s2
+    My2 = b * co2
+    M[0, 0] = m
+    M[0, 1] = 0.0
+    M[1, 1] = m
+    M[0, 2] = Mx1
+    M[0, 3] = Mx1
+    M[0, 4] = Mx2
+    M[1, 2] = My1
+    M[1, 3] = My1
+    M[1, 4] = My2
+    M[2, 2] = I_b + D11 + D22 + 2.0 * D12
+    M[2, 3] = D11 + D22 + 2.0 * D12
+    M[3, 3] = D11 + D22 + 2.0 * D12
+    M[2, 4] = D22 + D12
+    M[3, 4] = D22 + D12
+    M[4, 4] = D22
+    for i in range(5):
+        for j in range(i):
+            M[i, j] = M[j, i]
+
+
+@njit(cache=True, inline="always")
+def _bias_one(q, qd, p, h, gravity_only):
+    m1, m2, l1, c2, g = p[1], p[2], p[6], p[9], p[10]
+    s1, co1, s2, co2, th1, th2, w1, w2, m, a, b = _leg_terms(q, qd, p)
+    if gravity_only:
+        w1 = 0.0
+        w2 = 0.0
+    k = m2 * l1 * c2
+    s12 = np.sin(th1 - th2)
+    hx = -a * co1 * w1 * w1 - b * co2 * w2 * w2
+    hy = -a * s1 * w1 * w1 - b * s2 * w2 * w2 + m * g
+    h1 = k * s12 * w2 * w2 + a * g * co1
+    h2 = -k * s12 * w1 * w1 + b * g * co2
+    h[0] = hx
+    h[1] = hy
+    h[2] = h1 + h2
+    h[3] = h1 + h2
+    h[4] = h2
+
+
+@njit(cache=True, inline="always")
+def _foot_one(q, p, out):
+    l1, l2 = p[6], p[7]
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    out[0] = q[0] + l1 * np.cos(th1) + l2 * np.cos(th2)
+    out[1] = q[1] + l1 * np.sin(th1) + l2 * np.sin(th2)
+
+
+@njit(cache=True, inline="always")
+def _jacobian_one(q, p, Jc):
+    l1, l2 = p[6], p[7]
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    J1x, J1y = -l1 * np.sin(th1), l1 * np.cos(th1)
+    J2x, J2y = -l2 * np.sin(th2), l2 * np.cos(th2)
+    Jc[0, 0] = 1.0
+    Jc[0, 1] = 0.0
+    Jc[1, 0] = 0.0
+    Jc[1, 1] = 1.0
+    Jc[0, 2] = J1x + J2x
+    Jc[1, 2] = J1y + J2y
+    Jc[0, 3] = J1x + J2x
+    Jc[1, 3] = J1y + J2y
+    Jc[0, 4] = J2x
+    Jc[1, 4] = J2y
+
+
+@njit(cache=True, inline="always")
+def _jdot_qd_one(q, qd, p, out):
+    l1, l2 = p[6], p[7]
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    w1 = qd[2] + qd[3]
+    w2 = w1 + qd[4]
+    out[0] = -l1 * np.cos(th1) * w1 * w1 - l2 * np.cos(th2) * w2 * w2
+    out[1] = -l1 * np.sin(th1) * w1 * w1 - l2 * np.sin(th2) * w2 * w2
+
+
+@njit(cache=True, inline="always")
+def _com_one(q, p, out):
+    m_b, m1, m2, l1, c1, c2 = p[0], p[1], p[2], p[6], p[8], p[9]
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    m = m_b + m1 + m2
+    a = m1 * c1 + m2 * l1
+    b = m2 * c2
+    out[0] = q[0] + (a * np.cos(th1) + b * np.cos(th2)) / m
+    out[1] = q[1] + (a * np.sin(th1) + b * np.sin(th2)) / m
+
+
+# ----------------------------------------------------------------------------
+# Batch kernels: loop the single-robot kernels over the leading axis
+# ----------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _stance_batch(q, qd, tau, p, qdd, lam):
+    for i in range(q.shape[0]):
+        _stance_one(q[i], qd[i], tau[i], p, qdd[i], lam[i])
+
+
+@njit(cache=True)
+def _flight_batch(q, qd, tau, p, qdd):
+    for i in range(q.shape[0]):
+        _flight_one(q[i], qd[i], tau[i], p, qdd[i])
+
+
+@njit(cache=True)
+def _stance_single(q, qd, tau, p):
+    qdd = np.empty(5)
+    lam = np.empty(2)
+    _stance_one(q, qd, tau, p, qdd, lam)
+    return qdd, lam
+
+
+@njit(cache=True)
+def _mass_matrix_batch(q, p, M):
+    for i in range(q.shape[0]):
+        _mass_matrix_one(q[i], p, M[i])
+
+
+@njit(cache=True)
+def _bias_batch(q, qd, p, h, gravity_only):
+    for i in range(q.shape[0]):
+        _bias_one(q[i], qd[i], p, h[i], gravity_only)
+
+
+@njit(cache=True)
+def _foot_batch(q, p, out):
+    for i in range(q.shape[0]):
+        _foot_one(q[i], p, out[i])
+
+
+@njit(cache=True)
+def _jacobian_batch(q, p, Jc):
+    for i in range(q.shape[0]):
+        _jacobian_one(q[i], p, Jc[i])
+
+
+@njit(cache=True)
+def _jdot_qd_batch(q, qd, p, out):
+    for i in range(q.shape[0]):
+        _jdot_qd_one(q[i], qd[i], p, out[i])
+
+
+@njit(cache=True)
+def _com_batch(q, p, out):
+    for i in range(q.shape[0]):
+        _com_one(q[i], p, out[i])
+
+
+# ----------------------------------------------------------------------------
+# Public API: shape handling around the kernels
+# ----------------------------------------------------------------------------
+
+
+def params_array(p: LegParams | np.ndarray) -> np.ndarray:
+    """``LegParams`` as the float64 array the kernels read (an array passes through)."""
+    if isinstance(p, LegParams):
+        return p.array
+    a = np.asarray(p, dtype=np.float64)
+    if a.shape != (11,):
+        raise ValueError(f"params must be LegParams or an array of 11 values, got shape {a.shape}")
+    return a
+
+
+def _is_single(x, n: int) -> bool:
+    """Fast-path test: a contiguous float64 vector of length ``n`` (one robot)."""
+    return type(x) is np.ndarray and x.shape == (n,) and x.dtype == np.float64 and x.flags.c_contiguous
+
+
+def _vec(x, n: int, name: str) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim == 0 or a.shape[-1] != n:
+        raise ValueError(f"{name} must have shape (..., {n}), got {a.shape}")
+    return a
+
+
+def _batched(*arrays):
+    """Broadcast leading axes; return the lead shape and contiguous (N, n) views."""
+    lead = np.broadcast_shapes(*(a.shape[:-1] for a in arrays))
+    flat = []
+    for a in arrays:
+        if a.shape[:-1] != lead:
+            a = np.broadcast_to(a, lead + a.shape[-1:])
+        flat.append(np.ascontiguousarray(a.reshape(-1, a.shape[-1])))
+    return lead, flat
+
+
+def mass_matrix(q, p: LegParams) -> np.ndarray:
+    """Joint-space mass matrix ``M(q)`` (section 2), shape ``(..., 5, 5)``, symmetric positive definite."""
+    lead, (qf,) = _batched(_vec(q, NQ, "q"))
+    M = np.empty((qf.shape[0], NQ, NQ))
+    _mass_matrix_batch(qf, params_array(p), M)
+    return M.reshape(lead + (NQ, NQ))
+
+
+def bias_forces(q, qd, p: LegParams) -> np.ndarray:
+    """``h(q, qd)``: Coriolis, centrifugal and gravity generalized forces, shape ``(..., 5)``."""
+    lead, (qf, qdf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"))
+    h = np.empty((qf.shape[0], NQ))
+    _bias_batch(qf, qdf, params_array(p), h, False)
+    return h.reshape(lead + (NQ,))
+
+
+def gravity_forces(q, p: LegParams) -> np.ndarray:
+    """Gravity generalized forces ``dP/dq``, shape ``(..., 5)``."""
+    lead, (qf,) = _batched(_vec(q, NQ, "q"))
+    h = np.empty((qf.shape[0], NQ))
+    _bias_batch(qf, qf, params_array(p), h, True)
+    return h.reshape(lead + (NQ,))
+
+
+def foot_position(q, p: LegParams) -> np.ndarray:
+    """Foot position ``p_f(q)`` in the world frame (section 3), shape ``(..., 2)``."""
+    lead, (qf,) = _batched(_vec(q, NQ, "q"))
+    out = np.empty((qf.shape[0], 2))
+    _foot_batch(qf, params_array(p), out)
+    return out.reshape(lead + (2,))
+
+
+def com_position(q, p: LegParams) -> np.ndarray:
+    """Whole-body centre of mass in the world frame, shape ``(..., 2)``."""
+    lead, (qf,) = _batched(_vec(q, NQ, "q"))
+    out = np.empty((qf.shape[0], 2))
+    _com_batch(qf, params_array(p), out)
+    return out.reshape(lead + (2,))
+
+
+def contact_jacobian(q, p: LegParams) -> np.ndarray:
+    """Contact Jacobian ``Jc = d p_f / d q`` (section 3, Problem 3), rows ``x, y``, shape ``(..., 2, 5)``."""
+    lead, (qf,) = _batched(_vec(q, NQ, "q"))
+    Jc = np.empty((qf.shape[0], 2, NQ))
+    _jacobian_batch(qf, params_array(p), Jc)
+    return Jc.reshape(lead + (2, NQ))
+
+
+def contact_jdot_qd(q, qd, p: LegParams) -> np.ndarray:
+    """``Jcdot(q, qd) qd``, the foot's velocity-product acceleration, shape ``(..., 2)``."""
+    lead, (qf, qdf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"))
+    out = np.empty((qf.shape[0], 2))
+    _jdot_qd_batch(qf, qdf, params_array(p), out)
+    return out.reshape(lead + (2,))
+
+
+def contact_inertia(q, p: LegParams) -> np.ndarray:
+    """Contact inertia ``Lambda_c = Jc M^-1 Jc^T`` (section 4, Problem 4), shape ``(..., 2, 2)``.
+
+    Computed by a Cholesky-based solve of ``M X = Jc^T``, never by inverting ``M``.
+    """
+    M = mass_matrix(q, p)
+    Jc = contact_jacobian(q, p)
+    L = np.linalg.cholesky(M)
+    Y = np.linalg.solve(L, np.swapaxes(Jc, -1, -2))  # L Y = Jc^T, so Lambda_c = Y^T Y
+    return np.swapaxes(Y, -1, -2) @ Y
+
+
+def stance_dynamics(q, qd, tau, p: LegParams) -> tuple[np.ndarray, np.ndarray]:
+    """Solve the stance KKT system (section 4) for ``qdd`` and the contact force ``lam``.
+
+    Args:
+        q: ``(..., 5)`` configuration.
+        qd: ``(..., 5)`` velocity.
+        tau: ``(..., 2)`` hip and knee torques [N m].
+        p: physical parameters.
+
+    Returns:
+        ``(qdd, lam)`` of shapes ``(..., 5)`` and ``(..., 2)``; ``lam = [lam_x, lam_y]`` is the
+        ground's force on the foot [N].
+    """
+    if _is_single(q, NQ) and _is_single(qd, NQ) and _is_single(tau, NU):
+        return _stance_single(q, qd, tau, params_array(p))
+    lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
+    n = qf.shape[0]
+    qdd = np.empty((n, NQ))
+    lam = np.empty((n, 2))
+    _stance_batch(qf, qdf, tf, params_array(p), qdd, lam)
+    return qdd.reshape(lead + (NQ,)), lam.reshape(lead + (2,))
+
+
+def flight_dynamics(q, qd, tau, p: LegParams) -> np.ndarray:
+    """Unconstrained forward dynamics ``M qdd + h = S^T tau`` (section 2), shape ``(..., 5)``."""
+    lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
+    qdd = np.empty((qf.shape[0], NQ))
+    _flight_batch(qf, qdf, tf, params_array(p), qdd)
+    return qdd.reshape(lead + (NQ,))
+
+
+def kinetic_energy(q, qd, p: LegParams) -> np.ndarray:
+    """Kinetic energy ``qd^T M qd / 2`` [J], shape ``(...)``."""
+    qd = _vec(qd, NQ, "qd")
+    M = mass_matrix(q, p)
+    return 0.5 * np.einsum("...i,...ij,...j->...", qd, M, qd)
+
+
+def potential_energy(q, p: LegParams) -> np.ndarray:
+    """Potential energy ``g (m_b y_b + m1 y_c1 + m2 y_c2)`` [J], shape ``(...)``."""
+    q = _vec(q, NQ, "q")
+    com = com_position(q, p)
+    return p.g * p.total_mass * com[..., 1]

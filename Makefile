@@ -19,8 +19,8 @@ $(VENV)/.installed-%: pyproject.toml | $(BIN)/python
 	touch $@
 
 train: $(VENV)/.installed-train
-	$(BIN)/python train/ppo.py --out $(RUN)
-	$(BIN)/python train/evaluate.py $(RUN) --baseline lqr --episodes 20 --gif --out $(RUN)/eval
+	$(BIN)/python -m train.ppo --out $(RUN)
+	$(BIN)/python -m train.evaluate $(RUN) --baseline lqr --episodes 20 --gif
 
 test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -q

@@ -60,6 +60,7 @@ __all__ = [
     "potential_energy",
     "com_position",
     "params_array",
+    "static_equilibrium",
 ]
 
 NQ = 5  # generalized coordinates
@@ -502,3 +503,33 @@ def potential_energy(q, p: LegParams) -> np.ndarray:
     q = _vec(q, NQ, "q")
     com = com_position(q, p)
     return p.g * p.total_mass * com[..., 1]
+
+
+def static_equilibrium(p: LegParams, knee: float = 0.8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The stance equilibrium with the torso level, knee at ``knee`` and the COM above the foot.
+
+    With ``th_b = 0`` and ``th2 = th1 + knee``, the COM is above the foot when
+    ``(a/m - l1) cos th1 + (b/m - l2) cos th2 = 0`` (``a = m1 c1 + m2 l1``, ``b = m2 c2``),
+    i.e. ``tan th1 = (A + B cos knee) / (B sin knee)``; the root with the knee below the hip
+    is taken. The hip torque is then zero and the knee torque balances gravity.
+
+    Returns:
+        ``(q, tau, lam)``: configuration with the foot at the origin, holding torques and the
+        contact force ``[0, m g]``.
+    """
+    m = p.total_mass
+    A = (p.m1 * p.c1 + p.m2 * p.l1) / m - p.l1
+    B = p.m2 * p.c2 / m - p.l2
+    th1 = float(np.arctan2(A + B * np.cos(knee), B * np.sin(knee)))
+    while th1 > 0.0:
+        th1 -= np.pi
+    while th1 <= -np.pi:
+        th1 += np.pi
+    q = np.array([0.0, 0.0, 0.0, th1, float(knee)])
+    q[:2] -= foot_position(q, p)
+    G = gravity_forces(q, p)
+    Jc = contact_jacobian(q, p)
+    lam = np.array([0.0, m * p.g])
+    # M qdd + G = S^T tau + Jc^T lam with qdd = 0, read on the actuated rows
+    tau = G[3:] - (Jc.T @ lam)[3:]
+    return q, tau, lam

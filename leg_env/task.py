@@ -1,0 +1,391 @@
+"""The balance task on the stance model: configuration, observation, reward and termination.
+
+One batched kernel (``step_batch``) advances the physics and computes the observation,
+every reward term and every termination flag. The single environment calls it with a
+batch of one and the vector environment with a batch of N, so the two cannot disagree.
+
+Observation (float32, ``OBS_DIM = 12``):
+
+===== ======================================== ======
+index meaning                                  unit
+===== ======================================== ======
+0     base x relative to the foot contact point m
+1     base y relative to the foot contact point m
+2     torso angle th_b                          rad
+3     hip angle q1                              rad
+4     knee angle q2                             rad
+5-9   qd = [x_b', y_b', th_b', q1', q2']        m/s, rad/s
+10    lam_x / (m_total g)                       1
+11    lam_y / (m_total g)                       1
+===== ======================================== ======
+
+The contact force is the mean over the last control step (the contact impulse / dt).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+
+import numpy as np
+from numba import njit
+
+from .dynamics import foot_position, static_equilibrium
+from .integrate import MAX_ANGLE, SUBSTEPS, DT, _project_one, _rk4_one
+from .params import LegParams
+
+__all__ = [
+    "StanceConfig",
+    "OBS_DIM",
+    "REWARD_TERMS",
+    "FLAG_NAMES",
+    "INFO_NAMES",
+    "Nominal",
+    "nominal_state",
+    "step_batch",
+    "observe_batch",
+    "project_batch",
+    "reset_state",
+]
+
+OBS_DIM = 12
+REWARD_TERMS = ("alive", "drift", "unilateral", "friction", "ctrl")
+FLAG_NAMES = ("terminated", "unilateral_violation", "friction_violation", "numerical_failure")
+INFO_NAMES = ("base_drift", "foot_error", "normal_force")
+
+
+@dataclass(frozen=True)
+class StanceConfig:
+    """Settings of the balance task (everything that is not physics).
+
+    Raises:
+        ValueError: a value is out of its documented range; the message names it.
+    """
+
+    dt: float = DT  # control period [s]
+    substeps: int = SUBSTEPS  # least RK4 steps per control period
+    max_angle: float = MAX_ANGLE  # largest link/joint rotation per RK4 step [rad]
+    torque_limit: tuple = (50.0, 50.0)  # |tau_hip|, |tau_knee| at action +-1 [N m]
+    nominal_knee: float = 0.8  # knee angle of the nominal equilibrium [rad]
+    # reward weights
+    alive_bonus: float = 1.0  # paid on each healthy step
+    drift_position_weight: float = 10.0  # per m^2 of base offset from nominal
+    drift_angle_weight: float = 1.0  # per rad^2 of torso angle
+    drift_velocity_weight: float = 0.1  # per (m/s)^2 + (rad/s)^2 of torso velocity
+    unilateral_weight: float = 10.0  # per unit of max(0, -lam_y) / weight
+    friction_weight: float = 10.0  # per unit of max(0, |lam_x| - mu lam_y) / weight
+    ctrl_cost_weight: float = 0.01  # per unit of |action|^2
+    mu: float = 0.8  # friction coefficient of the cone check
+    # termination
+    min_base_height: float = 0.5  # torso above the contact point [m]
+    max_torso_angle: float = 1.0  # |th_b| [rad]
+    hip_range: tuple = (-3.0, -0.9)  # allowed q1 [rad]
+    knee_range: tuple = (0.05, 2.5)  # allowed q2 [rad]
+    terminate_on_contact_loss: bool = False
+    contact_loss_threshold: float = 0.0  # lam_y below this ends the episode, if enabled [N]
+    max_rate: float = 1.0e3  # any |qd| above this is a numerical failure [m/s, rad/s]
+    # reset
+    reset_noise_scale: float = 0.01  # uniform noise half-width on (th_b, q1, q2) [rad] and their rates [rad/s]
+
+    def __post_init__(self) -> None:
+        def bad(name, why):
+            raise ValueError(f"StanceConfig.{name} {why}, got {getattr(self, name)!r}")
+
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name in ("torque_limit", "hip_range", "knee_range"):
+                try:
+                    v = tuple(float(x) for x in v)
+                except TypeError:
+                    bad(f.name, "must be a pair of numbers")
+                if len(v) != 2 or not all(math.isfinite(x) for x in v):
+                    bad(f.name, "must be a pair of finite numbers")
+                object.__setattr__(self, f.name, v)
+            elif f.name == "terminate_on_contact_loss":
+                if not isinstance(v, (bool, np.bool_)):
+                    bad(f.name, "must be a bool")
+                object.__setattr__(self, f.name, bool(v))
+            elif f.name == "substeps":
+                if isinstance(v, bool) or int(v) != v or v < 1:
+                    bad(f.name, "must be a positive integer")
+                object.__setattr__(self, f.name, int(v))
+            else:
+                if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)):
+                    bad(f.name, "must be a real number")
+                v = float(v)
+                if math.isnan(v) or (math.isinf(v) and f.name != "max_angle"):
+                    bad(f.name, "must be finite")
+                object.__setattr__(self, f.name, v)
+        for name in ("dt", "max_angle", "max_rate", "min_base_height", "max_torso_angle"):
+            if getattr(self, name) <= 0.0:
+                bad(name, "must be > 0")
+        if min(self.torque_limit) <= 0.0:
+            bad("torque_limit", "must be > 0 for both joints")
+        for name in (
+            "alive_bonus",
+            "drift_position_weight",
+            "drift_angle_weight",
+            "drift_velocity_weight",
+            "unilateral_weight",
+            "friction_weight",
+            "ctrl_cost_weight",
+            "mu",
+            "reset_noise_scale",
+        ):
+            if getattr(self, name) < 0.0:
+                bad(name, "must be >= 0")
+        for name in ("hip_range", "knee_range"):
+            lo, hi = getattr(self, name)
+            if not lo < hi:
+                bad(name, "must be (low, high) with low < high")
+        if not 0.0 < self.nominal_knee < math.pi:
+            bad("nominal_knee", "must be in (0, pi)")
+
+    @classmethod
+    def from_kwargs(cls, config: "StanceConfig | dict | None" = None, **overrides) -> "StanceConfig":
+        """A config from an instance or dict, with keyword overrides; unknown names raise ValueError."""
+        base = {} if config is None else (asdict(config) if isinstance(config, StanceConfig) else dict(config))
+        base.update(overrides)
+        names = {f.name for f in fields(cls)}
+        unknown = set(base) - names
+        if unknown:
+            raise ValueError(f"unknown StanceConfig argument(s): {sorted(unknown)}")
+        return cls(**base)
+
+    def replace(self, **changes) -> "StanceConfig":
+        return replace(self, **changes)
+
+    def array(self) -> np.ndarray:
+        """The numeric settings in the order ``step_batch`` reads them (``_C_*`` indices)."""
+        return np.array(
+            [
+                self.dt,
+                self.substeps,
+                self.max_angle,
+                self.torque_limit[0],
+                self.torque_limit[1],
+                self.alive_bonus,
+                self.drift_position_weight,
+                self.drift_angle_weight,
+                self.drift_velocity_weight,
+                self.unilateral_weight,
+                self.friction_weight,
+                self.ctrl_cost_weight,
+                self.mu,
+                self.min_base_height,
+                self.max_torso_angle,
+                self.hip_range[0],
+                self.hip_range[1],
+                self.knee_range[0],
+                self.knee_range[1],
+                float(self.terminate_on_contact_loss),
+                self.contact_loss_threshold,
+                self.max_rate,
+            ],
+            dtype=np.float64,
+        )
+
+
+(
+    _C_DT,
+    _C_SUBSTEPS,
+    _C_MAX_ANGLE,
+    _C_TAU_HIP,
+    _C_TAU_KNEE,
+    _C_ALIVE,
+    _C_W_POS,
+    _C_W_ANG,
+    _C_W_VEL,
+    _C_W_UNI,
+    _C_W_FRIC,
+    _C_W_CTRL,
+    _C_MU,
+    _C_MIN_HEIGHT,
+    _C_MAX_TORSO,
+    _C_HIP_LO,
+    _C_HIP_HI,
+    _C_KNEE_LO,
+    _C_KNEE_HI,
+    _C_TERM_CONTACT,
+    _C_CONTACT_THRESH,
+    _C_MAX_RATE,
+) = range(22)
+
+
+@dataclass(frozen=True)
+class Nominal:
+    """The nominal equilibrium of a task: state with the foot at the origin, holding torques, contact force."""
+
+    q: np.ndarray
+    tau: np.ndarray
+    lam: np.ndarray
+
+    @property
+    def base(self) -> np.ndarray:
+        """Nominal base position relative to the contact point [m]."""
+        return self.q[:2]
+
+
+def nominal_state(p: LegParams, config: StanceConfig) -> Nominal:
+    """The task's nominal posture: a static equilibrium with the torso level and the COM above the foot."""
+    q, tau, lam = static_equilibrium(p, config.nominal_knee)
+    if np.any(np.abs(tau) > np.asarray(config.torque_limit)):
+        raise ValueError(
+            f"torque_limit {config.torque_limit} cannot hold the nominal posture, which needs {tau.round(2).tolist()} N m"
+        )
+    return Nominal(q=q, tau=tau, lam=lam)
+
+
+@njit(cache=True)
+def observe_batch(q, qd, anchor, lam, weight, obs):
+    """Write the float32 observation of each robot (layout in the module docstring)."""
+    for i in range(q.shape[0]):
+        obs[i, 0] = q[i, 0] - anchor[i, 0]
+        obs[i, 1] = q[i, 1] - anchor[i, 1]
+        for j in range(2, 5):
+            obs[i, j] = q[i, j]
+        for j in range(5):
+            obs[i, 5 + j] = qd[i, j]
+        obs[i, 10] = lam[i, 0] / weight
+        obs[i, 11] = lam[i, 1] / weight
+
+
+@njit(cache=True)
+def step_batch(q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra):
+    """Advance every robot one control step and evaluate the task, in place.
+
+    Args:
+        q, qd: ``(N, 5)`` float64 state, overwritten (left unchanged on numerical failure).
+        anchor: ``(N, 2)`` foot contact points.
+        action: ``(N, 2)`` float64 actions, already checked finite; clipped here to [-1, 1].
+        p: ``LegParams.array``; c: ``StanceConfig.array()``; q_nom: nominal ``q`` (foot at origin).
+        lam: ``(N, 2)`` out, mean contact force over the step [N].
+        obs: ``(N, 12)`` float32 out (left at the previous observation on numerical failure).
+        terms: ``(N, 5)`` out, reward terms in ``REWARD_TERMS`` order (they sum to the reward).
+        flags: ``(N, 4)`` bool out, in ``FLAG_NAMES`` order.
+        extra: ``(N, 3)`` out, in ``INFO_NAMES`` order.
+    """
+    n = q.shape[0]
+    dt = c[_C_DT]
+    substeps = int(c[_C_SUBSTEPS])
+    weight = (p[0] + p[1] + p[2]) * p[10]
+    if weight <= 0.0:
+        weight = 1.0
+    work = np.empty((6, 5))
+    q_prev = np.empty(5)
+    qd_prev = np.empty(5)
+    tau = np.empty(2)
+    a = np.empty(2)
+    for i in range(n):
+        for j in range(5):
+            q_prev[j] = q[i, j]
+            qd_prev[j] = qd[i, j]
+        a[0] = min(1.0, max(-1.0, action[i, 0]))
+        a[1] = min(1.0, max(-1.0, action[i, 1]))
+        tau[0] = a[0] * c[_C_TAU_HIP]
+        tau[1] = a[1] * c[_C_TAU_KNEE]
+        _rk4_one(q[i], qd[i], tau, p, anchor[i], dt, substeps, c[_C_MAX_ANGLE], True, lam[i], work)
+
+        finite = np.isfinite(lam[i, 0]) and np.isfinite(lam[i, 1])
+        for j in range(5):
+            if not (np.isfinite(q[i, j]) and abs(qd[i, j]) <= c[_C_MAX_RATE]):
+                finite = False
+        if not finite:
+            # blow-up: restore the last good state, end the episode, pay nothing
+            for j in range(5):
+                q[i, j] = q_prev[j]
+                qd[i, j] = qd_prev[j]
+            lam[i, 0] = 0.0
+            lam[i, 1] = 0.0
+            for k in range(terms.shape[1]):
+                terms[i, k] = 0.0
+            flags[i, 0] = True
+            flags[i, 1] = False
+            flags[i, 2] = False
+            flags[i, 3] = True
+            extra[i, 0] = np.sqrt((q[i, 0] - anchor[i, 0] - q_nom[0]) ** 2 + (q[i, 1] - anchor[i, 1] - q_nom[1]) ** 2)
+            extra[i, 1] = 0.0
+            extra[i, 2] = 0.0
+            continue
+
+        lam_x, lam_y = lam[i, 0], lam[i, 1]
+        dx = q[i, 0] - anchor[i, 0] - q_nom[0]
+        dy = q[i, 1] - anchor[i, 1] - q_nom[1]
+        th_b = q[i, 2]
+        # foot error and knee height from the same kinematics as the integrator
+        l1, l2 = p[6], p[7]
+        th1 = q[i, 2] + q[i, 3]
+        th2 = th1 + q[i, 4]
+        knee_y = q[i, 1] + l1 * np.sin(th1)
+        fx = q[i, 0] + l1 * np.cos(th1) + l2 * np.cos(th2) - anchor[i, 0]
+        fy = knee_y + l2 * np.sin(th2) - anchor[i, 1]
+        height = q[i, 1] - anchor[i, 1]
+
+        unilateral = max(0.0, -lam_y)
+        friction = max(0.0, abs(lam_x) - c[_C_MU] * lam_y)
+        fell = (
+            height < c[_C_MIN_HEIGHT]
+            or q[i, 1] < knee_y
+            or abs(th_b) > c[_C_MAX_TORSO]
+            or q[i, 3] < c[_C_HIP_LO]
+            or q[i, 3] > c[_C_HIP_HI]
+            or q[i, 4] < c[_C_KNEE_LO]
+            or q[i, 4] > c[_C_KNEE_HI]
+        )
+        lost = c[_C_TERM_CONTACT] > 0.5 and lam_y < c[_C_CONTACT_THRESH]
+        terminated = fell or lost
+
+        terms[i, 0] = 0.0 if terminated else c[_C_ALIVE]
+        terms[i, 1] = -(
+            c[_C_W_POS] * (dx * dx + dy * dy)
+            + c[_C_W_ANG] * th_b * th_b
+            + c[_C_W_VEL] * (qd[i, 0] ** 2 + qd[i, 1] ** 2 + qd[i, 2] ** 2)
+        )
+        terms[i, 2] = -c[_C_W_UNI] * unilateral / weight
+        terms[i, 3] = -c[_C_W_FRIC] * friction / weight
+        terms[i, 4] = -c[_C_W_CTRL] * (a[0] * a[0] + a[1] * a[1])
+        flags[i, 0] = terminated
+        flags[i, 1] = lam_y < 0.0
+        flags[i, 2] = friction > 0.0
+        flags[i, 3] = False
+        extra[i, 0] = np.sqrt(dx * dx + dy * dy)
+        extra[i, 1] = np.sqrt(fx * fx + fy * fy)
+        extra[i, 2] = lam_y
+        # observation
+        obs[i, 0] = q[i, 0] - anchor[i, 0]
+        obs[i, 1] = height
+        for j in range(2, 5):
+            obs[i, j] = q[i, j]
+        for j in range(5):
+            obs[i, 5 + j] = qd[i, j]
+        obs[i, 10] = lam_x / weight
+        obs[i, 11] = lam_y / weight
+
+
+@njit(cache=True)
+def project_batch(q, qd, p, anchor):
+    """Put each robot's foot on its anchor and its velocity in the contact nullspace (coordinate partitioning)."""
+    for i in range(q.shape[0]):
+        _project_one(q[i], qd[i], p, anchor[i])
+
+
+def reset_state(rng: np.random.Generator, p: LegParams, config: StanceConfig, nominal: Nominal):
+    """Sample one initial state: nominal posture + uniform noise, projected onto the contact.
+
+    Noise of half-width ``reset_noise_scale`` is added to ``(th_b, q1, q2)`` and their rates;
+    the base position and velocity then follow from the contact (foot at the origin, ``Jc qd = 0``).
+    Draws exactly 6 uniforms from ``rng`` (none when the scale is 0), so resets are reproducible.
+
+    Returns:
+        ``(q, qd, anchor)`` as float64 arrays of shapes (5,), (5,), (2,).
+    """
+    q = nominal.q.copy()
+    qd = np.zeros(5)
+    s = config.reset_noise_scale
+    if s > 0.0:
+        noise = rng.uniform(-s, s, size=6)
+        q[2:] += noise[:3]
+        qd[2:] += noise[3:]
+    anchor = np.zeros(2)
+    project_batch(q[None], qd[None], p.array, anchor[None])
+    return q, qd, anchor

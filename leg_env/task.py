@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 from numba import njit
 
-from .dynamics import foot_position, static_equilibrium
+from .dynamics import _stance_one, static_equilibrium
 from .integrate import MAX_ANGLE, SUBSTEPS, DT, _project_one, _rk4_one
 from .params import LegParams
 
@@ -43,9 +43,11 @@ __all__ = [
     "Nominal",
     "nominal_state",
     "step_batch",
+    "start_batch",
     "observe_batch",
     "project_batch",
     "reset_state",
+    "reset_states",
 ]
 
 OBS_DIM = 12
@@ -65,7 +67,7 @@ class StanceConfig:
     dt: float = DT  # control period [s]
     substeps: int = SUBSTEPS  # least RK4 steps per control period
     max_angle: float = MAX_ANGLE  # largest link/joint rotation per RK4 step [rad]
-    torque_limit: tuple = (50.0, 50.0)  # |tau_hip|, |tau_knee| at action +-1 [N m]
+    torque_limit: tuple = (50.0, 50.0)  # |tau_hip|, |tau_knee| at action +-1 [N m]; a number sets both
     nominal_knee: float = 0.8  # knee angle of the nominal equilibrium [rad]
     # reward weights
     alive_bonus: float = 1.0  # paid on each healthy step
@@ -94,9 +96,11 @@ class StanceConfig:
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name in ("torque_limit", "hip_range", "knee_range"):
+                if f.name == "torque_limit" and isinstance(v, (int, float, np.floating, np.integer)):
+                    v = (v, v)  # one limit for both joints
                 try:
                     v = tuple(float(x) for x in v)
-                except TypeError:
+                except (TypeError, ValueError):
                     bad(f.name, "must be a pair of numbers")
                 if len(v) != 2 or not all(math.isfinite(x) for x in v):
                     bad(f.name, "must be a pair of finite numbers")
@@ -106,7 +110,7 @@ class StanceConfig:
                     bad(f.name, "must be a bool")
                 object.__setattr__(self, f.name, bool(v))
             elif f.name == "substeps":
-                if isinstance(v, bool) or int(v) != v or v < 1:
+                if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or int(v) != v or v < 1:
                     bad(f.name, "must be a positive integer")
                 object.__setattr__(self, f.name, int(v))
             else:
@@ -250,6 +254,66 @@ def observe_batch(q, qd, anchor, lam, weight, obs):
         obs[i, 11] = lam[i, 1] / weight
 
 
+@njit(cache=True, inline="always")
+def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flags, extra):
+    """Reward terms, flags, extras and observation of robot ``i`` at its (finite) state and force.
+
+    The one place where the task's predicates (health, feasibility) are written.
+    """
+    lam_x, lam_y = lam[i, 0], lam[i, 1]
+    dx = q[i, 0] - anchor[i, 0] - q_nom[0]
+    dy = q[i, 1] - anchor[i, 1] - q_nom[1]
+    th_b = q[i, 2]
+    # foot error and knee height from the same kinematics as the integrator
+    l1, l2 = p[6], p[7]
+    th1 = q[i, 2] + q[i, 3]
+    th2 = th1 + q[i, 4]
+    knee_y = q[i, 1] + l1 * np.sin(th1)
+    fx = q[i, 0] + l1 * np.cos(th1) + l2 * np.cos(th2) - anchor[i, 0]
+    fy = knee_y + l2 * np.sin(th2) - anchor[i, 1]
+    height = q[i, 1] - anchor[i, 1]
+
+    unilateral = max(0.0, -lam_y)
+    friction = max(0.0, abs(lam_x) - c[_C_MU] * lam_y)
+    fell = (
+        height < c[_C_MIN_HEIGHT]
+        or q[i, 1] < knee_y
+        or abs(th_b) > c[_C_MAX_TORSO]
+        or q[i, 3] < c[_C_HIP_LO]
+        or q[i, 3] > c[_C_HIP_HI]
+        or q[i, 4] < c[_C_KNEE_LO]
+        or q[i, 4] > c[_C_KNEE_HI]
+    )
+    lost = c[_C_TERM_CONTACT] > 0.5 and lam_y < c[_C_CONTACT_THRESH]
+    terminated = fell or lost
+
+    terms[i, 0] = 0.0 if terminated else c[_C_ALIVE]
+    terms[i, 1] = -(
+        c[_C_W_POS] * (dx * dx + dy * dy)
+        + c[_C_W_ANG] * th_b * th_b
+        + c[_C_W_VEL] * (qd[i, 0] ** 2 + qd[i, 1] ** 2 + qd[i, 2] ** 2)
+    )
+    terms[i, 2] = -c[_C_W_UNI] * unilateral / weight
+    terms[i, 3] = -c[_C_W_FRIC] * friction / weight
+    terms[i, 4] = -c[_C_W_CTRL] * (a0 * a0 + a1 * a1)
+    flags[i, 0] = terminated
+    flags[i, 1] = lam_y < 0.0
+    flags[i, 2] = friction > 0.0
+    flags[i, 3] = False
+    extra[i, 0] = np.sqrt(dx * dx + dy * dy)
+    extra[i, 1] = np.sqrt(fx * fx + fy * fy)
+    extra[i, 2] = lam_y
+    # observation
+    obs[i, 0] = q[i, 0] - anchor[i, 0]
+    obs[i, 1] = height
+    for j in range(2, 5):
+        obs[i, j] = q[i, j]
+    for j in range(5):
+        obs[i, 5 + j] = qd[i, j]
+    obs[i, 10] = lam_x / weight
+    obs[i, 11] = lam_y / weight
+
+
 @njit(cache=True)
 def step_batch(q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra):
     """Advance every robot one control step and evaluate the task, in place.
@@ -308,58 +372,26 @@ def step_batch(q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra
             extra[i, 2] = 0.0
             continue
 
-        lam_x, lam_y = lam[i, 0], lam[i, 1]
-        dx = q[i, 0] - anchor[i, 0] - q_nom[0]
-        dy = q[i, 1] - anchor[i, 1] - q_nom[1]
-        th_b = q[i, 2]
-        # foot error and knee height from the same kinematics as the integrator
-        l1, l2 = p[6], p[7]
-        th1 = q[i, 2] + q[i, 3]
-        th2 = th1 + q[i, 4]
-        knee_y = q[i, 1] + l1 * np.sin(th1)
-        fx = q[i, 0] + l1 * np.cos(th1) + l2 * np.cos(th2) - anchor[i, 0]
-        fy = knee_y + l2 * np.sin(th2) - anchor[i, 1]
-        height = q[i, 1] - anchor[i, 1]
+        _assess(i, q, qd, anchor, lam, a[0], a[1], p, c, q_nom, weight, obs, terms, flags, extra)
 
-        unilateral = max(0.0, -lam_y)
-        friction = max(0.0, abs(lam_x) - c[_C_MU] * lam_y)
-        fell = (
-            height < c[_C_MIN_HEIGHT]
-            or q[i, 1] < knee_y
-            or abs(th_b) > c[_C_MAX_TORSO]
-            or q[i, 3] < c[_C_HIP_LO]
-            or q[i, 3] > c[_C_HIP_HI]
-            or q[i, 4] < c[_C_KNEE_LO]
-            or q[i, 4] > c[_C_KNEE_HI]
-        )
-        lost = c[_C_TERM_CONTACT] > 0.5 and lam_y < c[_C_CONTACT_THRESH]
-        terminated = fell or lost
 
-        terms[i, 0] = 0.0 if terminated else c[_C_ALIVE]
-        terms[i, 1] = -(
-            c[_C_W_POS] * (dx * dx + dy * dy)
-            + c[_C_W_ANG] * th_b * th_b
-            + c[_C_W_VEL] * (qd[i, 0] ** 2 + qd[i, 1] ** 2 + qd[i, 2] ** 2)
-        )
-        terms[i, 2] = -c[_C_W_UNI] * unilateral / weight
-        terms[i, 3] = -c[_C_W_FRIC] * friction / weight
-        terms[i, 4] = -c[_C_W_CTRL] * (a[0] * a[0] + a[1] * a[1])
-        flags[i, 0] = terminated
-        flags[i, 1] = lam_y < 0.0
-        flags[i, 2] = friction > 0.0
-        flags[i, 3] = False
-        extra[i, 0] = np.sqrt(dx * dx + dy * dy)
-        extra[i, 1] = np.sqrt(fx * fx + fy * fy)
-        extra[i, 2] = lam_y
-        # observation
-        obs[i, 0] = q[i, 0] - anchor[i, 0]
-        obs[i, 1] = height
-        for j in range(2, 5):
-            obs[i, j] = q[i, j]
-        for j in range(5):
-            obs[i, 5 + j] = qd[i, j]
-        obs[i, 10] = lam_x / weight
-        obs[i, 11] = lam_y / weight
+@njit(cache=True)
+def start_batch(q, qd, anchor, tau, p, c, q_nom, lam, obs, flags, extra):
+    """Evaluate freshly reset robots without stepping: contact force, observation, flags, extras.
+
+    No control step has been taken yet, so the contact force is the instantaneous stance force
+    at the start state under the torques ``tau`` (``(2,)``; the env passes the nominal holding
+    torques): at the nominal posture it is exactly the nominal ``[0, m g]`` up to round-off.
+    Arguments as in ``step_batch``; ``flags[:, 0]`` tells whether the start state is already terminal.
+    """
+    weight = (p[0] + p[1] + p[2]) * p[10]
+    if weight <= 0.0:
+        weight = 1.0
+    qdd = np.empty(5)
+    terms = np.empty((q.shape[0], len(REWARD_TERMS)))
+    for i in range(q.shape[0]):
+        _stance_one(q[i], qd[i], tau, p, qdd, lam[i])
+        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra)
 
 
 @njit(cache=True)
@@ -379,13 +411,28 @@ def reset_state(rng: np.random.Generator, p: LegParams, config: StanceConfig, no
     Returns:
         ``(q, qd, anchor)`` as float64 arrays of shapes (5,), (5,), (2,).
     """
-    q = nominal.q.copy()
-    qd = np.zeros(5)
+    q, qd, anchor = reset_states([rng], p, config, nominal)
+    return q[0], qd[0], anchor[0]
+
+
+def reset_states(rngs, p: LegParams, config: StanceConfig, nominal: Nominal):
+    """``reset_state`` for several robots at once, robot ``j`` drawing from ``rngs[j]``.
+
+    Row ``j`` is exactly ``reset_state(rngs[j], ...)``; one projection serves the batch.
+
+    Returns:
+        ``(q, qd, anchor)`` as float64 arrays of shapes (k, 5), (k, 5), (k, 2), ``k = len(rngs)``.
+    """
+    k = len(rngs)
+    q = np.tile(nominal.q, (k, 1))
+    qd = np.zeros((k, 5))
     s = config.reset_noise_scale
     if s > 0.0:
-        noise = rng.uniform(-s, s, size=6)
-        q[2:] += noise[:3]
-        qd[2:] += noise[3:]
-    anchor = np.zeros(2)
-    project_batch(q[None], qd[None], p.array, anchor[None])
+        noise = np.empty((k, 6))
+        for j, rng in enumerate(rngs):
+            noise[j] = rng.uniform(-s, s, size=6)
+        q[:, 2:] += noise[:, :3]
+        qd[:, 2:] += noise[:, 3:]
+    anchor = np.zeros((k, 2))
+    project_batch(q, qd, p.array, anchor)
     return q, qd, anchor

@@ -1,0 +1,367 @@
+"""``leg_env/PlanarLegStance-v0``: balance the planar leg on its pinned foot (one robot)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from ..dynamics import foot_position
+from ..params import LegParams
+from ..task import FLAG_NAMES, INFO_NAMES, OBS_DIM, REWARD_TERMS, StanceConfig, nominal_state, project_batch, reset_state, start_batch, step_batch
+
+__all__ = ["PlanarLegStanceEnv"]
+
+_RESET_OPTIONS = ("qpos", "qvel")
+
+
+class PlanarLegStanceEnv(gym.Env):
+    r"""Balance a planar torso on one leg whose point foot is pinned to the ground.
+
+    ## Description
+    The robot of the lesson "Simple Legged Robot Dynamics": a floating torso (the base), a thigh
+    hinged at the torso's centre of mass (hip) and a shank hinged to the thigh (knee), ending in a
+    point foot in single support on level ground. Generalised coordinates
+    ``q = [x_b, y_b, th_b, q1, q2]``: torso position and angle, hip angle (thigh relative to torso),
+    knee angle (shank relative to thigh); angles are counter-clockwise, ``th_b = 0`` is a level torso.
+
+    The physics is the exact stance model: the foot is a bilateral pin joint at its contact point
+    and ``M qdd + h = S^T tau + Jc^T lam`` with ``Jc qdd + Jcdot qd = 0`` is solved analytically at
+    every RK4 stage (``leg_env.dynamics``). The stance integrator (``leg_env.integrate``) integrates
+    the independent coordinates ``(th_b, q1, q2)`` and places the base exactly on the contact, so the
+    foot stays on its contact point to round-off (about 1e-15 m). Because the pin is bilateral the
+    ground can pull as well as push: the contact force ``lam = [lam_x, lam_y]`` (the ground's force on
+    the foot) is part of the observation, and the reward charges the agent for asking the ground for
+    a force it could not give (``lam_y < 0``, or ``|lam_x| > mu lam_y``).
+
+    The task is to stay near the nominal posture: a static equilibrium with the torso level, the knee
+    bent by ``nominal_knee`` (0.8 rad) and the whole-body centre of mass above the foot, held by
+    constant torques (about 0 N m at the hip and -24.1 N m at the knee with the default parameters;
+    ``lam = [0, m g] = [0, 147.15] N``). The equilibrium is unstable: with zero torques the robot falls.
+
+    **Time stepping.** One ``step`` is a control period ``dt`` = 0.01 s (100 Hz) with the torques held
+    constant, integrated by at least ``substeps`` = 4 RK4 steps, more when the motion is fast so that no
+    link turns by more than ``max_angle`` = 0.02 rad per RK4 step. Convergence check (1 s from a
+    slightly perturbed nominal state, default parameters, compared with 256 fixed RK4 steps per period):
+    under smooth torques (nominal + sinusoids of 3 and 5 N m) the default state error is 6.4e-9
+    (4x finer steps: 2.5e-11, the 4th-order ratio 256); under zero torques (a fall) it is 2.9e-8 in
+    ``q``, 9.1e-8 in ``qd`` and 6e-6 of the weight in the contact force. The discretisation error is far
+    below anything a policy can notice.
+
+    ## Action Space
+    ``Box(-1, 1, (2,), float32)``, scaled by ``torque_limit`` (default 50 N m for both joints, twice the
+    24.1 N m the knee needs to hold the nominal posture). Out-of-range actions are clipped to ``[-1, 1]``.
+    A NaN or infinite action, or one whose shape is not ``(2,)``, raises ``ValueError`` and leaves the
+    environment untouched.
+
+    | Num | Action              | Min | Max | Unit                   |
+    |-----|---------------------|-----|-----|------------------------|
+    | 0   | hip torque `tau_hip`   | -1  | 1   | `torque_limit[0]` N m |
+    | 1   | knee torque `tau_knee` | -1  | 1   | `torque_limit[1]` N m |
+
+    ## Observation Space
+    ``Box(low, high, (12,), float32)``. The base position is relative to the contact point and is
+    bounded by the leg length ``L = l1 + l2`` (padded by 1%); the other entries have no finite bound
+    that holds for every state the environment can reach (the torso and joints turn freely once the
+    robot has fallen, if stepping goes on), so their bounds are infinite. Velocities never exceed
+    ``max_rate``: a faster state is treated as a numerical failure. The contact force is the mean over
+    the last control step (the contact impulse over ``dt``), divided by the weight ``m g``; after
+    ``reset`` it is the instantaneous force under the nominal holding torques (exactly ``[0, 1]`` at the
+    nominal posture).
+
+    | Num | Observation                                      | Min  | Max  | Unit  |
+    |-----|--------------------------------------------------|------|------|-------|
+    | 0   | base `x_b` relative to the contact point         | -1.01 L | 1.01 L | m  |
+    | 1   | base `y_b` relative to the contact point         | -1.01 L | 1.01 L | m  |
+    | 2   | torso angle `th_b`                               | -Inf | Inf  | rad   |
+    | 3   | hip angle `q1`                                   | -Inf | Inf  | rad   |
+    | 4   | knee angle `q2`                                  | -Inf | Inf  | rad   |
+    | 5   | base velocity `x_b'`                             | -Inf | Inf  | m/s   |
+    | 6   | base velocity `y_b'`                             | -Inf | Inf  | m/s   |
+    | 7   | torso angular velocity `th_b'`                   | -Inf | Inf  | rad/s |
+    | 8   | hip angular velocity `q1'`                       | -Inf | Inf  | rad/s |
+    | 9   | knee angular velocity `q2'`                      | -Inf | Inf  | rad/s |
+    | 10  | tangential contact force `lam_x / (m g)`         | -Inf | Inf  | 1     |
+    | 11  | normal contact force `lam_y / (m g)`             | -Inf | Inf  | 1     |
+
+    ## Rewards
+    ``reward = reward_alive + reward_drift + reward_unilateral + reward_friction + reward_ctrl``, each
+    term in ``info`` under that name (they sum to the reward exactly, in this order):
+
+    - ``reward_alive = alive_bonus`` on a healthy step (not terminated), else 0.
+    - ``reward_drift = -(drift_position_weight |p_b - p_nom|^2 + drift_angle_weight th_b^2
+      + drift_velocity_weight (x_b'^2 + y_b'^2 + th_b'^2))``, with ``p_b`` the base position relative to
+      the contact point and ``p_nom`` its nominal value.
+    - ``reward_unilateral = -unilateral_weight max(0, -lam_y) / (m g)``: the ground cannot pull.
+    - ``reward_friction = -friction_weight max(0, |lam_x| - mu lam_y) / (m g)``: the force must lie in
+      the friction cone.
+    - ``reward_ctrl = -ctrl_cost_weight |a|^2`` with ``a`` the clipped action.
+
+    ``info`` also has ``contact_force`` (``lam`` [N], shape (2,)), ``normal_force`` (``lam_y`` [N]),
+    ``unilateral_violation`` (``lam_y < 0``), ``friction_violation`` (``|lam_x| > mu lam_y``),
+    ``numerical_failure``, ``base_drift`` (``|p_b - p_nom|`` [m]) and ``foot_error`` (the foot's
+    distance from its contact point [m]). ``reset`` returns the same keys except the reward terms.
+
+    ## Starting State
+    The nominal posture plus uniform noise in ``[-reset_noise_scale, reset_noise_scale]`` on the torso,
+    hip and knee angles [rad] and on their rates [rad/s]; ``reset_noise_scale = 0`` gives exactly the
+    nominal state. The base position and velocity then follow from the contact: the foot is on the
+    contact point, which is the world origin, and ``Jc qd = 0`` (the base velocity is replaced, the
+    torso and joint rates are kept: a projection onto the nullspace of ``Jc``).
+
+    ``reset(options={"qpos": q, "qvel": qd})`` starts from an explicit state instead (either key may be
+    left out: ``qpos`` defaults to the nominal posture, ``qvel`` to zero; no noise is added). The contact
+    point is where that foot is, and the base velocity is projected onto the contact as above. Shapes
+    must be ``(5,)`` and values finite, else ``ValueError``.
+
+    ## Episode End
+    ### Termination
+    The episode terminates when the robot is unhealthy:
+
+    1. it falls: the torso is less than ``min_base_height`` (0.5 m) above the contact point, or below
+       the knee, or ``|th_b| > max_torso_angle`` (1 rad);
+    2. a joint leaves its range: ``q1`` outside ``hip_range`` (-3, -0.9) rad or ``q2`` outside
+       ``knee_range`` (0.05, 2.5) rad;
+    3. if ``terminate_on_contact_loss``: ``lam_y < contact_loss_threshold`` (0 N);
+    4. a numerical failure: a non-finite state or force, or a rate above ``max_rate``. The state is
+       restored to the last good one, the observation is the last (finite) one, every reward term is
+       0 and ``info["numerical_failure"]`` is True.
+
+    ### Truncation
+    Only through the time limit: 1000 steps (10 s) when made with ``gymnasium.make``.
+
+    ## Arguments
+    ``gymnasium.make("leg_env/PlanarLegStance-v0", **kwargs)`` or ``PlanarLegStanceEnv(**kwargs)``.
+    Every ``StanceConfig`` field is a keyword argument (it overrides ``config``); unknown names and
+    out-of-range values raise ``ValueError``, as does a ``torque_limit`` that cannot hold the nominal
+    posture or termination limits that the nominal posture itself violates.
+
+    | Parameter                   | Type              | Default        | Description                                              |
+    |-----------------------------|-------------------|----------------|----------------------------------------------------------|
+    | `render_mode`               | str or None       | None           | `"rgb_array"` (headless frames) or `"human"` (a window)  |
+    | `params`                    | LegParams or dict | lesson's       | masses, inertias, lengths, gravity                       |
+    | `config`                    | StanceConfig or dict | defaults    | all task settings below at once                          |
+    | `width`, `height`           | int               | 480, 480       | frame size in pixels                                     |
+    | `dt`                        | float             | 0.01           | control period [s]; `metadata["render_fps"] = 1 / dt`   |
+    | `substeps`                  | int               | 4              | least RK4 steps per control period                       |
+    | `max_angle`                 | float             | 0.02           | largest link rotation per RK4 step [rad] (`inf`: fixed)  |
+    | `torque_limit`              | float or pair     | (50, 50)       | torque at action 1 for hip, knee [N m]                   |
+    | `nominal_knee`              | float             | 0.8            | knee angle of the nominal posture [rad]                  |
+    | `alive_bonus`               | float             | 1.0            | reward per healthy step                                  |
+    | `drift_position_weight`     | float             | 10.0           | per m^2 of base offset                                   |
+    | `drift_angle_weight`        | float             | 1.0            | per rad^2 of torso angle                                 |
+    | `drift_velocity_weight`     | float             | 0.1            | per (m/s)^2 + (rad/s)^2 of torso velocity                |
+    | `unilateral_weight`         | float             | 10.0           | per weight of pulling force                              |
+    | `friction_weight`           | float             | 10.0           | per weight of force outside the friction cone            |
+    | `ctrl_cost_weight`          | float             | 0.01           | per unit of squared action                               |
+    | `mu`                        | float             | 0.8            | friction coefficient of the cone check                   |
+    | `min_base_height`           | float             | 0.5            | fall: torso height above the contact point [m]           |
+    | `max_torso_angle`           | float             | 1.0            | fall: torso tilt [rad]                                   |
+    | `hip_range`, `knee_range`   | pair              | (-3, -0.9), (0.05, 2.5) | allowed joint angles [rad]                      |
+    | `terminate_on_contact_loss` | bool              | False          | end the episode when `lam_y < contact_loss_threshold`    |
+    | `contact_loss_threshold`    | float             | 0.0            | [N]                                                      |
+    | `max_rate`                  | float             | 1000           | a faster state is a numerical failure [m/s, rad/s]       |
+    | `reset_noise_scale`         | float             | 0.01           | half-width of the reset noise [rad, rad/s]               |
+
+    Pickling (and ``copy.deepcopy``) keeps every argument and the full state, random generator
+    included, so a copy continues the same trajectory; an open window is not copied.
+
+    ## Version History
+    * v0: Initial release.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 100}
+
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        params: LegParams | dict | None = None,
+        config: StanceConfig | dict | None = None,
+        width: int = 480,
+        height: int = 480,
+        **config_overrides: Any,
+    ):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        for name, value in (("width", width), ("height", height)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"{name} must be a positive integer number of pixels, got {value!r}")
+        self.render_mode = render_mode
+        self.width, self.height = int(width), int(height)
+        self.params = LegParams.from_any(params)
+        self.config = StanceConfig.from_kwargs(config, **config_overrides)
+        self.nominal = nominal_state(self.params, self.config)
+
+        fps = 1.0 / self.config.dt
+        fps = int(round(fps)) if abs(fps - round(fps)) < 1e-9 * fps else fps
+        if fps != self.metadata["render_fps"]:
+            self.metadata = {**type(self).metadata, "render_fps": fps}
+
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        reach = 1.01 * (self.params.l1 + self.params.l2)
+        high = np.full(OBS_DIM, np.inf, dtype=np.float32)
+        high[:2] = reach
+        self.observation_space = spaces.Box(-high, high, dtype=np.float32)
+
+        # kernel inputs and (1, .) output buffers, shared with nothing
+        self._p = self.params.array
+        self._c = self.config.array()
+        self._q_nom = self.nominal.q
+        self._tau_nom = np.ascontiguousarray(self.nominal.tau, dtype=np.float64)
+        self._q = np.empty((1, 5))
+        self._qd = np.empty((1, 5))
+        self._anchor = np.empty((1, 2))
+        self._action = np.zeros((1, 2))
+        self._lam = np.zeros((1, 2))
+        self._obs = np.zeros((1, OBS_DIM), dtype=np.float32)
+        self._terms = np.zeros((1, len(REWARD_TERMS)))
+        self._flags = np.zeros((1, len(FLAG_NAMES)), dtype=np.bool_)
+        self._extra = np.zeros((1, len(INFO_NAMES)))
+        self._viewer = None
+
+        # start at the nominal posture, so that it can be checked against the termination limits
+        self._start(self.nominal.q, np.zeros(5), np.zeros(2))
+        if self._flags[0, 0]:
+            raise ValueError(
+                "the nominal posture is already terminal under these limits "
+                f"(q = {np.round(self.nominal.q, 3).tolist()}; check min_base_height, max_torso_angle, hip_range, knee_range, contact_loss_threshold)"
+            )
+
+    # ---------------------------------------------------------------- API
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        if options and any(k in options for k in _RESET_OPTIONS):
+            q, qd = self._explicit_state(options)
+            anchor = foot_position(q, self.params)
+        else:
+            if options:
+                raise ValueError(f"unknown reset option(s) {sorted(options)}; valid: {list(_RESET_OPTIONS)}")
+            q, qd, anchor = reset_state(self.np_random, self.params, self.config, self.nominal)
+        self._start(q, qd, anchor)
+        info = self._info()
+        if self.render_mode == "human":
+            self.render()
+        return self._obs[0].copy(), info
+
+    def step(self, action):
+        a0, a1 = _checked_action(action)
+        self._action[0, 0] = a0
+        self._action[0, 1] = a1
+        step_batch(
+            self._q, self._qd, self._anchor, self._action, self._p, self._c, self._q_nom,
+            self._lam, self._obs, self._terms, self._flags, self._extra,
+        )  # fmt: skip
+        alive, drift, unilateral, friction, ctrl = self._terms[0].tolist()
+        reward = alive + drift + unilateral + friction + ctrl
+        info = self._info()
+        info["reward_alive"] = alive
+        info["reward_drift"] = drift
+        info["reward_unilateral"] = unilateral
+        info["reward_friction"] = friction
+        info["reward_ctrl"] = ctrl
+        if self.render_mode == "human":
+            self.render()
+        return self._obs[0].copy(), reward, bool(self._flags[0, 0]), False, info
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn(
+                "You are calling render method without specifying any render mode. You can specify the render_mode "
+                f'at initialization, e.g. gym.make("{self.spec.id if self.spec else "leg_env/PlanarLegStance-v0"}", render_mode="rgb_array")'
+            )
+            return None
+        from .. import render
+
+        violated = bool(self._flags[0, 1] or self._flags[0, 2])
+        if self.render_mode == "rgb_array":
+            return render.draw(self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.width, self.height, self.config.mu)
+        if self._viewer is None:
+            self._viewer = render.Viewer(self.width, self.height, self.metadata["render_fps"])
+        self._viewer.show(self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.config.mu)
+        return None
+
+    def close(self):
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
+
+    # ---------------------------------------------------------- accessors
+
+    @property
+    def dt(self) -> float:
+        """Control period [s]: the simulated time of one ``step``."""
+        return self.config.dt
+
+    @property
+    def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Copies of ``(q, qd, anchor)``: configuration, velocity and the foot's contact point."""
+        return self._q[0].copy(), self._qd[0].copy(), self._anchor[0].copy()
+
+    # ------------------------------------------------------------ helpers
+
+    def _start(self, q, qd, anchor) -> None:
+        """Put the robot at ``(q, qd)`` with its foot on ``anchor`` and evaluate it without stepping."""
+        self._q[0] = q
+        self._qd[0] = qd
+        self._anchor[0] = anchor
+        project_batch(self._q, self._qd, self._p, self._anchor)
+        start_batch(
+            self._q, self._qd, self._anchor, self._tau_nom, self._p, self._c, self._q_nom,
+            self._lam, self._obs, self._flags, self._extra,
+        )  # fmt: skip
+
+    def _info(self) -> dict:
+        _, unilateral, friction, failure = self._flags[0].tolist()
+        base_drift, foot_error, normal_force = self._extra[0].tolist()
+        return {
+            "contact_force": self._lam[0].copy(),
+            "normal_force": normal_force,
+            "unilateral_violation": unilateral,
+            "friction_violation": friction,
+            "numerical_failure": failure,
+            "base_drift": base_drift,
+            "foot_error": foot_error,
+        }
+
+    def _explicit_state(self, options: dict) -> tuple[np.ndarray, np.ndarray]:
+        unknown = set(options) - set(_RESET_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: {list(_RESET_OPTIONS)}")
+        out = []
+        for key, default in (("qpos", self.nominal.q), ("qvel", np.zeros(5))):
+            value = options.get(key, default)
+            try:
+                value = np.array(value, dtype=np.float64)
+            except (TypeError, ValueError) as e:
+                raise ValueError(f"reset option {key!r} must be 5 numbers, got {options[key]!r}") from e
+            if value.shape != (5,):
+                raise ValueError(f"reset option {key!r} must have shape (5,), got {value.shape}")
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"reset option {key!r} must be finite, got {value.tolist()}")
+            out.append(value)
+        return out[0], out[1]
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_viewer"] = None  # a window does not travel
+        return state
+
+
+def _checked_action(action) -> tuple[float, float]:
+    """The action as two Python floats; ``ValueError`` unless it is 2 finite numbers of shape (2,)."""
+    try:
+        a = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"action must be 2 numbers [hip, knee], got {action!r}") from e
+    if a.shape != (2,):
+        raise ValueError(f"action must have shape (2,) [hip, knee], got shape {a.shape}")
+    a0, a1 = a.tolist()
+    if not (math.isfinite(a0) and math.isfinite(a1)):
+        bad = [name for name, v in (("hip", a0), ("knee", a1)) if not math.isfinite(v)]
+        raise ValueError(f"action must be finite; non-finite entries: {bad} in {[a0, a1]}")
+    return a0, a1
+

@@ -1,0 +1,94 @@
+"""Rendering: headless ``rgb_array`` frames, a ``human`` window (SDL dummy driver in CI), lazy pygame."""
+
+import os
+import pickle
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from leg_env import ENV_ID, PlanarLegStanceEnv
+from leg_env.render import FEASIBLE, VIOLATED, draw
+
+SIZES = [(480, 480), (320, 200), (120, 360)]
+
+
+def count(frame: np.ndarray, colour) -> int:
+    return int(np.all(frame == np.array(colour, dtype=np.uint8), axis=-1).sum())
+
+
+@pytest.mark.parametrize("width,height", SIZES)
+def test_rgb_array_frame_shape_and_content(width, height):
+    env = gym.make(ENV_ID, render_mode="rgb_array", width=width, height=height, reset_noise_scale=0.0)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (height, width, 3) and frame.dtype == np.uint8
+    colours = np.unique(frame.reshape(-1, 3), axis=0)
+    assert len(colours) >= 8  # sky, ground, links, torso, joints, arrow, ...
+    assert count(frame, FEASIBLE) > 20 and count(frame, VIOLATED) == 0  # the nominal force is feasible
+
+
+def test_violated_force_is_red_and_frames_follow_the_state():
+    env = gym.make(ENV_ID, render_mode="rgb_array", reset_noise_scale=0.0)
+    env.reset(seed=0)
+    first = env.render()
+    _, _, _, _, info = env.step(np.array([0.0, 1.0]))  # pulls on the ground
+    assert info["unilateral_violation"]
+    frame = env.render()
+    assert count(frame, VIOLATED) > 20 and count(frame, FEASIBLE) == 0
+    assert not np.array_equal(first, frame)
+
+
+def test_draw_directly(params):
+    q = np.array([0.0, 0.9, 0.2, -2.0, 0.8])
+    frame = draw(q, np.zeros(2), np.array([10.0, 140.0]), params, violated=False, width=64, height=48)
+    assert frame.shape == (48, 64, 3) and frame.dtype == np.uint8
+    assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 3
+
+
+def test_render_after_a_fall():
+    env = gym.make(ENV_ID, render_mode="rgb_array")
+    env.reset(seed=0)
+    for _ in range(300):
+        if env.step(np.zeros(2))[2]:
+            break
+    assert env.render().shape == (480, 480, 3)
+
+
+def test_render_without_mode_warns_and_returns_none():
+    env = PlanarLegStanceEnv()
+    env.reset(seed=0)
+    with pytest.warns(UserWarning, match="render_mode"):
+        assert env.render() is None
+
+
+def test_rgb_array_needs_no_display():
+    code = (
+        "import sys, leg_env, gymnasium as gym\n"
+        "assert 'pygame' not in sys.modules\n"
+        "import leg_env.render\n"
+        "assert 'pygame' not in sys.modules\n"
+        "env = gym.make('leg_env/PlanarLegStance-v0', render_mode='rgb_array')\n"
+        "env.reset(seed=0)\n"
+        "assert 'pygame' not in sys.modules\n"
+        "print(env.render().shape)\n"
+    )
+    environ = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=environ)
+    assert out.stdout.strip() == "(480, 480, 3)"
+
+
+def test_human_mode_opens_a_window_and_closes():
+    # conftest sets SDL_VIDEODRIVER=dummy, so the window exists without a display
+    env = gym.make(ENV_ID, render_mode="human", width=160, height=120)
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(env.action_space.sample())
+    assert env.render() is None
+    assert env.unwrapped._viewer is not None
+    clone = pickle.loads(pickle.dumps(env.unwrapped))  # a window does not travel
+    assert clone._viewer is None
+    env.close()
+    env.close()  # closing twice is allowed

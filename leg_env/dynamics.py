@@ -101,14 +101,20 @@ def _leg_terms(q, qd, p):
 
 
 @njit(cache=True, inline="always")
-def _stance_one(q, qd, tau, p, qdd, lam):
-    """Stance KKT solve for one robot; writes ``qdd`` (5,) and ``lam`` (2,)."""
-    I_b, I1, I2 = p[3], p[4], p[5]
-    m1, m2, l1, l2, c1, c2, g = p[1], p[2], p[6], p[7], p[8], p[9], p[10]
-    s1, co1, s2, co2, th1, th2, w1, w2, m, a, b = _leg_terms(q, qd, p)
+def _stance_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
+    """Stance KKT solve from the link angles' sines/cosines and rates ``w1 = th1'``, ``w2 = th2'``.
+
+    The stance dynamics depend on nothing else (translation invariance), so the integrator can
+    reuse the trigonometry of its projection. Returns ``(qdd[0..4], lam_x, lam_y)`` as scalars.
+    """
+    m_b, m1, m2, I_b, I1, I2 = p[0], p[1], p[2], p[3], p[4], p[5]
+    l1, l2, c1, c2, g = p[6], p[7], p[8], p[9], p[10]
+    m = m_b + m1 + m2
+    a = m1 * c1 + m2 * l1  # first moment of the leg about the hip along the thigh
+    b = m2 * c2  # first moment of the shank about the knee
     k = m2 * l1 * c2
-    c12 = np.cos(th1 - th2)
-    s12 = np.sin(th1 - th2)
+    c12 = co1 * co2 + s1 * s2  # cos(th1 - th2)
+    s12 = s1 * co2 - co1 * s2  # sin(th1 - th2)
     # leg block of A (absolute angles)
     D11 = I1 + m1 * c1 * c1 + m2 * l1 * l1
     D22 = I2 + m2 * c2 * c2
@@ -131,33 +137,31 @@ def _stance_one(q, qd, tau, p, qdd, lam):
     K22 = D22 - 2.0 * (J2x * B2x + J2y * B2y) + m * (J2x * J2x + J2y * J2y)
     K12 = D12 - (J1x * B2x + J1y * B2y) - (B1x * J2x + B1y * J2y) + m * (J1x * J2x + J1y * J2y)
     # right-hand side: Q - h + J^T h_xy + (B - m J)^T jd, with Q = (tau_hip - tau_knee, tau_knee)
-    r1 = (tau[0] - tau[1]) - h1 + (J1x * hx + J1y * hy) + ((B1x - m * J1x) * jx + (B1y - m * J1y) * jy)
-    r2 = tau[1] - h2 + (J2x * hx + J2y * hy) + ((B2x - m * J2x) * jx + (B2y - m * J2y) * jy)
+    r1 = (tau_hip - tau_knee) - h1 + (J1x * hx + J1y * hy) + ((B1x - m * J1x) * jx + (B1y - m * J1y) * jy)
+    r2 = tau_knee - h2 + (J2x * hx + J2y * hy) + ((B2x - m * J2x) * jx + (B2y - m * J2y) * jy)
     # solve the 2x2 SPD system by elimination
     f = K12 / K11
     dd2 = (r2 - f * r1) / (K22 - f * K12)
     dd1 = (r1 - K12 * dd2) / K11
     xdd = -jx - (J1x * dd1 + J2x * dd2)
     ydd = -jy - (J1y * dd1 + J2y * dd2)
-    lam[0] = m * xdd + B1x * dd1 + B2x * dd2 + hx
-    lam[1] = m * ydd + B1y * dd1 + B2y * dd2 + hy
-    thbdd = -tau[0] / I_b
-    qdd[0] = xdd
-    qdd[1] = ydd
-    qdd[2] = thbdd
-    qdd[3] = dd1 - thbdd
-    qdd[4] = dd2 - dd1
+    lam_x = m * xdd + B1x * dd1 + B2x * dd2 + hx
+    lam_y = m * ydd + B1y * dd1 + B2y * dd2 + hy
+    thbdd = -tau_hip / I_b
+    return xdd, ydd, thbdd, dd1 - thbdd, dd2 - dd1, lam_x, lam_y
 
 
 @njit(cache=True, inline="always")
-def _flight_one(q, qd, tau, p, qdd):
-    """Unconstrained (flight) forward dynamics for one robot; writes ``qdd`` (5,)."""
-    I_b, I1, I2 = p[3], p[4], p[5]
-    m1, m2, l1, c1, c2, g = p[1], p[2], p[6], p[8], p[9], p[10]
-    s1, co1, s2, co2, th1, th2, w1, w2, m, a, b = _leg_terms(q, qd, p)
+def _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
+    """Unconstrained (flight) forward dynamics from the same inputs as ``_stance_core``; returns ``qdd[0..4]``."""
+    m_b, m1, m2, I_b, I1, I2 = p[0], p[1], p[2], p[3], p[4], p[5]
+    l1, c1, c2, g = p[6], p[8], p[9], p[10]
+    m = m_b + m1 + m2
+    a = m1 * c1 + m2 * l1
+    b = m2 * c2
     k = m2 * l1 * c2
-    c12 = np.cos(th1 - th2)
-    s12 = np.sin(th1 - th2)
+    c12 = co1 * co2 + s1 * s2  # cos(th1 - th2)
+    s12 = s1 * co2 - co1 * s2  # sin(th1 - th2)
     D11 = I1 + m1 * c1 * c1 + m2 * l1 * l1
     D22 = I2 + m2 * c2 * c2
     D12 = k * c12
@@ -171,17 +175,39 @@ def _flight_one(q, qd, tau, p, qdd):
     K11 = D11 - (B1x * B1x + B1y * B1y) / m
     K22 = D22 - (B2x * B2x + B2y * B2y) / m
     K12 = D12 - (B1x * B2x + B1y * B2y) / m
-    r1 = (tau[0] - tau[1]) - h1 + (B1x * hx + B1y * hy) / m
-    r2 = tau[1] - h2 + (B2x * hx + B2y * hy) / m
+    r1 = (tau_hip - tau_knee) - h1 + (B1x * hx + B1y * hy) / m
+    r2 = tau_knee - h2 + (B2x * hx + B2y * hy) / m
     f = K12 / K11
     dd2 = (r2 - f * r1) / (K22 - f * K12)
     dd1 = (r1 - K12 * dd2) / K11
-    thbdd = -tau[0] / I_b
-    qdd[0] = -(B1x * dd1 + B2x * dd2 + hx) / m
-    qdd[1] = -(B1y * dd1 + B2y * dd2 + hy) / m
-    qdd[2] = thbdd
-    qdd[3] = dd1 - thbdd
-    qdd[4] = dd2 - dd1
+    thbdd = -tau_hip / I_b
+    xdd = -(B1x * dd1 + B2x * dd2 + hx) / m
+    ydd = -(B1y * dd1 + B2y * dd2 + hy) / m
+    return xdd, ydd, thbdd, dd1 - thbdd, dd2 - dd1
+
+
+@njit(cache=True, inline="always")
+def _stance_one(q, qd, tau, p, qdd, lam):
+    """Stance KKT solve for one robot; writes ``qdd`` (5,) and ``lam`` (2,)."""
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    w1 = qd[2] + qd[3]
+    w2 = w1 + qd[4]
+    qdd[0], qdd[1], qdd[2], qdd[3], qdd[4], lam[0], lam[1] = _stance_core(
+        np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), w1, w2, tau[0], tau[1], p
+    )
+
+
+@njit(cache=True, inline="always")
+def _flight_one(q, qd, tau, p, qdd):
+    """Unconstrained (flight) forward dynamics for one robot; writes ``qdd`` (5,)."""
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    w1 = qd[2] + qd[3]
+    w2 = w1 + qd[4]
+    qdd[0], qdd[1], qdd[2], qdd[3], qdd[4] = _flight_core(
+        np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), w1, w2, tau[0], tau[1], p
+    )
 
 
 @njit(cache=True, inline="always")
@@ -311,11 +337,8 @@ def _flight_batch(q, qd, tau, p, qdd):
 
 
 @njit(cache=True)
-def _stance_single(q, qd, tau, p):
-    qdd = np.empty(5)
-    lam = np.empty(2)
+def _stance_single(q, qd, tau, p, qdd, lam):
     _stance_one(q, qd, tau, p, qdd, lam)
-    return qdd, lam
 
 
 @njit(cache=True)
@@ -369,9 +392,31 @@ def params_array(p: LegParams | np.ndarray) -> np.ndarray:
     return a
 
 
-def _is_single(x, n: int) -> bool:
-    """Fast-path test: a contiguous float64 vector of length ``n`` (one robot)."""
-    return type(x) is np.ndarray and x.shape == (n,) and x.dtype == np.float64 and x.flags.c_contiguous
+_F64 = np.dtype(np.float64)
+_SHAPE_Q = (NQ,)
+_SHAPE_TAU = (NU,)
+
+
+def _single_robot(q, qd, tau) -> bool:
+    """Fast-path test: ``q``, ``qd`` of shape (5,) and ``tau`` of shape (2,), all contiguous float64.
+
+    One expression, no calls (this sits on the per-evaluation path). ``dtype is`` compares with
+    numpy's float64 singleton; an equal but distinct dtype object only takes the general path.
+    """
+    return (
+        type(q) is np.ndarray
+        and type(qd) is np.ndarray
+        and type(tau) is np.ndarray
+        and q.shape == _SHAPE_Q
+        and qd.shape == _SHAPE_Q
+        and tau.shape == _SHAPE_TAU
+        and q.dtype is _F64
+        and qd.dtype is _F64
+        and tau.dtype is _F64
+        and q.flags.c_contiguous
+        and qd.flags.c_contiguous
+        and tau.flags.c_contiguous
+    )
 
 
 def _vec(x, n: int, name: str) -> np.ndarray:
@@ -473,8 +518,10 @@ def stance_dynamics(q, qd, tau, p: LegParams) -> tuple[np.ndarray, np.ndarray]:
         ``(qdd, lam)`` of shapes ``(..., 5)`` and ``(..., 2)``; ``lam = [lam_x, lam_y]`` is the
         ground's force on the foot [N].
     """
-    if _is_single(q, NQ) and _is_single(qd, NQ) and _is_single(tau, NU):
-        return _stance_single(q, qd, tau, params_array(p))
+    if _single_robot(q, qd, tau):
+        qdd, lam = np.empty(NQ), np.empty(2)
+        _stance_single(q, qd, tau, params_array(p), qdd, lam)
+        return qdd, lam
     lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
     n = qf.shape[0]
     qdd = np.empty((n, NQ))

@@ -25,10 +25,12 @@ One kernel serves one robot and a batch: single-robot calls are a batch of one.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
-from .dynamics import NQ, NU, _batched, _flight_one, _foot_one, _stance_one, _vec, params_array
+from .dynamics import _F64, NQ, NU, _batched, _flight_core, _single_robot, _stance_core, _vec, params_array
 from .params import LegParams
 
 __all__ = ["stance_step", "flight_step", "project_stance", "project_velocity", "step_inplace"]
@@ -38,18 +40,24 @@ _RK4_W = np.array([1.0, 2.0, 2.0, 1.0]) / 6.0
 
 
 @njit(cache=True, inline="always")
+def _project_core(s1, co1, s2, co2, w1, w2, anchor, p):
+    """Base position and velocity that put the foot on ``anchor`` with ``Jc qd = 0``."""
+    l1, l2 = p[6], p[7]
+    x = anchor[0] - l1 * co1 - l2 * co2
+    y = anchor[1] - l1 * s1 - l2 * s2
+    vx = l1 * s1 * w1 + l2 * s2 * w2
+    vy = -(l1 * co1 * w1 + l2 * co2 * w2)
+    return x, y, vx, vy
+
+
+@njit(cache=True, inline="always")
 def _project_one(q, qd, p, anchor):
     """Put the foot exactly on ``anchor`` and make ``Jc qd = 0`` by moving only the base."""
-    l1, l2 = p[6], p[7]
     th1 = q[2] + q[3]
     th2 = th1 + q[4]
     w1 = qd[2] + qd[3]
     w2 = w1 + qd[4]
-    s1, co1, s2, co2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
-    q[0] = anchor[0] - l1 * co1 - l2 * co2
-    q[1] = anchor[1] - l1 * s1 - l2 * s2
-    qd[0] = l1 * s1 * w1 + l2 * s2 * w2
-    qd[1] = -(l1 * co1 * w1 + l2 * co2 * w2)
+    q[0], q[1], qd[0], qd[1] = _project_core(np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), w1, w2, anchor, p)
 
 
 @njit(cache=True, inline="always")
@@ -59,55 +67,91 @@ def _substeps_for(qd, dt, substeps, max_angle):
     w = max(abs(qd[2]), abs(qd[3]), abs(qd[4]), abs(qd[2] + qd[3]), abs(qd[2] + qd[3] + qd[4]))
     need = w * dt / max_angle
     if need > substeps:
-        if need > 4096.0:  # non-finite or absurd rates: cap the work, the caller flags the state
+        if need > 4096.0:  # infinite or absurd rates: cap the work, the caller flags the state
             return 4096
         return int(np.ceil(need))
-    return substeps
+    return substeps  # also for NaN rates: the state is already lost, the caller flags it
+
+
+@njit(cache=True, inline="always")
+def _accel(stance, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
+    """``(qdd[0..4], lam_x, lam_y)`` of the stance model, or of flight with ``lam = 0``."""
+    if stance:
+        return _stance_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p)
+    xdd, ydd, thbdd, q1dd, q2dd = _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p)
+    return xdd, ydd, thbdd, q1dd, q2dd, 0.0, 0.0
 
 
 @njit(cache=True, inline="always")
 def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean, work):
-    """One control step of RK4 on one robot, in place; ``work`` is (6, 5) scratch."""
-    q0, qd0, qs, qds, acc_q, acc_qd = work[0], work[1], work[2], work[3], work[4], work[5]
-    substeps = _substeps_for(qd, dt, substeps, max_angle)
-    h = dt / substeps
-    qdd = np.empty(NQ)
-    lam = np.zeros(2)
-    lam_mean[0] = 0.0
-    lam_mean[1] = 0.0
-    for _ in range(substeps):
-        for j in range(NQ):
-            q0[j] = q[j]
-            qd0[j] = qd[j]
-            qs[j] = q[j]
-            qds[j] = qd[j]
-            acc_q[j] = 0.0
-            acc_qd[j] = 0.0
-        for st in range(4):
-            if st > 0:
-                ch = _RK4_C[st] * h
-                for j in range(NQ):
-                    # previous stage slope: (qds, qdd); new stage state from y0
-                    qs[j] = q0[j] + ch * qds[j]
-                for j in range(NQ):
-                    qds[j] = qd0[j] + ch * qdd[j]
-            if stance:
-                _stance_one(qs, qds, tau, p, qdd, lam)
-            else:
-                _flight_one(qs, qds, tau, p, qdd)
-            w = _RK4_W[st]
-            for j in range(NQ):
-                acc_q[j] += w * qds[j]
-                acc_qd[j] += w * qdd[j]
-            lam_mean[0] += w * lam[0]
-            lam_mean[1] += w * lam[1]
-        for j in range(NQ):
-            q[j] = q0[j] + h * acc_q[j]
-            qd[j] = qd0[j] + h * acc_qd[j]
-        if stance:
-            _project_one(q, qd, p, anchor)
-    lam_mean[0] /= substeps
-    lam_mean[1] /= substeps
+    """One control step of RK4 on one robot, in place.
+
+    The state lives in scalars: ``(x, y, a, b, c)`` = ``q`` and ``(vx, vy, va, vb, vc)`` = ``qd``.
+    The dynamics depend only on the link angles' sines/cosines and rates, so the trigonometry
+    computed after an RK4 step serves both the stance projection and the next step's first stage.
+    ``work`` is unused (kept so existing callers need not change).
+    """
+    n = _substeps_for(qd, dt, substeps, max_angle)
+    h = dt / n
+    ch = _RK4_C[1] * h  # stage offsets: h/2, h/2, h
+    W0, W1 = _RK4_W[0], _RK4_W[1]  # weights 1/6, 2/6, 2/6, 1/6
+    t_hip, t_knee = tau[0], tau[1]
+    x, y, a, b, c = q[0], q[1], q[2], q[3], q[4]
+    vx, vy, va, vb, vc = qd[0], qd[1], qd[2], qd[3], qd[4]
+    th1 = a + b
+    th2 = th1 + c
+    s1, co1, s2, co2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
+    lx = 0.0
+    ly = 0.0
+    for _ in range(n):
+        # stage 1 at the current state
+        ax1, ay1, aa1, ab1, ac1, lx1, ly1 = _accel(stance, s1, co1, s2, co2, va + vb, va + vb + vc, t_hip, t_knee, p)
+        # stage 2: y0 + h/2 k1
+        a2, b2, c2 = a + ch * va, b + ch * vb, c + ch * vc
+        vx2, vy2, va2, vb2, vc2 = vx + ch * ax1, vy + ch * ay1, va + ch * aa1, vb + ch * ab1, vc + ch * ac1
+        th1 = a2 + b2
+        th2 = th1 + c2
+        ax2, ay2, aa2, ab2, ac2, lx2, ly2 = _accel(
+            stance, np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), va2 + vb2, va2 + vb2 + vc2, t_hip, t_knee, p
+        )
+        # stage 3: y0 + h/2 k2
+        a3, b3, c3 = a + ch * va2, b + ch * vb2, c + ch * vc2
+        vx3, vy3, va3, vb3, vc3 = vx + ch * ax2, vy + ch * ay2, va + ch * aa2, vb + ch * ab2, vc + ch * ac2
+        th1 = a3 + b3
+        th2 = th1 + c3
+        ax3, ay3, aa3, ab3, ac3, lx3, ly3 = _accel(
+            stance, np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), va3 + vb3, va3 + vb3 + vc3, t_hip, t_knee, p
+        )
+        # stage 4: y0 + h k3
+        a4, b4, c4 = a + h * va3, b + h * vb3, c + h * vc3
+        vx4, vy4, va4, vb4, vc4 = vx + h * ax3, vy + h * ay3, va + h * aa3, vb + h * ab3, vc + h * ac3
+        th1 = a4 + b4
+        th2 = th1 + c4
+        ax4, ay4, aa4, ab4, ac4, lx4, ly4 = _accel(
+            stance, np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), va4 + vb4, va4 + vb4 + vc4, t_hip, t_knee, p
+        )
+        # y1 = y0 + h (k1 + 2 k2 + 2 k3 + k4) / 6
+        x = x + h * (W0 * vx + W1 * vx2 + W1 * vx3 + W0 * vx4)
+        y = y + h * (W0 * vy + W1 * vy2 + W1 * vy3 + W0 * vy4)
+        a = a + h * (W0 * va + W1 * va2 + W1 * va3 + W0 * va4)
+        b = b + h * (W0 * vb + W1 * vb2 + W1 * vb3 + W0 * vb4)
+        c = c + h * (W0 * vc + W1 * vc2 + W1 * vc3 + W0 * vc4)
+        vx = vx + h * (W0 * ax1 + W1 * ax2 + W1 * ax3 + W0 * ax4)
+        vy = vy + h * (W0 * ay1 + W1 * ay2 + W1 * ay3 + W0 * ay4)
+        va = va + h * (W0 * aa1 + W1 * aa2 + W1 * aa3 + W0 * aa4)
+        vb = vb + h * (W0 * ab1 + W1 * ab2 + W1 * ab3 + W0 * ab4)
+        vc = vc + h * (W0 * ac1 + W1 * ac2 + W1 * ac3 + W0 * ac4)
+        lx = lx + W0 * lx1 + W1 * lx2 + W1 * lx3 + W0 * lx4
+        ly = ly + W0 * ly1 + W1 * ly2 + W1 * ly3 + W0 * ly4
+        th1 = a + b
+        th2 = th1 + c
+        s1, co1, s2, co2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
+        if stance:  # the projection, on the trigonometry just computed
+            x, y, vx, vy = _project_core(s1, co1, s2, co2, va + vb, va + vb + vc, anchor, p)
+    q[0], q[1], q[2], q[3], q[4] = x, y, a, b, c
+    qd[0], qd[1], qd[2], qd[3], qd[4] = vx, vy, va, vb, vc
+    lam_mean[0] = lx / n
+    lam_mean[1] = ly / n
 
 
 @njit(cache=True)
@@ -142,11 +186,14 @@ MAX_ANGLE = 0.02  # default largest link rotation per RK4 step [rad]
 
 
 def _checked_steps(dt: float, substeps: int, max_angle: float) -> tuple[float, int, float]:
+    for name, value in (("dt", dt), ("max_angle", max_angle), ("substeps", substeps)):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise ValueError(f"{name} must be a number, got {value!r}")
     max_angle = float(max_angle)
     if not max_angle > 0.0:
         raise ValueError(f"max_angle must be > 0 radians (np.inf for fixed steps), got {max_angle!r}")
     dt = float(dt)
-    if not np.isfinite(dt) or dt <= 0.0:
+    if not math.isfinite(dt) or dt <= 0.0:
         raise ValueError(f"dt must be a positive finite number of seconds, got {dt!r}")
     if int(substeps) != substeps or substeps < 1:
         raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
@@ -173,6 +220,15 @@ def stance_step(
     from .dynamics import foot_position
 
     dt, substeps, max_angle = _checked_steps(dt, substeps, max_angle)
+    if _single_robot(q, qd, tau):
+        # one robot: the same kernel on (1, n) views, without the broadcasting machinery
+        if anchor is None:
+            anchor = foot_position(q, p)
+        if type(anchor) is np.ndarray and anchor.shape == (2,) and anchor.dtype is _F64 and anchor.flags.c_contiguous:
+            q1, qd1, lam = q.reshape(1, NQ).copy(), qd.reshape(1, NQ).copy(), np.empty((1, 2))
+            step_inplace(q1, qd1, tau.reshape(1, NU), params_array(p), anchor.reshape(1, 2), dt, substeps, max_angle,
+                         True, lam)
+            return q1[0], qd1[0], lam[0]
     q = _vec(q, NQ, "q")
     anchor = foot_position(q, p) if anchor is None else _vec(anchor, 2, "anchor")
     lead, (qf, qdf, tf, af) = _batched(q, _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"), anchor)

@@ -424,7 +424,8 @@ def reset_states(rngs, p: LegParams, config: StanceConfig, nominal: Nominal):
         ``(q, qd, anchor)`` as float64 arrays of shapes (k, 5), (k, 5), (k, 2), ``k = len(rngs)``.
     """
     k = len(rngs)
-    q = np.tile(nominal.q, (k, 1))
+    q = np.empty((k, 5))
+    q[:] = nominal.q
     qd = np.zeros((k, 5))
     s = config.reset_noise_scale
     if s > 0.0:

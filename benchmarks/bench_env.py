@@ -1,0 +1,307 @@
+"""Environment speed of leg-env next to Gymnasium's MuJoCo environments, in one run, one table.
+
+    .venv/bin/python benchmarks/bench_env.py          # the table (about a minute)
+    .venv/bin/python benchmarks/bench_env.py --ppo    # and PPO fps, 50,000 steps each (a few minutes)
+
+MuJoCo comes from the ``bench`` extra (``pip install -e '.[bench]'``). One thread for numba, BLAS/OpenMP
+and torch. Every number is the median over ``REPEATS`` timed repeats (``time.perf_counter``), each
+timing a loop of steps and dividing; the rows are timed round-robin, repeat by repeat, so that a
+change in machine load hits every row alike; random actions are sampled before timing (uniform over the
+action space, seeded) because sampling costs more than a leg-env step. Episodes end as they do in
+training, and their resets are part of the time: the single envs are reset by the loop, the vector
+envs autoreset themselves.
+
+Rows:
+(a) ``env.step`` of one environment made by ``gymnasium.make`` (with its ``TimeLimit`` and
+    checkers): leg-env, ``Hopper-v5`` and ``InvertedDoublePendulum-v5``; the ratio is Hopper's time
+    over the row's.
+(b) env-steps per second of ``gymnasium.make_vec``: leg-env's native batch (its default
+    ``vector_entry_point``, NEXT_STEP autoreset) at N = 1, 64, 1024, 4096, and Gymnasium's
+    ``SyncVectorEnv`` of ``Hopper-v5`` with 8 envs; the ratio is the row's rate over that one's.
+(c) env-steps per second of Stable-Baselines3 ``VecEnv.step``: leg-env's adapter
+    (``leg_env.sb3``, which builds the per-env ``infos`` dicts SB3 wants) and SB3's
+    ``DummyVecEnv`` of ``Hopper-v5`` with 8 envs (the ratio's reference).
+With ``--ppo``: SB3 PPO (``MlpPolicy``, SB3's default hyperparameters, 16,384-step rollouts) for
+50,000 steps on the adapter with 64 envs and on ``InvertedDoublePendulum-v5`` with 8
+``DummyVecEnv`` envs; fps = steps / wall time, and the rollout-collection rate alone.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ["NUMBA_NUM_THREADS"] = "1"
+os.environ["OMP_NUM_THREADS"] = "1"
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import platform  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from importlib.metadata import version  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+
+import leg_env  # noqa: E402
+
+REPEATS = 7
+SEED = 0
+LEG = leg_env.ENV_ID
+HOPPER = "Hopper-v5"
+PENDULUM = "InvertedDoublePendulum-v5"
+SINGLE_STEPS = {LEG: 20_000, HOPPER: 2_000, PENDULUM: 4_000}  # env.step calls per repeat (about 0.3 s)
+VECTOR_SIZES = (1, 64, 1024, 4096)
+SB3_SIZES = (64, 1024, 4096)
+REFERENCE_ENVS = 8  # SyncVectorEnv / DummyVecEnv of Hopper-v5
+ENV_STEPS_PER_REPEAT = 100_000  # leg-env batches: calls per repeat = clip(this / N, MIN_CALLS, MAX_CALLS)
+MIN_CALLS, MAX_CALLS = 25, 2_000
+REFERENCE_CALLS = 200  # SyncVectorEnv / DummyVecEnv of Hopper-v5: calls per repeat
+PPO_TIMESTEPS = 50_000
+PPO_ROLLOUT = 16_384  # steps per PPO rollout for both runs (SB3's default 2048 steps x 8 envs)
+PPO_LEG_ENVS = 64
+PPO_PENDULUM_ENVS = 8
+# targets of the issue, as ratios measured in this one run
+TARGET_SINGLE_RATIO = 20.0
+TARGET_VECTOR_RATIO = 200.0
+TARGET_VECTOR_RATE = 500_000.0
+
+
+def sampled_actions(space: gym.spaces.Box, calls: int, n: int | None, seed: int = SEED) -> np.ndarray:
+    """``calls`` uniform random actions (of ``n`` envs each, if given), sampled before any timing."""
+    shape = (calls,) + ((n,) if n is not None else ()) + space.shape
+    return np.random.default_rng(seed).uniform(space.low, space.high, size=shape).astype(space.dtype)
+
+
+class Runner:
+    """One table row: ``run()`` steps an environment through a pre-sampled action block, returning env-steps."""
+
+    def __init__(self, run, close):
+        self.run, self.close, self.rates = run, close, []
+
+    def time_once(self) -> None:
+        start = time.perf_counter()
+        units = self.run()
+        self.rates.append(units / (time.perf_counter() - start))
+
+    @property
+    def rate(self) -> float:
+        return statistics.median(self.rates)
+
+
+def single_env_runner(env_id: str) -> Runner:
+    """``env.step`` calls through ``gymnasium.make``, resetting when an episode ends."""
+    env = gym.make(env_id)
+    env.reset(seed=SEED)
+    steps = SINGLE_STEPS[env_id]
+    actions = sampled_actions(env.action_space, steps, None)
+
+    def run() -> int:
+        for a in actions:
+            _, _, terminated, truncated, _ = env.step(a)
+            if terminated or truncated:
+                env.reset()
+        return steps
+
+    return Runner(run, env.close)
+
+
+def calls_for(n: int) -> int:
+    return int(np.clip(ENV_STEPS_PER_REPEAT // n, MIN_CALLS, MAX_CALLS))
+
+
+def vector_env_runner(envs, calls: int | None = None) -> Runner:
+    """Env-steps of a ``gymnasium.vector.VectorEnv`` (it autoresets)."""
+    n = envs.num_envs
+    calls = calls or calls_for(n)
+    actions = sampled_actions(envs.single_action_space, calls, n)
+    envs.reset(seed=SEED)
+
+    def run() -> int:
+        for a in actions:
+            envs.step(a)
+        return calls * n
+
+    return Runner(run, envs.close)
+
+
+def sb3_runner(venv, calls: int | None = None) -> Runner:
+    """Env-steps of a Stable-Baselines3 ``VecEnv`` (step_async + step_wait)."""
+    n = venv.num_envs
+    calls = calls or calls_for(n)
+    actions = sampled_actions(venv.action_space, calls, n)
+    venv.seed(SEED)
+    venv.reset()
+
+    def run() -> int:
+        for a in actions:
+            venv.step(a)
+        return calls * n
+
+    return Runner(run, venv.close)
+
+
+def time_all(runners: dict) -> None:
+    """Warm every runner up, then time them round-robin ``REPEATS`` times (load changes hit all rows alike)."""
+    for runner in runners.values():
+        runner.run()
+    for _ in range(REPEATS):
+        for runner in runners.values():
+            runner.time_once()
+    for runner in runners.values():
+        runner.close()
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "n/a"
+    packages = ", ".join(
+        f"{name} {version(name)}" for name in ("numpy", "numba", "gymnasium", "mujoco", "stable-baselines3", "torch")
+    )
+    return (
+        f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; Python {platform.python_version()}; "
+        f"{packages}; one thread; load average at start {load}"
+    )
+
+
+def fmt_rate(x: float) -> str:
+    return f"{x:,.0f}"
+
+
+def env_table() -> dict:
+    """Time everything, print the table, return the numbers the targets need."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from leg_env.sb3 import make_sb3_vec_env
+
+    runners = {("single", env_id): single_env_runner(env_id) for env_id in (LEG, HOPPER, PENDULUM)}
+    runners["sync", HOPPER] = vector_env_runner(
+        gym.make_vec(HOPPER, num_envs=REFERENCE_ENVS, vectorization_mode="sync"), REFERENCE_CALLS
+    )
+    runners.update({("vector", n): vector_env_runner(gym.make_vec(LEG, num_envs=n)) for n in VECTOR_SIZES})
+    runners["dummy", HOPPER] = sb3_runner(make_vec_env(HOPPER, n_envs=REFERENCE_ENVS), REFERENCE_CALLS)
+    runners.update({("sb3", n): sb3_runner(make_sb3_vec_env(n)) for n in SB3_SIZES})
+    time_all(runners)
+    rate = {key: runner.rate for key, runner in runners.items()}
+
+    rows = []
+    for env_id in (LEG, HOPPER, PENDULUM):
+        r = rate["single", env_id]
+        rows.append(("`gym.make` `env.step`", env_id, 1, r, r / rate["single", HOPPER]))
+    for n in VECTOR_SIZES:
+        rows.append(("`gym.make_vec` (native)", LEG, n, rate["vector", n], rate["vector", n] / rate["sync", HOPPER]))
+    rows.append(("`gym.make_vec` (`SyncVectorEnv`)", HOPPER, REFERENCE_ENVS, rate["sync", HOPPER], 1.0))
+    for n in SB3_SIZES:
+        rows.append(("SB3 `VecEnv` (`leg_env.sb3`)", LEG, n, rate["sb3", n], rate["sb3", n] / rate["dummy", HOPPER]))
+    rows.append(("SB3 `DummyVecEnv`", HOPPER, REFERENCE_ENVS, rate["dummy", HOPPER], 1.0))
+
+    print(f"\nEnvironment speed, median of {REPEATS} round-robin repeats, random actions, resets included.")
+    print("ratio: (a) vs Hopper-v5 `env.step`; (b) vs `SyncVectorEnv(Hopper-v5, 8)`; (c) vs `DummyVecEnv(Hopper-v5, 8)`.\n")
+    print("| interface | environment | N | us per call | env-steps/s | ratio |")
+    print("|---|---|---:|---:|---:|---:|")
+    for interface, env_id, n, r, ratio in rows:
+        print(f"| {interface} | {env_id} | {n} | {1e6 * n / r:,.1f} | {fmt_rate(r)} | {ratio:.1f}x |")
+    return rate
+
+
+def check_targets(rate: dict) -> bool:
+    n = max(VECTOR_SIZES)
+    single_ratio = rate["single", LEG] / rate["single", HOPPER]
+    vector_ratio = rate["vector", n] / rate["sync", HOPPER]
+    checks = [
+        (f"`gym.make` env.step vs Hopper-v5 >= {TARGET_SINGLE_RATIO:.0f}x", f"{single_ratio:.1f}x", single_ratio >= TARGET_SINGLE_RATIO),
+        (
+            f"`gym.make_vec` N={n} vs SyncVectorEnv(Hopper-v5, {REFERENCE_ENVS}) >= {TARGET_VECTOR_RATIO:.0f}x",
+            f"{vector_ratio:.0f}x",
+            vector_ratio >= TARGET_VECTOR_RATIO,
+        ),
+        (
+            f"`gym.make_vec` N={n} >= {fmt_rate(TARGET_VECTOR_RATE)} env-steps/s",
+            fmt_rate(rate["vector", n]),
+            rate["vector", n] >= TARGET_VECTOR_RATE,
+        ),
+    ]
+    print("\nTargets:")
+    for name, value, ok in checks:
+        print(f"  {'PASS' if ok else 'FAIL'}  {name}: {value}")
+    return all(ok for _, _, ok in checks)
+
+
+def ppo_table() -> None:
+    """PPO fps on the adapter (64 envs) and on InvertedDoublePendulum-v5 (8 DummyVecEnv envs)."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from leg_env.sb3 import make_sb3_vec_env
+
+    torch.set_num_threads(1)
+
+    class RolloutClock(BaseCallback):
+        """Wall time spent collecting rollouts (env steps + policy inference)."""
+
+        def __init__(self):
+            super().__init__()
+            self.seconds = 0.0
+            self._start = 0.0
+
+        def _on_rollout_start(self) -> None:
+            self._start = time.perf_counter()
+
+        def _on_rollout_end(self) -> None:
+            self.seconds += time.perf_counter() - self._start
+
+        def _on_step(self) -> bool:
+            return True
+
+    runs = [
+        ("leg-env, `leg_env.sb3` adapter", LEG, PPO_LEG_ENVS, lambda: VecMonitor(make_sb3_vec_env(PPO_LEG_ENVS, seed=SEED))),
+        ("MuJoCo, `DummyVecEnv`", PENDULUM, PPO_PENDULUM_ENVS, lambda: make_vec_env(PENDULUM, n_envs=PPO_PENDULUM_ENVS, seed=SEED)),
+    ]
+    print(
+        f"\nPPO (SB3 `MlpPolicy`, default hyperparameters, n_steps x n_envs = {PPO_ROLLOUT:,}), "
+        f"learn({PPO_TIMESTEPS:,}), torch on one thread; fps = timesteps / wall time.\n"
+    )
+    print("| environment | VecEnv | n_envs | timesteps | wall s | fps | rollout fps |")
+    print("|---|---|---:|---:|---:|---:|---:|")
+    for label, env_id, n_envs, make in runs:
+        venv = make()
+        clock = RolloutClock()
+        model = PPO("MlpPolicy", venv, n_steps=PPO_ROLLOUT // n_envs, seed=SEED, device="cpu", verbose=0)
+        start = time.perf_counter()
+        model.learn(PPO_TIMESTEPS, callback=clock)
+        wall = time.perf_counter() - start
+        steps = model.num_timesteps
+        print(
+            f"| {env_id} | {label} | {n_envs} | {steps:,} | {wall:.1f} | {fmt_rate(steps / wall)} | {fmt_rate(steps / clock.seconds)} |",
+            flush=True,
+        )
+        venv.close()
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--ppo", action="store_true", help=f"also time PPO for {PPO_TIMESTEPS:,} steps on leg-env and {PENDULUM}")
+    args = parser.parse_args()
+    print(f"Machine: {machine()}")
+    ok = check_targets(env_table())
+    if args.ppo:
+        ppo_table()
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

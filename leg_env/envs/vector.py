@@ -1,0 +1,493 @@
+"""``leg_env/PlanarLegStance-v0`` as a natively batched ``gymnasium.vector.VectorEnv``.
+
+``gymnasium.make_vec("leg_env/PlanarLegStance-v0", num_envs=N)`` builds this class (it is the id's
+``vector_entry_point``). One call of the task kernel ``leg_env.task.step_batch`` advances all N robots,
+the same kernel the single environment calls with N = 1, and resets go through the same
+``reset_states``, ``project_batch`` and ``start_batch``: sub-env ``i`` of a batch reset with
+``seed=s`` is exactly a ``PlanarLegStanceEnv`` reset with ``seed=s + i`` under ``TimeLimit``, step for
+step and across autoresets. Observations, rewards, terminations, truncations and ``info`` (keys,
+values and ``_key`` masks) equal, bit for bit, those of ``gymnasium.vector.SyncVectorEnv`` over N
+single environments in the same autoreset mode, with one deliberate difference: on a step where
+every sub-env resets, the reward-term keys are still there (masks all False) where SyncVectorEnv
+drops them, so ``info["reward_alive"]`` never raises ``KeyError``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from ..dynamics import foot_position
+from ..params import LegParams
+from ..task import INFO_NAMES, OBS_DIM, REWARD_TERMS, FLAG_NAMES, StanceConfig, project_batch, reset_states, start_batch, step_batch
+from .stance import PlanarLegStanceEnv
+
+__all__ = ["PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
+
+REWARD_KEYS = tuple(f"reward_{name}" for name in REWARD_TERMS)
+"""``info`` keys of the reward terms (after a step only); they sum to the reward."""
+STATE_KEYS = (
+    "contact_force",
+    "normal_force",
+    "unilateral_violation",
+    "friction_violation",
+    "numerical_failure",
+    "base_drift",
+    "foot_error",
+)
+"""``info`` keys after both ``reset`` and ``step``, as in the single environment."""
+
+_FLAG = {name: k for k, name in enumerate(FLAG_NAMES)}
+_EXTRA = {name: k for k, name in enumerate(INFO_NAMES)}
+_RESET_OPTIONS = ("qpos", "qvel", "reset_mask")
+
+
+class PlanarLegStanceVectorEnv(VectorEnv):
+    r"""N independent copies of ``PlanarLegStanceEnv``, stepped by one batched kernel call.
+
+    Everything about a sub-environment (dynamics, observation, reward terms, termination, ``info``,
+    constructor arguments, spaces) is documented on ``leg_env.envs.stance.PlanarLegStanceEnv`` and
+    is computed by the same code; this class adds batching, the time limit and autoreset.
+
+    ## Spaces
+    ``single_observation_space`` and ``single_action_space`` are the single environment's
+    (``Box(-1, 1, (2,))`` actions, 12 observations); ``observation_space`` and ``action_space`` are
+    those batched to ``(num_envs, 12)`` and ``(num_envs, 2)``.
+
+    ## Step
+    ``step(actions)`` takes ``(num_envs, 2)`` actions (clipped to ``[-1, 1]``) and returns
+    ``(obs, reward, terminated, truncated, info)`` with shapes ``(num_envs, 12)`` float32,
+    ``(num_envs,)`` float64, bool and bool. A NaN or infinite action or a wrong shape raises
+    ``ValueError`` naming the sub-envs, and leaves every sub-env untouched.
+
+    ``info`` is Gymnasium's vector form: one array per key over the sub-envs, and a boolean mask
+    ``info["_key"]`` telling which sub-envs report it. The keys are the single env's:
+    ``reward_alive, reward_drift, reward_unilateral, reward_friction, reward_ctrl`` (summing to the
+    reward), ``contact_force`` ``(num_envs, 2)``, ``normal_force``, ``unilateral_violation``,
+    ``friction_violation``, ``numerical_failure``, ``base_drift``, ``foot_error``.
+
+    ## Episode end and autoreset
+    ``terminated`` is the single env's termination. ``truncated`` is the time limit: a sub-env's
+    ``max_episode_steps``-th step since its reset (``gymnasium.make_vec`` passes the registered 1000;
+    ``None`` disables it). A sub-env that ended restarts with fresh noise from its own random
+    generator, by ``autoreset_mode`` (also in ``metadata["autoreset_mode"]``):
+
+    - ``NEXT_STEP`` (default, Gymnasium's): the step after the end resets it instead of stepping it
+      (its action is ignored); that step returns its reset observation, reward 0, ``terminated`` and
+      ``truncated`` False, and the reset ``info`` (no reward terms, whose masks are False).
+    - ``SAME_STEP``: the ending step resets it at once and returns the reset observation;
+      ``info["final_obs"]`` (object array, ``None`` elsewhere) and ``info["final_info"]`` hold the
+      last observation and the step ``info`` of the sub-envs that ended (masks ``_final_obs``,
+      ``_final_info``); the top-level ``info`` of those sub-envs is their reset ``info``.
+      The Stable-Baselines3 adapter ``leg_env.sb3`` uses this mode.
+    - ``DISABLED``: no autoreset; reset ended sub-envs with
+      ``reset(options={"reset_mask": mask})`` before stepping them again (else ``ValueError``).
+
+    ## Reset
+    ``reset(seed=s)`` seeds sub-env ``i`` with ``s + i`` (``seed`` may also be a list of ``num_envs``
+    ints or ``None``); ``seed=None`` continues each sub-env's generator (fresh entropy the first
+    time), as ``SyncVectorEnv`` does. ``options``: ``reset_mask`` (``(num_envs,)`` bool) resets only
+    those sub-envs; ``qpos`` / ``qvel`` give explicit states, ``(5,)`` for all reset sub-envs or one
+    row per reset sub-env (semantics of the single env's options).
+
+    ## Rendering
+    ``render_mode="rgb_array"``: ``render()`` returns a tuple of ``(height, width, 3)`` uint8 frames,
+    one for each of the first ``render_envs`` sub-envs.
+
+    ## Arguments
+    ``num_envs`` (int >= 1), ``max_episode_steps`` (int >= 1 or None, default 1000),
+    ``autoreset_mode`` (``AutoresetMode`` or its value string, default ``NEXT_STEP``),
+    ``render_envs`` (frames per ``render()``, default 4) and every argument of the single env:
+    ``render_mode`` (None or ``"rgb_array"``), ``params``, ``config``, ``width``, ``height`` and the
+    ``StanceConfig`` fields as keywords. Pickling keeps every argument and the full state.
+
+    ## Version History
+    * v0: Initial release.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 100, "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        render_mode: str | None = None,
+        params: LegParams | dict | None = None,
+        config: StanceConfig | dict | None = None,
+        max_episode_steps: int | None = 1000,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        width: int = 480,
+        height: int = 480,
+        render_envs: int = 4,
+        **config_overrides: Any,
+    ):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if max_episode_steps is not None and (
+            isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1
+        ):
+            raise ValueError(f"max_episode_steps must be a positive integer or None, got {max_episode_steps!r}")
+        try:
+            autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError as e:
+            raise ValueError(f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, got {autoreset_mode!r}") from e
+        if isinstance(render_envs, bool) or not isinstance(render_envs, (int, np.integer)) or render_envs < 1:
+            raise ValueError(f"render_envs must be a positive integer, got {render_envs!r}")
+
+        # The single env checks the arguments and defines the spaces; the batch reuses both.
+        single = PlanarLegStanceEnv(params=params, config=config, width=width, height=height, **config_overrides)
+        self.num_envs = n = int(num_envs)
+        self.render_mode = render_mode
+        self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
+        self.autoreset_mode = autoreset_mode
+        self.render_envs = int(render_envs)
+        self.width, self.height = single.width, single.height
+        self.params, self.config, self.nominal = single.params, single.config, single.nominal
+        self.metadata = {**type(self).metadata, "render_fps": single.metadata["render_fps"], "autoreset_mode": autoreset_mode}
+        self.single_observation_space = single.observation_space
+        self.single_action_space = single.action_space
+        self.observation_space = batch_space(self.single_observation_space, n)
+        self.action_space = batch_space(self.single_action_space, n)
+
+        self._p = self.params.array
+        self._c = self.config.array()
+        self._q_nom = self.nominal.q
+        self._tau_nom = np.ascontiguousarray(self.nominal.tau, dtype=np.float64)
+        # state and kernel outputs: row i is sub-env i
+        self._q = np.tile(self.nominal.q, (n, 1))
+        self._qd = np.zeros((n, 5))
+        self._anchor = np.zeros((n, 2))
+        self._lam = np.zeros((n, 2))
+        self._obs = np.zeros((n, OBS_DIM), dtype=np.float32)
+        self._terms = np.zeros((n, len(REWARD_TERMS)))
+        self._flags = np.zeros((n, len(FLAG_NAMES)), dtype=np.bool_)
+        self._extra = np.zeros((n, len(INFO_NAMES)))
+        self._elapsed = np.zeros(n, dtype=np.int64)
+        self._ended = np.zeros(n, dtype=np.bool_)  # ended on the last step and not reset since
+        self._rngs: list[np.random.Generator | None] = [None] * n
+
+    # ---------------------------------------------------------------- API
+
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
+        """Reset all sub-envs (or those in ``options["reset_mask"]``); see the class docstring."""
+        n = self.num_envs
+        options = dict(options or {})
+        unknown = set(options) - set(_RESET_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: {list(_RESET_OPTIONS)}")
+        rows = self._reset_rows(options.pop("reset_mask", None))
+        seeds = self._seeds(seed)
+        explicit = self._explicit_states(options, len(rows)) if options else None
+        # every check is done: from here on nothing raises
+        if isinstance(seed, (int, np.integer)):
+            super().reset(seed=int(seed))
+        for i in rows.tolist():
+            if seeds[i] is not None or self._rngs[i] is None:
+                self._rngs[i] = seeding.np_random(seeds[i])[0]
+        if rows.size == n:
+            self._start(None, *(explicit or self._draw_starts(rows)))
+        else:
+            self._start(rows, *(explicit or self._draw_starts(rows)))
+        self._elapsed[rows] = 0
+        self._ended[rows] = False
+        info = {}
+        if rows.size == n:
+            self._add_state_info(info, self._lam, self._flags, self._extra)
+        else:
+            self._add_state_info(info, self._lam[rows], self._flags[rows], self._extra[rows], rows)
+        return self._obs.copy(), info
+
+    def step(self, actions):
+        """Step every sub-env (autoresetting those that ended); see the class docstring."""
+        t = self._step(actions)
+        stepped = None
+        if t.restarted is not None:
+            stepped = np.ones(self.num_envs, dtype=np.bool_)
+            stepped[t.restarted] = False
+        info = {}
+        self._add_reward_info(info, stepped, t.terms)
+        self._add_state_info(info, self._lam, self._flags, self._extra)
+        if t.final is not None:  # SAME_STEP: the ended rows report their reset, their last step goes to final_*
+            ended = np.logical_not(stepped)
+            final_obs = np.full(self.num_envs, None, dtype=object)
+            for k, i in enumerate(t.restarted.tolist()):
+                final_obs[i] = t.final.obs[k]
+            final_info = {}
+            self._add_reward_info(final_info, ended, t.terms)
+            self._add_state_info(final_info, t.final.lam, t.final.flags, t.final.extra, t.restarted)
+            info["final_obs"] = final_obs
+            info["_final_obs"] = ended
+            info["final_info"] = final_info
+            info["_final_info"] = ended.copy()
+        return t.obs, t.reward, t.terminated, t.truncated, info
+
+    def render(self):
+        """Frames of the first ``render_envs`` sub-envs (``rgb_array`` mode), else None with a warning."""
+        if self.render_mode is None:
+            from gymnasium import logger
+
+            logger.warn('You are calling render method without specifying any render mode, e.g. render_mode="rgb_array".')
+            return None
+        from .. import render
+
+        frames = []
+        for i in range(min(self.render_envs, self.num_envs)):
+            violated = bool(self._flags[i, _FLAG["unilateral_violation"]] or self._flags[i, _FLAG["friction_violation"]])
+            frames.append(
+                render.draw(self._q[i], self._anchor[i], self._lam[i], self.params, violated, self.width, self.height, self.config.mu)
+            )
+        return tuple(frames)
+
+    # ---------------------------------------------------------- accessors
+
+    @property
+    def dt(self) -> float:
+        """Control period [s]: the simulated time of one ``step``."""
+        return self.config.dt
+
+    @property
+    def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Copies of ``(q, qd, anchor)``, shapes ``(num_envs, 5), (num_envs, 5), (num_envs, 2)``."""
+        return self._q.copy(), self._qd.copy(), self._anchor.copy()
+
+    @property
+    def elapsed_steps(self) -> np.ndarray:
+        """Steps of each sub-env since its last reset (a copy)."""
+        return self._elapsed.copy()
+
+    # ------------------------------------------------------------ helpers
+
+    def _step(self, actions) -> "_Transition":
+        """Check the actions, autoreset, make one kernel call; shared by ``step`` and the SB3 adapter.
+
+        NEXT_STEP resets the rows that ended on the previous step (they are stepped from their
+        start, then put back there: the kernel call stays one call over all rows); SAME_STEP resets
+        the rows that end in this step, after keeping their last observation, flags, extras and
+        force in ``final``. The returned ``terms`` are the step's; the buffers hold the reset rows' start.
+        """
+        a = self._checked_actions(actions)
+        mode = self.autoreset_mode
+        restarted = None
+        if mode == AutoresetMode.NEXT_STEP and self._ended.any():
+            restarted = np.flatnonzero(self._ended)
+            starts = self._draw_starts(restarted)
+            # step the restarting rows from their start (cheap, near nominal), then put them back there
+            self._q[restarted] = starts[0]
+            self._qd[restarted] = starts[1]
+            self._anchor[restarted] = starts[2]
+        elif mode == AutoresetMode.DISABLED and self._ended.any():
+            raise ValueError(
+                f"sub-env(s) {_some(np.flatnonzero(self._ended))} ended; with autoreset_mode DISABLED reset them "
+                'with reset(options={"reset_mask": mask}) before stepping them again'
+            )
+        step_batch(
+            self._q, self._qd, self._anchor, a, self._p, self._c, self._q_nom,
+            self._lam, self._obs, self._terms, self._flags, self._extra,
+        )  # fmt: skip
+        self._elapsed += 1
+        if restarted is not None:
+            self._start(restarted, *starts)
+            self._terms[restarted] = 0.0
+            self._elapsed[restarted] = 0
+        terms = self._terms
+        reward = terms[:, 0] + terms[:, 1] + terms[:, 2] + terms[:, 3] + terms[:, 4]
+        terminated = self._flags[:, 0].copy()
+        if self.max_episode_steps is None:
+            truncated = np.zeros(self.num_envs, dtype=np.bool_)
+        else:
+            truncated = self._elapsed >= self.max_episode_steps
+        if restarted is not None:
+            terminated[restarted] = False  # a start state is not an episode end
+        ended = terminated | truncated
+        final = None
+        if mode == AutoresetMode.SAME_STEP and ended.any():
+            restarted = np.flatnonzero(ended)
+            final = _Final(self._obs[restarted], self._flags[restarted], self._extra[restarted], self._lam[restarted])
+            self._start(restarted, *self._draw_starts(restarted))
+            self._elapsed[restarted] = 0
+            self._ended[:] = False
+        else:
+            self._ended = ended
+        return _Transition(self._obs.copy(), reward, terminated, truncated, restarted, final, terms.copy())
+
+    def _checked_actions(self, actions) -> np.ndarray:
+        """``actions`` as a C-contiguous float64 ``(num_envs, 2)`` array; ``ValueError`` if malformed or non-finite."""
+        try:
+            a = np.ascontiguousarray(actions, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"actions must be a ({self.num_envs}, 2) array of numbers [hip, knee], got {actions!r}") from e
+        if a.shape != (self.num_envs, 2):
+            raise ValueError(f"actions must have shape ({self.num_envs}, 2) [hip, knee], got shape {a.shape}")
+        finite = np.isfinite(a)
+        if not finite.all():
+            bad = np.flatnonzero(~finite.all(axis=1))
+            raise ValueError(f"actions must be finite; sub-env(s) {_some(bad)} got {a[bad[:3]].tolist()}")
+        return a
+
+    def _draw_starts(self, rows: np.ndarray):
+        """Fresh start states of ``rows``, each drawn from its own generator as the single env draws it."""
+        rngs = self._rngs
+        return reset_states([rngs[i] for i in rows.tolist()], self.params, self.config, self.nominal)
+
+    def _start(self, rows: np.ndarray | None, q, qd, anchor) -> None:
+        """Put ``rows`` (all if None) at ``(q, qd)`` on ``anchor`` and evaluate them without stepping.
+
+        ``q, qd, anchor`` are ``(len(rows), .)`` float64 arrays owned by the caller; a subset's are
+        projected in place (projection is idempotent, so a start may be passed twice).
+        """
+        if rows is None:
+            self._q[:] = q
+            self._qd[:] = qd
+            self._anchor[:] = anchor
+            project_batch(self._q, self._qd, self._p, self._anchor)
+            start_batch(
+                self._q, self._qd, self._anchor, self._tau_nom, self._p, self._c, self._q_nom,
+                self._lam, self._obs, self._flags, self._extra,
+            )  # fmt: skip
+            return
+        k = rows.size
+        lam, obs = np.empty((k, 2)), np.empty((k, OBS_DIM), dtype=np.float32)
+        flags, extra = np.empty((k, len(FLAG_NAMES)), dtype=np.bool_), np.empty((k, len(INFO_NAMES)))
+        project_batch(q, qd, self._p, anchor)
+        start_batch(q, qd, anchor, self._tau_nom, self._p, self._c, self._q_nom, lam, obs, flags, extra)
+        self._q[rows] = q
+        self._qd[rows] = qd
+        self._anchor[rows] = anchor
+        self._lam[rows] = lam
+        self._obs[rows] = obs
+        self._flags[rows] = flags
+        self._extra[rows] = extra
+
+    def _reset_rows(self, reset_mask) -> np.ndarray:
+        if reset_mask is None:
+            return np.arange(self.num_envs)
+        if not isinstance(reset_mask, np.ndarray) or reset_mask.dtype != np.bool_ or reset_mask.shape != (self.num_envs,):
+            raise ValueError(f"options['reset_mask'] must be a bool numpy array of shape ({self.num_envs},), got {reset_mask!r}")
+        if not reset_mask.any():
+            raise ValueError("options['reset_mask'] must select at least one sub-env")
+        return np.flatnonzero(reset_mask)
+
+    def _seeds(self, seed) -> list[int | None]:
+        n = self.num_envs
+        if seed is None:
+            return [None] * n
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            if seed < 0:
+                raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+            return [int(seed) + i for i in range(n)]
+        seeds = list(seed)
+        if len(seeds) != n:
+            raise ValueError(f"a list of seeds must have num_envs={n} entries, got {len(seeds)}")
+        for s in seeds:
+            if s is not None and (isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0):
+                raise ValueError(f"seeds must be non-negative integers or None, got {s!r}")
+        return [None if s is None else int(s) for s in seeds]
+
+    def _explicit_states(self, options: dict, k: int):
+        """``(q, qd, anchor)`` for ``k`` rows from the ``qpos`` / ``qvel`` options (single env semantics)."""
+        out = []
+        for key, default in (("qpos", self.nominal.q), ("qvel", np.zeros(5))):
+            value = options.get(key, default)
+            try:
+                value = np.array(value, dtype=np.float64)
+            except (TypeError, ValueError) as e:
+                raise ValueError(f"reset option {key!r} must be numbers of shape (5,) or ({k}, 5), got {options[key]!r}") from e
+            if value.shape not in ((5,), (k, 5)):
+                raise ValueError(f"reset option {key!r} must have shape (5,) or ({k}, 5), got {value.shape}")
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"reset option {key!r} must be finite")
+            out.append(np.array(np.broadcast_to(value, (k, 5))))
+        q, qd = out
+        return q, qd, foot_position(q, self.params)
+
+    def _step_info_columns(self, t: "_Transition") -> dict:
+        """Every ``info`` key of the step itself, one array per key over all rows.
+
+        Rows that SAME_STEP reset during the step report their last step, not their reset
+        (what Stable-Baselines3 puts in a sub-env's ``info``). Shared with ``leg_env.sb3``.
+        """
+        columns = {key: t.terms[:, k] for k, key in enumerate(REWARD_KEYS)}
+        state = self._state_columns(self._lam, self._flags, self._extra)
+        if t.final is not None:
+            for key, rows_values in self._state_columns(t.final.lam, t.final.flags, t.final.extra).items():
+                state[key][t.restarted] = rows_values
+        columns.update(state)
+        return columns
+
+    def _add_reward_info(self, info: dict, mask: np.ndarray | None, terms: np.ndarray) -> None:
+        """The reward terms of the rows in ``mask`` (all if None), zeros elsewhere.
+
+        The keys are there even when no row stepped (SyncVectorEnv omits them then).
+        """
+        columns = terms.T.copy()  # one copy: row k is term k over the sub-envs
+        if mask is None:
+            masks = np.ones(columns.shape, dtype=np.bool_)
+        else:
+            columns[:, ~mask] = 0.0
+            masks = np.empty(columns.shape, dtype=np.bool_)
+            masks[:] = mask
+        for k, key in enumerate(REWARD_KEYS):
+            info[key] = columns[k]
+            info["_" + key] = masks[k]
+
+    def _add_state_info(self, info: dict, lam, flags, extra, rows: np.ndarray | None = None) -> None:
+        """The state keys from row-aligned ``lam, flags, extra`` of ``rows`` (all if None); zeros elsewhere."""
+        n = self.num_envs
+        if rows is None:
+            masks = np.ones((len(STATE_KEYS), n), dtype=np.bool_)
+        else:
+            masks = np.zeros((len(STATE_KEYS), n), dtype=np.bool_)
+            masks[:, rows] = True
+        for k, (key, values) in enumerate(self._state_columns(lam, flags, extra).items()):
+            if rows is not None:
+                column = np.zeros((n, *values.shape[1:]), dtype=values.dtype)
+                column[rows] = values
+                values = column
+            info[key] = values
+            info["_" + key] = masks[k]
+
+    @staticmethod
+    def _state_columns(lam, flags, extra) -> dict:
+        """The state keys as fresh arrays over the rows of ``lam (k, 2), flags (k, 4), extra (k, 3)``."""
+        flag_rows, extra_rows = flags.T.copy(), extra.T.copy()  # two copies serve six keys
+        return {
+            "contact_force": lam.copy(),
+            "normal_force": extra_rows[_EXTRA["normal_force"]],
+            "unilateral_violation": flag_rows[_FLAG["unilateral_violation"]],
+            "friction_violation": flag_rows[_FLAG["friction_violation"]],
+            "numerical_failure": flag_rows[_FLAG["numerical_failure"]],
+            "base_drift": extra_rows[_EXTRA["base_drift"]],
+            "foot_error": extra_rows[_EXTRA["foot_error"]],
+        }
+
+
+class _Final(NamedTuple):
+    """The last step of the rows that SAME_STEP reset, before the reset (row-aligned with ``restarted``)."""
+
+    obs: np.ndarray
+    flags: np.ndarray
+    extra: np.ndarray
+    lam: np.ndarray
+
+
+class _Transition(NamedTuple):
+    """What one batched step produced; ``restarted`` are the rows reset during it (or None)."""
+
+    obs: np.ndarray
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    restarted: np.ndarray | None
+    final: _Final | None
+    terms: np.ndarray
+
+
+def _some(rows: np.ndarray, limit: int = 10) -> str:
+    """Up to ``limit`` sub-env indices, for error messages."""
+    shown = rows[:limit].tolist()
+    return f"{shown}{' ...' if rows.size > limit else ''}"

@@ -1,0 +1,187 @@
+"""A Stable-Baselines3 ``VecEnv`` over the natively batched ``PlanarLegStanceVectorEnv``.
+
+SB3 does not accept ``gymnasium.vector.VectorEnv`` objects (``gymnasium.make_vec`` output), and its
+own ``DummyVecEnv`` steps one single environment at a time. ``LegStanceVecEnv`` gives SB3 the batch
+directly, one kernel call per step, with SB3's semantics::
+
+    from stable_baselines3 import PPO
+    from leg_env.sb3 import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(64, seed=0)            # VecNormalize / VecMonitor / VecCheckNan wrap it as usual
+    model = PPO("MlpPolicy", venv).learn(50_000)
+
+Importing this module needs ``stable-baselines3`` (the ``train`` extra).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvObs, VecEnvStepReturn
+
+from .envs.vector import REWARD_KEYS, STATE_KEYS, PlanarLegStanceVectorEnv
+
+__all__ = ["LegStanceVecEnv", "make_sb3_vec_env"]
+
+# the per-env info values built from Python scalars, in the order step_wait unpacks them
+_SCALAR_KEYS = (
+    "reward_alive", "reward_drift", "reward_unilateral", "reward_friction", "reward_ctrl",
+    "normal_force", "unilateral_violation", "friction_violation", "numerical_failure", "base_drift", "foot_error",
+)  # fmt: skip
+assert set(_SCALAR_KEYS) | {"contact_force"} == set(REWARD_KEYS + STATE_KEYS)
+# attributes whose single-environment meaning differs from the batched env's
+_SINGLE_ATTRIBUTES = {"observation_space": "single_observation_space", "action_space": "single_action_space"}
+
+
+class LegStanceVecEnv(VecEnv):
+    """SB3 ``VecEnv`` whose sub-environments are the rows of one ``PlanarLegStanceVectorEnv``.
+
+    The batched env must autoreset in ``SAME_STEP`` mode (``make_sb3_vec_env`` builds it so).
+    ``step`` returns ``(obs, rewards, dones, infos)`` as SB3 expects: ``rewards`` float32,
+    ``dones = terminated | truncated``, and ``infos`` a list of one dict per sub-env with the reward
+    terms and contact keys of the single environment's ``info`` for that step, ``"TimeLimit.truncated"``
+    (True only when the time limit ended an episode that did not also terminate) and, for sub-envs
+    whose episode ended, ``"terminal_observation"``: the last observation before the reset (the
+    returned ``obs`` row is already the next episode's first). ``reset_infos`` holds each sub-env's
+    latest reset ``info``.
+
+    ``seed(s)`` seeds sub-env ``i`` with ``s + i`` at the next ``reset``, exactly like
+    ``gymnasium.make("leg_env/PlanarLegStance-v0")`` reset with that seed, and ``set_options``
+    passes ``qpos`` / ``qvel`` (the same keys for every sub-env) to it.
+
+    The sub-envs share one batched env, so attributes and methods are that env's:
+    ``get_attr(name)`` returns its attribute for each requested index (``observation_space`` and
+    ``action_space`` are the single-env spaces), ``set_attr`` sets it for all sub-envs (a strict
+    subset raises ``ValueError``), ``env_method`` calls the method once and returns its result for
+    each index, and ``env_is_wrapped`` is False (no Gymnasium wrappers). ``get_images`` returns the
+    frames of the first ``render_envs`` sub-envs (``render_mode="rgb_array"``).
+    """
+
+    def __init__(self, env: PlanarLegStanceVectorEnv):
+        if not isinstance(env, PlanarLegStanceVectorEnv):
+            raise TypeError(f"env must be an (unwrapped) PlanarLegStanceVectorEnv, got {type(env).__name__}")
+        if env.autoreset_mode != AutoresetMode.SAME_STEP:
+            raise ValueError(
+                f"SB3 resets a sub-env in the step that ends it: build the env with autoreset_mode=AutoresetMode.SAME_STEP, "
+                f"got {env.autoreset_mode}"
+            )
+        self.env = env
+        self._actions: np.ndarray | None = None
+        super().__init__(env.num_envs, env.single_observation_space, env.single_action_space)
+
+    # ---------------------------------------------------------------- API
+
+    def reset(self) -> VecEnvObs:
+        seeds = self._seeds if any(s is not None for s in self._seeds) else None
+        obs, info = self.env.reset(seed=seeds, options=self._merged_options())
+        self._reset_seeds()
+        self._reset_options()
+        self.reset_infos = _per_env_state_infos(info, range(self.num_envs))
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions
+
+    def step_wait(self) -> VecEnvStepReturn:
+        if self._actions is None:
+            raise RuntimeError("step_wait() called without a step_async(actions) before it")
+        actions, self._actions = self._actions, None
+        env = self.env
+        t = env._step(actions)
+        columns = env._step_info_columns(t)
+        time_limit = t.truncated & ~t.terminated
+        scalars = [columns[key].tolist() for key in _SCALAR_KEYS]
+        infos = [
+            {
+                "reward_alive": alive,
+                "reward_drift": drift,
+                "reward_unilateral": unilateral,
+                "reward_friction": friction,
+                "reward_ctrl": ctrl,
+                "contact_force": contact_force,
+                "normal_force": normal_force,
+                "unilateral_violation": unilateral_violation,
+                "friction_violation": friction_violation,
+                "numerical_failure": numerical_failure,
+                "base_drift": base_drift,
+                "foot_error": foot_error,
+                "TimeLimit.truncated": truncated,
+            }
+            for (
+                alive, drift, unilateral, friction, ctrl,
+                normal_force, unilateral_violation, friction_violation, numerical_failure, base_drift, foot_error,
+                contact_force, truncated,
+            ) in zip(*scalars, columns["contact_force"], time_limit.tolist())  # _SCALAR_KEYS order
+        ]  # fmt: skip
+        if t.restarted is not None:
+            rows = t.restarted.tolist()
+            for k, i in enumerate(rows):
+                infos[i]["terminal_observation"] = t.final.obs[k]
+            state = env._state_columns(env._lam[t.restarted], env._flags[t.restarted], env._extra[t.restarted])
+            for k, reset_info in enumerate(_per_env_state_infos(state, range(len(rows)))):
+                self.reset_infos[rows[k]] = reset_info
+        dones = t.terminated | t.truncated
+        return t.obs, t.reward.astype(np.float32), dones, infos
+
+    def close(self) -> None:
+        self.env.close()
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        if self.render_mode != "rgb_array":
+            warnings.warn(f"The render mode is {self.render_mode}, but this method assumes it is `rgb_array` to obtain images.")
+            return [None for _ in range(self.num_envs)]
+        return list(self.env.render())
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        value = getattr(self.env, _SINGLE_ATTRIBUTES.get(attr_name, attr_name))
+        return [value for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        if sorted(set(self._get_indices(indices))) != list(range(self.num_envs)):
+            raise ValueError(f"the sub-envs share one batched env: set {attr_name!r} for all of them (indices=None)")
+        setattr(self.env, _SINGLE_ATTRIBUTES.get(attr_name, attr_name), value)
+
+    def env_method(self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs) -> list[Any]:
+        result = getattr(self.env, method_name)(*method_args, **method_kwargs)
+        return [result for _ in self._get_indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
+
+    # ------------------------------------------------------------ helpers
+
+    def _merged_options(self) -> dict | None:
+        """The per-sub-env reset options as the batched env's: ``None``, or ``qpos`` / ``qvel`` rows."""
+        if not any(self._options):
+            return None
+        keys = set(self._options[0])
+        if any(set(o) != keys for o in self._options):
+            raise ValueError("set_options: every sub-env needs the same option keys (the batch resets together)")
+        return {key: np.stack([np.asarray(o[key], dtype=np.float64) for o in self._options]) for key in keys}
+
+
+def _per_env_state_infos(info: dict, rows) -> list[dict]:
+    """Per-row dicts of the state keys of a vector-style ``info`` (or of row-aligned columns)."""
+    columns = [info[key] for key in STATE_KEYS]
+    return [{key: column[i] if key == "contact_force" else column[i].item() for key, column in zip(STATE_KEYS, columns)} for i in rows]
+
+
+def make_sb3_vec_env(num_envs: int, seed: int | None = None, **env_kwargs: Any) -> LegStanceVecEnv:
+    """``LegStanceVecEnv`` over ``PlanarLegStanceVectorEnv(num_envs, autoreset_mode=SAME_STEP, **env_kwargs)``.
+
+    ``env_kwargs`` are the batched env's arguments (``max_episode_steps`` defaults to the registered
+    1000, ``params``, ``config``, any ``StanceConfig`` field, ``render_mode``...). With ``seed``, the
+    first ``reset`` seeds sub-env ``i`` with ``seed + i``.
+    """
+    mode = env_kwargs.pop("autoreset_mode", AutoresetMode.SAME_STEP)
+    if AutoresetMode(mode) != AutoresetMode.SAME_STEP:
+        raise ValueError(f"the SB3 adapter needs autoreset_mode SAME_STEP, got {mode!r}")
+    venv = LegStanceVecEnv(PlanarLegStanceVectorEnv(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs))
+    if seed is not None:
+        venv.seed(seed)
+    return venv

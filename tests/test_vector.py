@@ -1,0 +1,305 @@
+"""The natively batched VectorEnv: registration, parity with single envs, seeding, errors, rendering."""
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import data_equivalence
+from gymnasium.vector import AutoresetMode
+
+import leg_env
+from leg_env.envs.stance import PlanarLegStanceEnv
+from leg_env.envs.vector import REWARD_KEYS, PlanarLegStanceVectorEnv
+
+ENV_ID = leg_env.ENV_ID
+NUM_ENVS = 4
+SEED = 11
+STEPS = 150
+MAX_STEPS = 25  # short episodes, so truncations happen alongside terminations
+ACTION_SCALE = 1.5  # beyond the limits: exercises clipping
+ACTION_BIAS = (0.6, -0.6)  # pushes the robot over: episodes also terminate
+AUTORESET_MODES = [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP]
+# non-default arguments, so that a dropped argument shows up as a mismatch
+ENV_KWARGS = dict(params={"m_b": 9.0, "l2": 0.55}, reset_noise_scale=0.05, ctrl_cost_weight=0.02, torque_limit=45.0)
+
+
+def random_actions(steps: int, n: int, seed: int = 0) -> np.ndarray:
+    noise = ACTION_SCALE * np.random.default_rng(seed).uniform(-1.0, 1.0, size=(steps, n, 2))
+    return (noise + np.asarray(ACTION_BIAS)).astype(np.float32)
+
+
+def make_pair(mode: AutoresetMode, n: int = NUM_ENVS, **kwargs):
+    """Ours (by make_vec's default) and Gymnasium's SyncVectorEnv over single envs, same arguments."""
+    kwargs = {**ENV_KWARGS, **kwargs}
+    ours = gym.make_vec(ENV_ID, num_envs=n, autoreset_mode=mode, max_episode_steps=MAX_STEPS, **kwargs)
+    sync = gym.make_vec(
+        ENV_ID, num_envs=n, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode},
+        max_episode_steps=MAX_STEPS, **kwargs,
+    )  # fmt: skip
+    return ours, sync
+
+
+def assert_same(a, b, what: str) -> None:
+    assert data_equivalence(a, b, exact=True), f"{what} differ:\n{a}\n{b}"
+
+
+def as_sync_info(info: dict) -> dict:
+    """Our info as SyncVectorEnv shapes it: it drops the reward terms on a step where no sub-env stepped."""
+    if "_reward_alive" in info and not info["_reward_alive"].any():
+        return {k: v for k, v in info.items() if k.lstrip("_") not in REWARD_KEYS}
+    return info
+
+
+# ------------------------------------------------------------------ registration and spaces
+
+
+@pytest.mark.filterwarnings("error")
+def test_make_vec_uses_the_native_class_by_default():
+    envs = gym.make_vec(ENV_ID, num_envs=3)
+    assert type(envs) is PlanarLegStanceVectorEnv
+    assert envs.num_envs == 3 and envs.max_episode_steps == 1000
+    assert envs.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
+    assert envs.spec.id == ENV_ID
+    same = gym.make_vec(ENV_ID, num_envs=2, autoreset_mode="SameStep", max_episode_steps=7, dt=0.02)
+    assert same.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP and same.max_episode_steps == 7
+    assert same.metadata["render_fps"] == 50 and same.dt == 0.02
+
+
+def test_spaces_and_metadata_match_the_single_env():
+    envs = PlanarLegStanceVectorEnv(5, **ENV_KWARGS)
+    single = gym.make(ENV_ID, **ENV_KWARGS)
+    assert envs.single_observation_space == single.observation_space
+    assert envs.single_action_space == single.action_space
+    assert envs.observation_space.shape == (5, 12) and envs.action_space.shape == (5, 2)
+    assert envs.metadata["render_fps"] == single.metadata["render_fps"]
+    obs, info = envs.reset(seed=0)
+    assert envs.observation_space.contains(obs)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"num_envs": 0},
+        {"num_envs": 2.0},
+        {"max_episode_steps": 0},
+        {"autoreset_mode": "EveryStep"},
+        {"render_mode": "human"},
+        {"render_envs": 0},
+        {"not_a_setting": 1.0},
+        {"torque_limit": 1.0},  # cannot hold the nominal posture
+    ],
+)
+def test_bad_arguments_raise(kwargs):
+    kwargs = {"num_envs": 2, **kwargs}
+    with pytest.raises(ValueError):
+        PlanarLegStanceVectorEnv(**kwargs)
+
+
+# ------------------------------------------------------------------ parity
+
+
+@pytest.mark.parametrize("mode", AUTORESET_MODES)
+def test_sub_env_i_is_a_single_env_seeded_seed_plus_i(mode):
+    """The bar: each row matches a single env (TimeLimit) reset with seed + i, across autoresets."""
+    envs = PlanarLegStanceVectorEnv(NUM_ENVS, autoreset_mode=mode, max_episode_steps=MAX_STEPS, **ENV_KWARGS)
+    singles = [gym.make(ENV_ID, max_episode_steps=MAX_STEPS, **ENV_KWARGS) for _ in range(NUM_ENVS)]
+    obs, _ = envs.reset(seed=SEED)
+    for i, env in enumerate(singles):
+        single_obs, _ = env.reset(seed=SEED + i)
+        np.testing.assert_array_equal(obs[i], single_obs)
+    pending = [False] * NUM_ENVS  # NEXT_STEP: this single env resets instead of stepping
+    ends = {"terminated": 0, "truncated": 0}
+    for actions in random_actions(STEPS, NUM_ENVS):
+        obs, reward, terminated, truncated, info = envs.step(actions)
+        for i, env in enumerate(singles):
+            if pending[i]:
+                single_obs, _ = env.reset()
+                assert (reward[i], terminated[i], truncated[i]) == (0.0, False, False)
+                assert not info["_reward_alive"][i] and info["reward_alive"][i] == 0.0
+                np.testing.assert_array_equal(obs[i], single_obs)
+                pending[i] = False
+                continue
+            single_obs, single_reward, single_term, single_trunc, single_info = env.step(actions[i])
+            assert (reward[i], terminated[i], truncated[i]) == (single_reward, single_term, single_trunc)
+            step_info = info if mode == AutoresetMode.NEXT_STEP or not (single_term or single_trunc) else info["final_info"]
+            for key in REWARD_KEYS + ("normal_force", "base_drift", "foot_error", "unilateral_violation"):
+                assert step_info[key][i] == single_info[key], key
+            np.testing.assert_array_equal(step_info["contact_force"][i], single_info["contact_force"])
+            ends["terminated"] += single_term
+            ends["truncated"] += single_trunc
+            if single_term or single_trunc:
+                if mode == AutoresetMode.SAME_STEP:
+                    np.testing.assert_array_equal(info["final_obs"][i], single_obs)
+                    single_obs, _ = env.reset()
+                else:
+                    pending[i] = True
+            np.testing.assert_array_equal(obs[i], single_obs)
+    assert ends["terminated"] >= 3 and ends["truncated"] >= 3, ends
+
+
+@pytest.mark.parametrize("mode", AUTORESET_MODES)
+def test_everything_equals_sync_vector_env(mode):
+    """Observations, rewards, flags and the whole info (keys, values, masks, final_*) equal SyncVectorEnv's."""
+    ours, sync = make_pair(mode)
+    assert_same(ours.reset(seed=SEED), sync.reset(seed=SEED), "reset")
+    ended = 0
+    for t, actions in enumerate(random_actions(STEPS, NUM_ENVS, seed=1)):
+        step_ours, step_sync = ours.step(actions), sync.step(actions)
+        step_ours = (*step_ours[:4], as_sync_info(step_ours[4]))
+        for name, a, b in zip(("obs", "reward", "terminated", "truncated", "info"), step_ours, step_sync):
+            assert_same(a, b, f"step {t} {name}")
+        ended += int(np.sum(step_ours[2] | step_ours[3]))
+    assert ended >= 6
+
+
+@pytest.mark.parametrize("mode", AUTORESET_MODES)
+def test_all_sub_envs_ending_together(mode):
+    """Every sub-env truncates on the same step: SyncVectorEnv then drops the reward keys, we keep them."""
+    ours, sync = make_pair(mode, reset_noise_scale=0.0)
+    hold = np.tile(ours.nominal.tau / np.asarray(ours.config.torque_limit), (NUM_ENVS, 1))
+    assert_same(ours.reset(seed=SEED), sync.reset(seed=SEED), "reset")
+    period = MAX_STEPS + 1 if mode == AutoresetMode.NEXT_STEP else MAX_STEPS  # NEXT_STEP spends a step resetting
+    for t in range(1, 2 * MAX_STEPS + 3):
+        step_ours, step_sync = ours.step(hold), sync.step(hold)
+        assert_same((*step_ours[:4], as_sync_info(step_ours[4])), step_sync, f"step {t}")
+        assert step_ours[3].all() == (t % period == MAX_STEPS % period)
+        assert not step_ours[2].any()
+        if mode == AutoresetMode.NEXT_STEP and t == MAX_STEPS + 1:  # everyone resets
+            assert "reward_alive" not in step_sync[4] and not step_ours[4]["_reward_alive"].any()
+
+
+def test_partial_reset_with_reset_mask_equals_sync_vector_env():
+    ours, sync = make_pair(AutoresetMode.DISABLED)
+    assert_same(ours.reset(seed=SEED), sync.reset(seed=SEED), "reset")
+    for t, actions in enumerate(random_actions(STEPS, NUM_ENVS, seed=2)):
+        out_ours, out_sync = ours.step(actions), sync.step(actions)
+        assert_same((*out_ours[:4], as_sync_info(out_ours[4])), out_sync, f"step {t}")
+        ended = out_ours[2] | out_ours[3]
+        if ended.any():
+            with pytest.raises(ValueError, match="DISABLED"):
+                ours.step(actions)
+            options = {"reset_mask": ended}
+            assert_same(ours.reset(options=dict(options)), sync.reset(options=dict(options)), f"reset at {t}")
+
+
+def test_gymnasium_vector_wrappers_see_the_same_episodes():
+    ours, sync = make_pair(AutoresetMode.NEXT_STEP)
+    ours, sync = gym.wrappers.vector.RecordEpisodeStatistics(ours), gym.wrappers.vector.RecordEpisodeStatistics(sync)
+    ours.reset(seed=SEED)
+    sync.reset(seed=SEED)
+    for actions in random_actions(60, NUM_ENVS, seed=3):
+        info_ours, info_sync = ours.step(actions)[-1], sync.step(actions)[-1]
+        assert ("episode" in info_ours) == ("episode" in info_sync)
+        if "episode" in info_ours:
+            for key in ("r", "l"):
+                np.testing.assert_array_equal(info_ours["episode"][key], info_sync["episode"][key])
+            np.testing.assert_array_equal(info_ours["_episode"], info_sync["_episode"])
+
+
+# ------------------------------------------------------------------ episode bookkeeping
+
+
+def test_reward_is_the_sum_of_its_terms_and_truncation_is_at_the_limit():
+    hold = PlanarLegStanceVectorEnv(3, max_episode_steps=10, reset_noise_scale=0.0)
+    obs, _ = hold.reset(seed=0)
+    action = np.tile(hold.nominal.tau / np.asarray(hold.config.torque_limit), (3, 1))
+    for t in range(1, 31):
+        obs, reward, terminated, truncated, info = hold.step(action)
+        np.testing.assert_array_equal(reward, sum(info[key] for key in REWARD_KEYS))
+        assert not terminated.any()
+        assert truncated.all() == (t % 11 == 10) and (truncated.any() == truncated.all())
+        assert hold.elapsed_steps.tolist() == [0 if t % 11 == 0 else t % 11] * 3
+
+
+def test_seeding_is_reproducible():
+    a, b = PlanarLegStanceVectorEnv(3, **ENV_KWARGS), PlanarLegStanceVectorEnv(3, **ENV_KWARGS)
+    obs_a, _ = a.reset(seed=5)
+    obs_b, _ = b.reset(seed=[5, 6, 7])
+    np.testing.assert_array_equal(obs_a, obs_b)
+    assert len({row.tobytes() for row in obs_a}) == 3  # the sub-envs differ
+    for actions in random_actions(80, 3):
+        assert_same(a.step(actions), b.step(actions), "step")
+    # seed=None continues each generator, as for a single env
+    assert_same(a.reset(), b.reset(), "unseeded reset")
+    obs_c, _ = a.reset(seed=6)
+    np.testing.assert_array_equal(obs_c[:2], obs_b[1:])
+    fresh = [PlanarLegStanceVectorEnv(3).reset()[0] for _ in range(2)]
+    assert not np.array_equal(*fresh)
+
+
+def test_explicit_start_state_and_reset_mask():
+    envs = PlanarLegStanceVectorEnv(3)
+    single = PlanarLegStanceEnv()
+    q = single.nominal.q + np.array([0.0, 0.0, 0.05, -0.1, 0.2])
+    qd = np.array([0.0, 0.0, 0.1, 0.0, -0.2])
+    obs, info = envs.reset(options={"qpos": q, "qvel": qd})
+    single_obs, single_info = single.reset(options={"qpos": q, "qvel": qd})
+    for i in range(3):
+        np.testing.assert_array_equal(obs[i], single_obs)
+        np.testing.assert_array_equal(info["contact_force"][i], single_info["contact_force"])
+    envs.step(np.zeros((3, 2)))
+    before, _, _ = envs.state
+    obs, info = envs.reset(seed=1, options={"reset_mask": np.array([False, True, False])})
+    after, _, _ = envs.state
+    np.testing.assert_array_equal(after[[0, 2]], before[[0, 2]])
+    assert info["_normal_force"].tolist() == [False, True, False] and info["normal_force"][0] == 0.0
+    np.testing.assert_array_equal(obs[1], single.reset(seed=2)[0])
+    with pytest.raises(ValueError):
+        envs.reset(options={"qpos": np.zeros(4)})
+    with pytest.raises(ValueError):
+        envs.reset(options={"reset_mask": np.zeros(3, dtype=bool)})
+    with pytest.raises(ValueError):
+        envs.reset(options={"flying": True})
+
+
+@pytest.mark.parametrize(
+    "actions, match",
+    [
+        (np.zeros((3, 2)), r"shape"),
+        (np.zeros((4, 3)), r"shape"),
+        ("fast", r"array of numbers"),
+        (np.array([[0.0, 0.0], [0.0, 0.0], [np.nan, 0.0], [0.0, np.inf]]), r"sub-env\(s\) \[2, 3\]"),
+    ],
+)
+def test_bad_actions_raise_and_leave_the_state_untouched(actions, match):
+    envs, twin = PlanarLegStanceVectorEnv(4), PlanarLegStanceVectorEnv(4)
+    envs.reset(seed=3)
+    twin.reset(seed=3)
+    with pytest.raises(ValueError, match=match):
+        envs.step(actions)
+    for a, b in zip(envs.state, twin.state):
+        np.testing.assert_array_equal(a, b)
+    assert envs.elapsed_steps.tolist() == [0, 0, 0, 0]
+    good = random_actions(1, 4)[0]
+    assert_same(envs.step(good), twin.step(good), "step after a rejected action")
+
+
+def test_pickle_keeps_arguments_and_state():
+    envs = PlanarLegStanceVectorEnv(3, autoreset_mode=AutoresetMode.SAME_STEP, max_episode_steps=9, **ENV_KWARGS)
+    envs.reset(seed=4)
+    actions = random_actions(40, 3)
+    for a in actions[:20]:
+        envs.step(a)
+    copy = pickle.loads(pickle.dumps(envs))
+    assert copy.params == envs.params and copy.config == envs.config and copy.max_episode_steps == 9
+    for a in actions[20:]:
+        assert_same(envs.step(a), copy.step(a), "step after unpickling")
+
+
+# ------------------------------------------------------------------ rendering
+
+
+def test_rgb_array_frames_of_the_first_sub_envs():
+    envs = PlanarLegStanceVectorEnv(5, render_mode="rgb_array", width=160, height=120, render_envs=3)
+    single = PlanarLegStanceEnv(render_mode="rgb_array", width=160, height=120)
+    envs.reset(seed=0)
+    single.reset(seed=1)
+    frames = envs.render()
+    assert isinstance(frames, tuple) and len(frames) == 3
+    for frame in frames:
+        assert frame.shape == (120, 160, 3) and frame.dtype == np.uint8
+        assert frame.std() > 10.0  # not blank
+    np.testing.assert_array_equal(frames[1], single.render())
+    with pytest.warns(UserWarning, match="render_mode"):
+        assert PlanarLegStanceVectorEnv(2).render() is None

@@ -11,9 +11,9 @@ timed). One thread (numba and BLAS/OpenMP).
     ``leg_env.dynamics.stance_dynamics`` vs Pinocchio's constrained forward dynamics
     (forward kinematics with zero acceleration, foot frame Jacobian, foot classical
     acceleration as the drift, ``pin.forwardDynamics``) on the same model (``tests/pin_model.py``).
-(b) One control step (dt = 0.01 s, 4 RK4 steps = 16 dynamics evaluations) on one robot:
+(b) One control step (dt = 0.01 s, 2 RK4 steps = 8 dynamics evaluations at the defaults) on one robot:
     ``integrate.stance_step`` (checked public wrapper) and ``integrate.step_inplace`` on (1, 5)
-    arrays (what the environments call), vs a Python RK4 loop over the same 16 Pinocchio
+    arrays (what the environments call), vs a Python RK4 loop over the same 8 Pinocchio
     evaluations (no contact projection: this favours Pinocchio).
 (c) Robot-steps per second with ``step_inplace`` on batches of N robots, vs a Python loop over
     robots stepping Pinocchio as in (b) (its cost per robot-step does not depend on N, so it is
@@ -250,7 +250,7 @@ def main() -> None:
     print(f"states: nominal posture + N(0, {ANGLE_NOISE}) rad angles, N(0, {RATE_NOISE}) velocities; "
           f"torques: holding torques {np.round(tau_eq, 2).tolist()} N m + U(-{TORQUE_NOISE}, {TORQUE_NOISE}) N m")
     print(f"RK4 steps per control step in (b), (c): mean {np.mean(substep_counts):.2f}, max {max(substep_counts)} "
-          f"(16 dynamics evaluations at 4); leg-env vs Pinocchio qdd agreement {agreement:.1e}")
+          f"({4 * it.SUBSTEPS} dynamics evaluations at {it.SUBSTEPS}); leg-env vs Pinocchio qdd agreement {agreement:.1e}")
     print()
     w = 58
     print(f"{'measurement':<{w}} {'leg-env':>12} {'Pinocchio':>12} {'ratio':>8}  target")
@@ -270,7 +270,7 @@ def main() -> None:
     print()
     print("Pinocchio columns: (a) pin.forwardKinematics(q, v, 0) + computeFrameJacobian + "
           "getFrameClassicalAcceleration + pin.forwardDynamics per evaluation; (b), (c) a Python RK4 loop "
-          "over 16 such evaluations per control step, (c) looping over robots in Python.")
+          f"over {4 * it.SUBSTEPS} such evaluations per control step, (c) looping over robots in Python.")
 
 
 if __name__ == "__main__":

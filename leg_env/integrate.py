@@ -181,7 +181,7 @@ def _project_batch(q, qd, p, anchor):
 
 
 DT = 0.01  # default control period [s]
-SUBSTEPS = 4  # default least number of RK4 steps per control period
+SUBSTEPS = 2  # default least number of RK4 steps per control period
 MAX_ANGLE = 0.02  # default largest link rotation per RK4 step [rad]
 
 

@@ -219,7 +219,7 @@ def test_zero_torques_fall_and_terminate():
 
 
 def test_default_control_step_is_converged():
-    """The documented convergence check: 1 s under smooth torques, default vs 4x finer RK4 steps."""
+    """The documented convergence check: 1 s under smooth torques, default vs 8x finer RK4 steps."""
     start = {"qpos": np.array([0.0, 0.0, 0.01, -2.0122, 0.8]), "qvel": np.array([0.0, 0.0, 0.0, 0.05, 0.0])}
     finals = []
     for kwargs in ({}, {"substeps": 16, "max_angle": 0.005}):

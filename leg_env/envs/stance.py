@@ -43,12 +43,14 @@ class PlanarLegStanceEnv(gym.Env):
     ``lam = [0, m g] = [0, 147.15] N``). The equilibrium is unstable: with zero torques the robot falls.
 
     **Time stepping.** One ``step`` is a control period ``dt`` = 0.01 s (100 Hz) with the torques held
-    constant, integrated by at least ``substeps`` = 4 RK4 steps, more when the motion is fast so that no
-    link turns by more than ``max_angle`` = 0.02 rad per RK4 step. Convergence check (1 s from a
-    slightly perturbed nominal state, default parameters, compared with 256 fixed RK4 steps per period):
-    under smooth torques (nominal + sinusoids of 3 and 5 N m) the default state error is 6.4e-9
-    (4x finer steps: 2.5e-11, the 4th-order ratio 256); under zero torques (a fall) it is 2.9e-8 in
-    ``q``, 9.1e-8 in ``qd`` and 6e-6 of the weight in the contact force. The discretisation error is far
+    constant, integrated by at least ``substeps`` = 2 RK4 steps, more when the motion is fast so that no
+    link or joint turns by more than ``max_angle`` = 0.02 rad per RK4 step (balancing never triggers
+    this; a fall does). Convergence check (1 s from a slightly perturbed nominal state, default
+    parameters, compared with 256 fixed RK4 steps per period): under smooth torques (nominal +
+    sinusoids of 3 and 5 N m) the default state error is 7.3e-8 in ``q`` and 4.6e-7 in ``qd``, the
+    contact force 3e-7 of the weight (4x finer steps: 3.2e-10 in ``q``, the 4th-order ratio ~256);
+    under zero torques (a fall) 4.7e-8 in ``q``, 1.5e-7 in ``qd`` and 1e-5 of the weight. The
+    discretisation error is far
     below anything a policy can notice.
 
     ## Action Space
@@ -146,7 +148,7 @@ class PlanarLegStanceEnv(gym.Env):
     | `config`                    | StanceConfig or dict | defaults    | all task settings below at once                          |
     | `width`, `height`           | int               | 480, 480       | frame size in pixels                                     |
     | `dt`                        | float             | 0.01           | control period [s]; `metadata["render_fps"] = 1 / dt`   |
-    | `substeps`                  | int               | 4              | least RK4 steps per control period                       |
+    | `substeps`                  | int               | 2              | least RK4 steps per control period                       |
     | `max_angle`                 | float             | 0.02           | largest link rotation per RK4 step [rad] (`inf`: fixed)  |
     | `torque_limit`              | float or pair     | (50, 50)       | torque at action 1 for hip, knee [N m]                   |
     | `nominal_knee`              | float             | 0.8            | knee angle of the nominal posture [rad]                  |
@@ -353,6 +355,10 @@ class PlanarLegStanceEnv(gym.Env):
 
 def _checked_action(action) -> tuple[float, float]:
     """The action as two Python floats; ``ValueError`` unless it is 2 finite numbers of shape (2,)."""
+    if type(action) is np.ndarray and action.shape == (2,) and action.dtype.kind == "f":
+        a0, a1 = action.tolist()  # the common case, without a conversion
+        if math.isfinite(a0) and math.isfinite(a1):
+            return a0, a1
     try:
         a = np.asarray(action, dtype=np.float64)
     except (TypeError, ValueError) as e:

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, fields, replace
 
+import numba
 import numpy as np
 from numba import njit
 
@@ -43,6 +44,7 @@ __all__ = [
     "Nominal",
     "nominal_state",
     "step_batch",
+    "step_batch_threaded",
     "start_batch",
     "observe_batch",
     "project_batch",
@@ -314,9 +316,63 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
     obs[i, 11] = lam_y / weight
 
 
+@njit(cache=True, inline="always")
+def _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a, work):
+    """One control step and task evaluation of robot ``i``; the last five arguments are scratch."""
+    for j in range(5):
+        q_prev[j] = q[i, j]
+        qd_prev[j] = qd[i, j]
+    a[0] = min(1.0, max(-1.0, action[i, 0]))
+    a[1] = min(1.0, max(-1.0, action[i, 1]))
+    tau[0] = a[0] * c[_C_TAU_HIP]
+    tau[1] = a[1] * c[_C_TAU_KNEE]
+    _rk4_one(q[i], qd[i], tau, p, anchor[i], c[_C_DT], int(c[_C_SUBSTEPS]), c[_C_MAX_ANGLE], True, lam[i], work)
+
+    finite = np.isfinite(lam[i, 0]) and np.isfinite(lam[i, 1])
+    for j in range(5):
+        if not (np.isfinite(q[i, j]) and abs(qd[i, j]) <= c[_C_MAX_RATE]):
+            finite = False
+    if not finite:
+        # blow-up: restore the last good state, end the episode, pay nothing
+        for j in range(5):
+            q[i, j] = q_prev[j]
+            qd[i, j] = qd_prev[j]
+        lam[i, 0] = 0.0
+        lam[i, 1] = 0.0
+        for k in range(terms.shape[1]):
+            terms[i, k] = 0.0
+        flags[i, 0] = True
+        flags[i, 1] = False
+        flags[i, 2] = False
+        flags[i, 3] = True
+        extra[i, 0] = np.sqrt((q[i, 0] - anchor[i, 0] - q_nom[0]) ** 2 + (q[i, 1] - anchor[i, 1] - q_nom[1]) ** 2)
+        extra[i, 1] = 0.0
+        extra[i, 2] = 0.0
+        return
+    _assess(i, q, qd, anchor, lam, a[0], a[1], p, c, q_nom, weight, obs, terms, flags, extra)
+
+
+@njit(cache=True, inline="always")
+def _weight(p):
+    weight = (p[0] + p[1] + p[2]) * p[10]
+    return weight if weight > 0.0 else 1.0
+
+
+@njit(cache=True)
+def _step_range(lo, hi, q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra):
+    weight = _weight(p)
+    work = np.empty((6, 5))
+    q_prev = np.empty(5)
+    qd_prev = np.empty(5)
+    tau = np.empty(2)
+    a = np.empty(2)
+    for i in range(lo, hi):
+        _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a, work)
+
+
 @njit(cache=True)
 def step_batch(q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra):
-    """Advance every robot one control step and evaluate the task, in place.
+    """Advance every robot one control step and evaluate the task, in place (one thread).
 
     Args:
         q, qd: ``(N, 5)`` float64 state, overwritten (left unchanged on numerical failure).
@@ -329,50 +385,19 @@ def step_batch(q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra
         flags: ``(N, 4)`` bool out, in ``FLAG_NAMES`` order.
         extra: ``(N, 3)`` out, in ``INFO_NAMES`` order.
     """
+    _step_range(0, q.shape[0], q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra)
+
+
+@njit(cache=True, parallel=True)
+def step_batch_threaded(q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra):
+    """``step_batch`` split into contiguous chunks over numba's threads (``numba.set_num_threads``).
+
+    Robots are independent, so the result is bitwise that of ``step_batch``.
+    """
     n = q.shape[0]
-    dt = c[_C_DT]
-    substeps = int(c[_C_SUBSTEPS])
-    weight = (p[0] + p[1] + p[2]) * p[10]
-    if weight <= 0.0:
-        weight = 1.0
-    work = np.empty((6, 5))
-    q_prev = np.empty(5)
-    qd_prev = np.empty(5)
-    tau = np.empty(2)
-    a = np.empty(2)
-    for i in range(n):
-        for j in range(5):
-            q_prev[j] = q[i, j]
-            qd_prev[j] = qd[i, j]
-        a[0] = min(1.0, max(-1.0, action[i, 0]))
-        a[1] = min(1.0, max(-1.0, action[i, 1]))
-        tau[0] = a[0] * c[_C_TAU_HIP]
-        tau[1] = a[1] * c[_C_TAU_KNEE]
-        _rk4_one(q[i], qd[i], tau, p, anchor[i], dt, substeps, c[_C_MAX_ANGLE], True, lam[i], work)
-
-        finite = np.isfinite(lam[i, 0]) and np.isfinite(lam[i, 1])
-        for j in range(5):
-            if not (np.isfinite(q[i, j]) and abs(qd[i, j]) <= c[_C_MAX_RATE]):
-                finite = False
-        if not finite:
-            # blow-up: restore the last good state, end the episode, pay nothing
-            for j in range(5):
-                q[i, j] = q_prev[j]
-                qd[i, j] = qd_prev[j]
-            lam[i, 0] = 0.0
-            lam[i, 1] = 0.0
-            for k in range(terms.shape[1]):
-                terms[i, k] = 0.0
-            flags[i, 0] = True
-            flags[i, 1] = False
-            flags[i, 2] = False
-            flags[i, 3] = True
-            extra[i, 0] = np.sqrt((q[i, 0] - anchor[i, 0] - q_nom[0]) ** 2 + (q[i, 1] - anchor[i, 1] - q_nom[1]) ** 2)
-            extra[i, 1] = 0.0
-            extra[i, 2] = 0.0
-            continue
-
-        _assess(i, q, qd, anchor, lam, a[0], a[1], p, c, q_nom, weight, obs, terms, flags, extra)
+    chunks = numba.get_num_threads()
+    for k in numba.prange(chunks):
+        _step_range(k * n // chunks, (k + 1) * n // chunks, q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra)
 
 
 @njit(cache=True)
@@ -384,9 +409,7 @@ def start_batch(q, qd, anchor, tau, p, c, q_nom, lam, obs, flags, extra):
     torques): at the nominal posture it is exactly the nominal ``[0, m g]`` up to round-off.
     Arguments as in ``step_batch``; ``flags[:, 0]`` tells whether the start state is already terminal.
     """
-    weight = (p[0] + p[1] + p[2]) * p[10]
-    if weight <= 0.0:
-        weight = 1.0
+    weight = _weight(p)
     qdd = np.empty(5)
     terms = np.empty((q.shape[0], len(REWARD_TERMS)))
     for i in range(q.shape[0]):

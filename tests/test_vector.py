@@ -1,6 +1,9 @@
 """The natively batched VectorEnv: registration, parity with single envs, seeding, errors, rendering."""
 
+import os
 import pickle
+import subprocess
+import sys
 
 import gymnasium as gym
 import numpy as np
@@ -303,3 +306,36 @@ def test_rgb_array_frames_of_the_first_sub_envs():
     np.testing.assert_array_equal(frames[1], single.render())
     with pytest.warns(UserWarning, match="render_mode"):
         assert PlanarLegStanceVectorEnv(2).render() is None
+
+
+# ------------------------------------------------------------------- threads
+
+_THREADED_SCRIPT = """
+import numpy as np, gymnasium as gym, leg_env
+outs = []
+for threads in (1, 2):
+    env = gym.make_vec("leg_env/PlanarLegStance-v0", num_envs=257, num_threads=threads)
+    obs, _ = env.reset(seed=5)
+    rng = np.random.default_rng(5)
+    rows = [obs]
+    for _ in range(200):
+        obs, rew, term, trunc, info = env.step(rng.uniform(-1.0, 1.0, size=(257, 2)))
+        rows += [obs, rew, term, trunc, info["normal_force"]]
+    outs.append(rows)
+same = all(np.array_equal(a, b) for a, b in zip(*outs))
+print("SAME" if same else "DIFFERENT")
+"""
+
+
+def test_threaded_kernel_is_bitwise_the_serial_one():
+    """Two numba threads split the batch; every output equals the one-thread run exactly."""
+    env = dict(os.environ, NUMBA_NUM_THREADS="2")
+    out = subprocess.run([sys.executable, "-c", _THREADED_SCRIPT], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().endswith("SAME"), out.stdout
+
+
+@pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2", 10_000])
+def test_bad_num_threads_raise(bad):
+    with pytest.raises(ValueError, match="num_threads"):
+        PlanarLegStanceVectorEnv(num_envs=2, num_threads=bad)

@@ -333,24 +333,35 @@ class PlanarLegStanceEnv(gym.Env):
         unknown = set(options) - set(_RESET_OPTIONS)
         if unknown:
             raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: {list(_RESET_OPTIONS)}")
-        out = []
-        for key, default in (("qpos", self.nominal.q), ("qvel", np.zeros(5))):
-            value = options.get(key, default)
-            try:
-                value = np.array(value, dtype=np.float64)
-            except (TypeError, ValueError) as e:
-                raise ValueError(f"reset option {key!r} must be 5 numbers, got {options[key]!r}") from e
-            if value.shape != (5,):
-                raise ValueError(f"reset option {key!r} must have shape (5,), got {value.shape}")
-            if not np.all(np.isfinite(value)):
-                raise ValueError(f"reset option {key!r} must be finite, got {value.tolist()}")
-            out.append(value)
-        return out[0], out[1]
+        return explicit_start(options, self.nominal.q)
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state["_viewer"] = None  # a window does not travel
         return state
+
+
+def explicit_start(options: dict, q_nominal: np.ndarray, rows: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(q, qd)`` from the reset options ``qpos`` / ``qvel`` (defaults: the nominal posture, rest).
+
+    With ``rows=None`` each must have shape ``(5,)``; with ``rows=k`` shape ``(5,)`` (for every row)
+    or ``(k, 5)``, and the result has ``k`` rows. Values must be finite, else ``ValueError``.
+    """
+    shapes = ((5,),) if rows is None else ((5,), (rows, 5))
+    wanted = " or ".join(str(s) for s in shapes)
+    out = []
+    for key, default in (("qpos", q_nominal), ("qvel", np.zeros(5))):
+        value = options.get(key, default)
+        try:
+            value = np.array(value, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"reset option {key!r} must be numbers of shape {wanted}, got {options[key]!r}") from e
+        if value.shape not in shapes:
+            raise ValueError(f"reset option {key!r} must have shape {wanted}, got {value.shape}")
+        if not np.all(np.isfinite(value)):
+            raise ValueError(f"reset option {key!r} must be finite, got {value.tolist()}")
+        out.append(value if rows is None else np.array(np.broadcast_to(value, (rows, 5))))
+    return out[0], out[1]
 
 
 def _checked_action(action) -> tuple[float, float]:

@@ -36,7 +36,7 @@ from ..task import (
     step_batch,
     step_batch_threaded,
 )
-from .stance import PlanarLegStanceEnv
+from .stance import PlanarLegStanceEnv, explicit_start
 
 __all__ = ["PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
 
@@ -422,19 +422,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
 
     def _explicit_states(self, options: dict, k: int):
         """``(q, qd, anchor)`` for ``k`` rows from the ``qpos`` / ``qvel`` options (single env semantics)."""
-        out = []
-        for key, default in (("qpos", self.nominal.q), ("qvel", np.zeros(5))):
-            value = options.get(key, default)
-            try:
-                value = np.array(value, dtype=np.float64)
-            except (TypeError, ValueError) as e:
-                raise ValueError(f"reset option {key!r} must be numbers of shape (5,) or ({k}, 5), got {options[key]!r}") from e
-            if value.shape not in ((5,), (k, 5)):
-                raise ValueError(f"reset option {key!r} must have shape (5,) or ({k}, 5), got {value.shape}")
-            if not np.all(np.isfinite(value)):
-                raise ValueError(f"reset option {key!r} must be finite")
-            out.append(np.array(np.broadcast_to(value, (k, 5))))
-        q, qd = out
+        q, qd = explicit_start(options, self.nominal.q, rows=k)
         return q, qd, foot_position(q, self.params)
 
     def _step_info_columns(self, t: "_Transition") -> dict:

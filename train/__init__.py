@@ -1,0 +1,1 @@
+"""Training and evaluation: ``train.ppo`` (PPO with SB3), ``train.evaluate`` (metrics, GIF, plots)."""

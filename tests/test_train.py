@@ -1,0 +1,187 @@
+"""Training smoke tests: train() in-process, reload through the evaluation loader, resume, errors, the Zoo."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from train.evaluate import EvalArgs, PolicyLoadError, evaluate, load_policy, run_episodes
+from train.ppo import ENV_ID, TrainArgs, train
+
+ROOT = Path(__file__).resolve().parents[1]
+SHIPPED = ROOT / "policies" / "ppo_stance"
+TINY = ["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]  # 128 env steps per PPO iteration
+STEPS = 256
+EVAL_SEEDS = (10_000, 10_001, 10_002)
+
+
+def tiny_args(out: Path, **overrides) -> TrainArgs:
+    kwargs = dict(
+        out=out,
+        params=list(TINY),
+        total_timesteps=STEPS,
+        eval_freq=128,
+        eval_episodes=2,
+        checkpoint_freq=128,
+        progress_bar=False,
+        verbose=0,
+    )
+    kwargs.update(overrides)
+    return TrainArgs(**kwargs)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> Path:
+    return train(tiny_args(tmp_path_factory.mktemp("train") / "run"))
+
+
+def test_run_folder_has_everything(run):
+    for name in ("model.zip", "vecnormalize.pkl", "config.yaml", "command.txt", "evaluations.json", "learning_curve.png"):
+        assert (run / name).is_file(), name
+    config = yaml.safe_load((run / "config.yaml").read_text())
+    assert config["env_id"] == ENV_ID and config["n_envs"] == 4 and config["ppo"]["n_steps"] == 32
+    assert config["eval_env_kwargs"] == {}  # evaluation on the registered task, whatever the training shaping
+    evaluations = json.loads((run / "evaluations.json").read_text())
+    assert evaluations["total_timesteps"] == STEPS
+    assert [e["timesteps"] for e in evaluations["evaluations"]] == [128, 256]
+    assert all(len(e["returns"]) == 2 for e in evaluations["evaluations"])
+    assert list((run / "tb").iterdir()), "no TensorBoard log"
+    # the shipped model is the best evaluated one; the last one is kept next to it
+    selected = evaluations["selected"]
+    best = max(evaluations["evaluations"], key=lambda e: (e["survival_rate"], e["mean_return"]))
+    assert selected["from"] == "best" and selected["mean_return"] == best["mean_return"]
+    assert (run / "model.zip").read_bytes() == (run / "best" / "model.zip").read_bytes()
+    assert json.loads((run / "last" / "info.json").read_text())["timesteps"] == STEPS
+
+
+def test_reward_terms_and_violation_rates_reach_tensorboard(run):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    logs = [p for p in (run / "tb").rglob("events.out.tfevents.*")]
+    tags = set()
+    for log in logs:
+        acc = EventAccumulator(str(log))
+        acc.Reload()
+        tags |= set(acc.Tags()["scalars"])
+    for term in ("alive", "drift", "unilateral", "friction", "ctrl"):
+        assert f"rollout/reward_{term}" in tags
+    assert {"rollout/unilateral_violation_rate", "rollout/friction_violation_rate", "eval/mean_return"} <= tags
+
+
+def test_result_reloads_through_the_evaluation_loader(run):
+    policy = load_policy(run)
+    obs = np.zeros(12, dtype=np.float32)
+    action, _ = policy.predict(obs)
+    assert action.shape == (2,) and np.all(np.abs(action) <= 1.0)
+    assert policy.predict(np.zeros((5, 12), dtype=np.float32))[0].shape == (5, 2)
+    summary, series = run_episodes(policy, EVAL_SEEDS[:1], record=0)
+    assert summary["episodes"] == 1 and 1 <= summary["mean_length"] <= 1000
+    assert series["torque"].shape == (summary["steps"], 2)
+
+
+def test_evaluate_command_writes_the_comparison(run, tmp_path, capsys):
+    out = evaluate(EvalArgs(policy=str(run), baseline="lqr", episodes=2, out=tmp_path / "eval", gif=True))
+    for name in ("policy.json", "lqr.json", "table.md", "timeseries.png", "learning_curve.png", "episode.gif"):
+        assert (out / name).is_file(), name
+    lqr = json.loads((out / "lqr.json").read_text())
+    assert lqr["seeds"] == [10_000, 10_001] and lqr["survival_rate"] == 1.0
+    assert "| survival rate |" in capsys.readouterr().out
+
+
+def test_resume_continues_the_step_counter(tmp_path):
+    out = tmp_path / "run"
+    train(tiny_args(out))
+    first = json.loads((out / "evaluations.json").read_text())["evaluations"]
+    train(tiny_args(out, total_timesteps=2 * STEPS))
+
+    from stable_baselines3 import PPO
+
+    assert PPO.load(out / "last" / "model.zip", device="cpu").num_timesteps == 2 * STEPS
+    record = json.loads((out / "evaluations.json").read_text())
+    assert record["resumes"] == 1
+    history = record["evaluations"]
+    assert [e["timesteps"] for e in history] == [128, 256, 384, 512]
+    assert history[:2] == first  # the first invocation's evaluations are kept, not redone
+    assert len((out / "command.txt").read_text().splitlines()) == 2
+    assert yaml.safe_load((out / "config.yaml").read_text())["total_timesteps"] == 2 * STEPS
+
+
+def test_existing_run_is_not_overwritten(tmp_path):
+    out = tmp_path / "run"
+    train(tiny_args(out))
+    with pytest.raises(ValueError, match="different configuration"):
+        train(tiny_args(out, seed=1))
+    with pytest.raises(FileExistsError, match="--overwrite"):
+        train(tiny_args(out, resume=False))
+    train(tiny_args(out, seed=1, overwrite=True))
+    assert yaml.safe_load((out / "config.yaml").read_text())["seed"] == 1
+
+
+def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(tmp_path):
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "train.ppo", "--out", str(out), "--total-timesteps", "1000000", "--eval-freq", "0",
+           "--checkpoint-freq", "0", "--no-progress-bar", "--verbose", "0", "--params", *TINY]  # fmt: skip
+    proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.time() + 120
+        while not list((out / "tb").rglob("events.out.tfevents.*")) and time.time() < deadline:
+            time.sleep(0.2)
+        time.sleep(3.0)  # let it train a few iterations
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert "checkpoint saved" in err
+    progress = json.loads(next((out / "checkpoints").glob("0*/progress.json")).read_text())
+    assert progress["num_timesteps"] > 0
+    target = progress["num_timesteps"] + 128
+    train(tiny_args(out, total_timesteps=target, eval_freq=0, checkpoint_freq=0))
+    from stable_baselines3 import PPO
+
+    assert PPO.load(out / "last" / "model.zip", device="cpu").num_timesteps >= target
+
+
+def test_missing_or_corrupt_files_name_the_file(run, tmp_path):
+    broken = tmp_path / "broken"
+    shutil.copytree(run, broken)
+    (broken / "model.zip").unlink()
+    with pytest.raises(FileNotFoundError, match=str(broken / "model.zip")):
+        load_policy(broken)
+    (broken / "model.zip").write_bytes(b"this is not a zip archive")
+    with pytest.raises(PolicyLoadError, match=str(broken / "model.zip")):
+        load_policy(broken)
+    shutil.copy(run / "model.zip", broken / "model.zip")
+    (broken / "vecnormalize.pkl").write_bytes(b"\x80\x04garbage")
+    with pytest.raises(PolicyLoadError, match=str(broken / "vecnormalize.pkl")):
+        load_policy(broken)
+    (broken / "vecnormalize.pkl").unlink()
+    with pytest.raises(FileNotFoundError, match=str(broken / "vecnormalize.pkl")):
+        load_policy(broken)
+    with pytest.raises(FileNotFoundError, match="nowhere"):
+        load_policy(tmp_path / "nowhere")
+
+
+def test_shipped_policy_survives():
+    policy = load_policy(SHIPPED)
+    summary, _ = run_episodes(policy, EVAL_SEEDS)
+    assert summary["survival_rate"] == 1.0
+    assert summary["unilateral_violation_frac"] == 0.0
+
+
+def test_zoo_trains_the_env_from_the_same_file(tmp_path):
+    cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", ENV_ID, "--gym-packages", "leg_env",
+           "--conf-file", "train/hyperparams/ppo.yml", "--n-timesteps", "2000", "--num-threads", "1",
+           "--log-folder", str(tmp_path), "--seed", "0"]  # fmt: skip
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    result = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300, env=env)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
+    assert list(tmp_path.rglob("*.zip")), "the Zoo saved no model"

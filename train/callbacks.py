@@ -1,0 +1,172 @@
+"""Training callbacks: reward-term and contact-violation logging, periodic evaluation, checkpoints."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+
+from leg_env.task import REWARD_TERMS
+
+__all__ = ["RewardTermsLogger", "PeriodicEvaluation", "PeriodicCheckpoint", "run_vec_episodes", "evaluate_now"]
+
+REWARD_KEYS = tuple(f"reward_{name}" for name in REWARD_TERMS)
+VIOLATION_KEYS = ("unilateral_violation", "friction_violation")
+
+
+class RewardTermsLogger(BaseCallback):
+    """Log, per rollout, the mean of each ``reward_*`` info term per env step and the rate of contact violations.
+
+    TensorBoard keys: ``rollout/reward_<term>`` and ``rollout/<unilateral|friction>_violation_rate``.
+    """
+
+    def __init__(self):
+        super().__init__()
+        self._sums = dict.fromkeys(REWARD_KEYS + VIOLATION_KEYS, 0.0)
+        self._count = 0
+
+    def _on_rollout_start(self) -> None:
+        for key in self._sums:
+            self._sums[key] = 0.0
+        self._count = 0
+
+    def _on_step(self) -> bool:
+        sums = self._sums
+        for info in self.locals["infos"]:
+            for key in REWARD_KEYS:
+                sums[key] += info[key]
+            for key in VIOLATION_KEYS:
+                sums[key] += info[key]
+        self._count += len(self.locals["infos"])
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if self._count == 0:
+            return
+        for key in REWARD_KEYS:
+            self.logger.record(f"rollout/{key}", self._sums[key] / self._count)
+        for key in VIOLATION_KEYS:
+            self.logger.record(f"rollout/{key}_rate", self._sums[key] / self._count)
+
+
+def run_vec_episodes(predict: Callable, venv: VecEnv, seed: int) -> dict:
+    """Run one deterministic episode in each env of ``venv`` (seeded with ``seed``) and summarise them.
+
+    ``predict`` maps raw observations ``(N, 12)`` to actions. Returns per-episode ``returns``,
+    ``lengths`` and ``survived`` (ended by the time limit, not by a fall), their means, and the RMS
+    base drift over all steps [m].
+    """
+    n = venv.num_envs
+    venv.seed(seed)
+    obs = venv.reset()
+    finished = np.zeros(n, dtype=bool)
+    returns = np.zeros(n)
+    lengths = np.zeros(n, dtype=np.int64)
+    survived = np.zeros(n, dtype=bool)
+    drift_sq = 0.0
+    while not finished.all():
+        obs, rewards, dones, infos = venv.step(predict(obs))
+        active = ~finished
+        returns[active] += rewards[active]
+        lengths[active] += 1
+        drift_sq += sum(infos[i]["base_drift"] ** 2 for i in np.flatnonzero(active))
+        for i in np.flatnonzero(dones & active):
+            survived[i] = bool(infos[i].get("TimeLimit.truncated", False))
+        finished |= dones
+    return {
+        "mean_return": float(returns.mean()),
+        "std_return": float(returns.std()),
+        "mean_length": float(lengths.mean()),
+        "survival_rate": float(survived.mean()),
+        "rms_base_drift": float(np.sqrt(drift_sq / lengths.sum())),
+        "returns": returns.round(4).tolist(),
+        "lengths": lengths.tolist(),
+    }
+
+
+def evaluate_now(model, vec_normalize: VecNormalize | None, venv: VecEnv, seed: int) -> dict:
+    """Deterministic episodes of ``model`` on ``venv``, observations normalised by ``vec_normalize``."""
+
+    def predict(obs):
+        if vec_normalize is not None:
+            obs = vec_normalize.normalize_obs(obs)
+        return model.predict(obs, deterministic=True)[0]
+
+    return run_vec_episodes(predict, venv, seed)
+
+
+class PeriodicEvaluation(BaseCallback):
+    """Every ``eval_freq`` env steps, run ``venv.num_envs`` deterministic episodes and log the results.
+
+    The evaluation env's observations are normalised with the training ``VecNormalize``'s current
+    statistics; rewards are the env's own (unnormalised). Each result (with ``timesteps`` and the
+    wall-clock ``time``) is appended to ``history`` and passed to ``on_result``.
+    """
+
+    def __init__(
+        self,
+        venv: VecEnv,
+        vec_normalize: VecNormalize | None,
+        eval_freq: int,
+        seed: int,
+        history: list,
+        on_result: Callable[[dict], None] | None = None,
+        clock: Callable[[], float] = time.perf_counter,
+    ):
+        super().__init__()
+        self.venv = venv
+        self.vec_normalize = vec_normalize
+        self.eval_freq = eval_freq
+        self.seed = seed
+        self.history = history
+        self.on_result = on_result
+        self.clock = clock
+        self._next = None
+
+    def _init_callback(self) -> None:
+        done = self.history[-1]["timesteps"] if self.history else 0
+        self._next = (done // self.eval_freq + 1) * self.eval_freq if self.eval_freq > 0 else None
+
+    def _on_step(self) -> bool:
+        if self._next is not None and self.num_timesteps >= self._next:
+            while self._next <= self.num_timesteps:
+                self._next += self.eval_freq
+            self.evaluate()
+        return True
+
+    def evaluate(self) -> dict:
+        """Evaluate now, record and return the result."""
+        result = {"timesteps": int(self.num_timesteps)}
+        result.update(evaluate_now(self.model, self.vec_normalize, self.venv, self.seed))
+        result["time"] = round(self.clock(), 2)
+        self.history.append(result)
+        for key in ("mean_return", "std_return", "mean_length", "survival_rate", "rms_base_drift"):
+            self.logger.record(f"eval/{key}", result[key])
+        self.logger.dump(self.num_timesteps)
+        if self.on_result is not None:
+            self.on_result(result)
+        return result
+
+
+class PeriodicCheckpoint(BaseCallback):
+    """Call ``save()`` each time the step counter passes a multiple of ``checkpoint_freq``."""
+
+    def __init__(self, checkpoint_freq: int, save: Callable[[], None]):
+        super().__init__()
+        self.checkpoint_freq = checkpoint_freq
+        self.save = save
+        self._next = None
+
+    def _init_callback(self) -> None:
+        f = self.checkpoint_freq
+        self._next = (self.num_timesteps // f + 1) * f if f > 0 else None
+
+    def _on_step(self) -> bool:
+        if self._next is not None and self.num_timesteps >= self._next:
+            while self._next <= self.num_timesteps:
+                self._next += self.checkpoint_freq
+            self.save()
+        return True

@@ -1,0 +1,83 @@
+"""Command lines from argument dataclasses: one option per field, its docstring as the help text.
+
+A field's docstring is the string literal written under it (PEP 257's attribute docstring), read
+from the class source once, so the dataclass is the single place that documents an argument.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import inspect
+import textwrap
+import types
+import typing
+from pathlib import Path
+
+__all__ = ["field_docs", "parser_for", "parse_args"]
+
+
+def field_docs(cls: type) -> dict[str, str]:
+    """``{field name: docstring}`` for the attribute docstrings of a dataclass."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    body = tree.body[0].body
+    docs = {}
+    for node, after in zip(body, body[1:]):
+        if (
+            isinstance(node, ast.AnnAssign)
+            and isinstance(node.target, ast.Name)
+            and isinstance(after, ast.Expr)
+            and isinstance(after.value, ast.Constant)
+            and isinstance(after.value.value, str)
+        ):
+            docs[node.target.id] = " ".join(after.value.value.split())
+    return docs
+
+
+def _base_type(tp):
+    """``int`` for ``int | None``; the type itself otherwise."""
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(args) == 1:
+            return args[0]
+    return tp
+
+
+def parser_for(cls: type, positional: tuple[str, ...] = (), **parser_kwargs) -> argparse.ArgumentParser:
+    """An ``ArgumentParser`` with one option per field of ``cls`` (``--snake-case``; bools get ``--no-...``).
+
+    Fields named in ``positional`` become positional arguments (optional when they have a default).
+    """
+    doc = inspect.getdoc(cls) or ""
+    parser = argparse.ArgumentParser(
+        description=doc.split("\n\n")[0], formatter_class=argparse.ArgumentDefaultsHelpFormatter, **parser_kwargs
+    )
+    docs = field_docs(cls)
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        tp = _base_type(hints[f.name])
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
+        kwargs: dict = {"help": docs.get(f.name, ""), "default": default}
+        if tp is bool:
+            kwargs["action"] = argparse.BooleanOptionalAction
+        elif typing.get_origin(tp) is list:
+            kwargs["nargs"] = "*"
+            kwargs["type"] = typing.get_args(tp)[0]
+            kwargs["metavar"] = f.name.upper()
+        else:
+            kwargs["type"] = tp if tp in (int, float, str, Path) else str
+        if f.name in positional:
+            kwargs.pop("action", None)
+            if f.default is not dataclasses.MISSING:
+                kwargs["nargs"] = "?"
+            parser.add_argument(f.name, **kwargs)
+        else:
+            parser.add_argument("--" + f.name.replace("_", "-"), dest=f.name, **kwargs)
+    return parser
+
+
+def parse_args(cls: type, argv: list[str] | None = None, positional: tuple[str, ...] = (), prog: str | None = None):
+    """Parse ``argv`` (default: ``sys.argv[1:]``) into an instance of the dataclass ``cls``."""
+    ns = parser_for(cls, positional, prog=prog).parse_args(argv)
+    return cls(**vars(ns))

@@ -1,0 +1,368 @@
+"""Evaluate a trained policy, or the model-based LQR controller, over deterministic episodes.
+
+    python -m train.evaluate runs/ppo_stance --baseline lqr --episodes 20 --gif
+    python -m train.evaluate policies/ppo_stance
+    python -m train.evaluate lqr --out runs/lqr_eval
+
+``policy`` is a run or policy folder (``model.zip``, ``vecnormalize.pkl``, optionally ``config.yaml``
+whose ``eval_env_kwargs`` the evaluation env uses: by default none, the registered task as is, even
+when training shaped the reward through ``env_kwargs``) or ``lqr``. Episode ``i`` is seeded ``seed + i``
+(default 10_000 + i: training uses small seeds, in-training evaluation 20_000 + i) and runs in the
+single env from ``gymnasium.make`` with its 1000-step time limit. Results go to ``<policy>/eval/``
+(or ``--out``): one JSON per controller, ``table.md`` with the side-by-side table that is also
+printed, ``timeseries.png`` (base drift, torques and contact force of the first episode), for a run
+folder ``learning_curve.png`` (the run's curve with the baseline's level drawn in) and with ``--gif``
+an animation of the first episode.
+
+Metrics (over all episodes; "steps" are all control steps of all episodes):
+
+- ``survival_rate``: fraction of episodes that reach the time limit without terminating;
+- ``mean_return``, ``std_return``, ``mean_length``;
+- ``rms_base_drift``, ``max_base_drift`` [m]: base distance from its nominal position;
+- ``rms_torso_angle`` [rad]: the torso's tilt (0 in the nominal posture);
+- ``unilateral_violation_frac``: fraction of steps with ``lam_y < 0`` (the ground would have to pull);
+- ``friction_violation_frac``: fraction of steps with ``|lam_x| > mu lam_y``;
+- ``rms_torque`` [N m]: hip and knee; ``mean_reward_terms``: each reward term per episode.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from leg_env import ENV_ID  # importing leg_env registers the env
+from train.cli import parse_args
+
+__all__ = ["EvalArgs", "PolicyLoadError", "TrainedPolicy", "load_policy", "run_episodes", "evaluate", "format_table"]
+
+EVAL_SEED = 10_000
+GIF_FRAME_SKIP = 4  # one frame per 4 control steps: 25 frames per simulated second at dt = 0.01 s
+GIF_SIZE = 320  # pixels
+
+
+class PolicyLoadError(ValueError):
+    """A policy file exists but cannot be read as what it should be; the message names the file."""
+
+
+class TrainedPolicy:
+    """A trained SB3 model with the observation normalisation it was trained with.
+
+    ``predict`` has SB3's signature and takes raw env observations, one ``(12,)`` or a batch ``(N, 12)``.
+    """
+
+    def __init__(self, model, vec_normalize=None, env_kwargs: dict | None = None, path: Path | None = None):
+        self.model = model
+        self.vec_normalize = vec_normalize
+        self.env_kwargs = dict(env_kwargs or {})
+        self.path = path
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        obs = np.asarray(observation, dtype=np.float32)
+        if self.vec_normalize is not None:
+            obs = self.vec_normalize.normalize_obs(obs)
+        return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+
+
+def _read_config(folder: Path) -> dict:
+    path = folder / "config.yaml"
+    if not path.is_file():
+        return {}
+    import yaml
+
+    try:
+        config = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise PolicyLoadError(f"cannot read the run configuration {path}: {e}") from e
+    if not isinstance(config, dict):
+        raise PolicyLoadError(f"the run configuration {path} is not a mapping")
+    return config
+
+
+def load_policy(path, env_kwargs: dict | None = None):
+    """A policy with ``predict(obs)`` from a run/policy folder (or its ``model.zip``), or ``"lqr"``.
+
+    For ``"lqr"`` the controller is built for the env made with ``env_kwargs``. For a folder,
+    ``env_kwargs`` (default: the run's ``eval_env_kwargs``) are kept as the policy's ``env_kwargs``,
+    the evaluation env's arguments.
+
+    Raises:
+        FileNotFoundError: the folder, ``model.zip`` or (when the run normalised observations)
+            ``vecnormalize.pkl`` is missing; the message names the path.
+        PolicyLoadError: a file exists but is corrupt or of the wrong kind; the message names it.
+    """
+    if isinstance(path, str) and path.lower() == "lqr":
+        from leg_env.params import LegParams
+        from leg_env.task import StanceConfig
+        from policies.lqr import LQRController
+
+        kwargs = dict(env_kwargs or {})
+        params = kwargs.pop("params", None)
+        config = StanceConfig.from_kwargs(kwargs.pop("config", None), **{k: v for k, v in kwargs.items() if k not in ("render_mode", "width", "height")})
+        return LQRController(LegParams.from_any(params), config)
+
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    torch.set_num_threads(1)
+    path = Path(path)
+    folder = path.parent if path.suffix == ".zip" else path
+    model_file = path if path.suffix == ".zip" else folder / "model.zip"
+    if not folder.is_dir():
+        raise FileNotFoundError(f"policy folder not found: {folder}")
+    if not model_file.is_file():
+        raise FileNotFoundError(f"model file not found: {model_file}")
+    config = _read_config(folder)
+    try:
+        model = PPO.load(model_file, device="cpu")
+    except Exception as e:  # SB3 raises zipfile, pickle, torch or key errors on a bad archive
+        raise PolicyLoadError(f"cannot load the model file {model_file}: {type(e).__name__}: {e}") from e
+
+    vec_normalize = None
+    stats_file = folder / "vecnormalize.pkl"
+    if config.get("normalize", True) is not False or stats_file.exists():
+        if not stats_file.is_file():
+            raise FileNotFoundError(f"normalisation statistics not found: {stats_file}")
+        try:
+            with open(stats_file, "rb") as f:
+                vec_normalize = pickle.load(f)
+        except Exception as e:
+            raise PolicyLoadError(f"cannot load the normalisation statistics {stats_file}: {type(e).__name__}: {e}") from e
+        if not isinstance(vec_normalize, VecNormalize):
+            raise PolicyLoadError(f"{stats_file} does not hold VecNormalize statistics (got {type(vec_normalize).__name__})")
+        vec_normalize.training = False
+        vec_normalize.norm_reward = False
+        if not vec_normalize.norm_obs:
+            vec_normalize = None  # only returns were normalised: the policy reads raw observations
+        elif vec_normalize.obs_rms.mean.shape != model.observation_space.shape:
+            raise PolicyLoadError(
+                f"{stats_file} has statistics for observations of shape {vec_normalize.obs_rms.mean.shape}, "
+                f"the model in {model_file} expects {model.observation_space.shape}"
+            )
+    if env_kwargs is None:
+        env_kwargs = config.get("eval_env_kwargs", config.get("env_kwargs")) or {}
+    return TrainedPolicy(model, vec_normalize, env_kwargs, folder)
+
+
+def run_episodes(policy, seeds, env_kwargs: dict | None = None, record: int | None = None, frames: bool = False):
+    """Run one deterministic episode per seed; return the summary and the recorded episode.
+
+    Args:
+        policy: anything with SB3's ``predict``.
+        seeds: one seed per episode.
+        env_kwargs: keyword arguments of ``gymnasium.make``.
+        record: index of the episode whose time series is returned (None: none).
+        frames: also render that episode, one ``rgb_array`` frame per ``GIF_FRAME_SKIP`` steps.
+
+    Returns:
+        ``(summary, series)``: the metrics (module docstring) with per-episode lists, and for the
+        recorded episode a dict of ``base_drift`` (T,), ``torso_angle`` (T,), ``torque`` (T, 2), ``contact_force`` (T, 2),
+        ``weight`` and ``frames`` (or None).
+    """
+    import gymnasium as gym
+
+    from leg_env.task import REWARD_TERMS
+
+    env_kwargs = dict(env_kwargs or {})
+    per_episode = []
+    drift_sq, drift_max, torque_sq, steps, unilateral, friction = 0.0, 0.0, np.zeros(2), 0, 0, 0
+    tilt_sq = 0.0
+    series = None
+    for i, seed in enumerate(seeds):
+        recording = record == i
+        kwargs = dict(env_kwargs)
+        if recording and frames:
+            kwargs.update(render_mode="rgb_array", width=GIF_SIZE, height=GIF_SIZE)
+        env = gym.make(ENV_ID, **kwargs)
+        limit = np.asarray(env.unwrapped.config.torque_limit)
+        obs, _ = env.reset(seed=int(seed))
+        terms = dict.fromkeys(REWARD_TERMS, 0.0)
+        ep_return, length, ep_drift_sq = 0.0, 0, 0.0
+        rec = {"base_drift": [], "torso_angle": [], "torque": [], "contact_force": [], "frames": []} if recording else None
+        if recording and frames:
+            rec["frames"].append(env.render())
+        terminated = truncated = False
+        while not (terminated or truncated):
+            action, _ = policy.predict(obs, deterministic=True)
+            action = np.asarray(action, dtype=np.float64).reshape(2)
+            obs, reward, terminated, truncated, info = env.step(action)
+            tau = np.clip(action, -1.0, 1.0) * limit
+            ep_return += reward
+            length += 1
+            for name in REWARD_TERMS:
+                terms[name] += info[f"reward_{name}"]
+            d = info["base_drift"]
+            ep_drift_sq += d * d
+            drift_max = max(drift_max, d)
+            torque_sq += tau * tau
+            tilt_sq += float(obs[2]) ** 2
+            unilateral += bool(info["unilateral_violation"])
+            friction += bool(info["friction_violation"])
+            if rec is not None:
+                rec["base_drift"].append(d)
+                rec["torso_angle"].append(float(obs[2]))
+                rec["torque"].append(tau)
+                rec["contact_force"].append(np.asarray(info["contact_force"], dtype=np.float64))
+                if frames and length % GIF_FRAME_SKIP == 0:
+                    rec["frames"].append(env.render())
+        if rec is not None:
+            series = {
+                "base_drift": np.asarray(rec["base_drift"]),
+                "torso_angle": np.asarray(rec["torso_angle"]),
+                "torque": np.asarray(rec["torque"]),
+                "contact_force": np.asarray(rec["contact_force"]),
+                "weight": env.unwrapped.params.weight,
+                "dt": env.unwrapped.dt,
+                "torque_limit": tuple(limit),
+                "frames": rec["frames"] if frames else None,
+            }
+        env.close()
+        drift_sq += ep_drift_sq
+        steps += length
+        per_episode.append(
+            {
+                "seed": int(seed),
+                "return": round(ep_return, 4),
+                "length": length,
+                "survived": bool(truncated and not terminated),
+                "rms_base_drift": float(np.sqrt(ep_drift_sq / length)),
+                "reward_terms": {k: round(v, 4) for k, v in terms.items()},
+            }
+        )
+    returns = np.array([e["return"] for e in per_episode])
+    summary = {
+        "episodes": len(per_episode),
+        "survival_rate": float(np.mean([e["survived"] for e in per_episode])),
+        "mean_return": float(returns.mean()),
+        "std_return": float(returns.std()),
+        "mean_length": float(np.mean([e["length"] for e in per_episode])),
+        "rms_base_drift": float(np.sqrt(drift_sq / steps)),
+        "max_base_drift": float(drift_max),
+        "rms_torso_angle": float(np.sqrt(tilt_sq / steps)),
+        "unilateral_violation_frac": unilateral / steps,
+        "friction_violation_frac": friction / steps,
+        "rms_torque": np.sqrt(torque_sq / steps).round(4).tolist(),
+        "mean_reward_terms": {k: float(np.mean([e["reward_terms"][k] for e in per_episode])) for k in REWARD_TERMS},
+        "steps": int(steps),
+        "per_episode": per_episode,
+    }
+    return summary, series
+
+
+_ROWS = (
+    ("survival rate", "survival_rate", lambda v: f"{100 * v:.0f}%"),
+    ("mean return", "mean_return", lambda v: f"{v:.2f}"),
+    ("std return", "std_return", lambda v: f"{v:.2f}"),
+    ("mean episode length", "mean_length", lambda v: f"{v:.1f}"),
+    ("RMS base drift [cm]", "rms_base_drift", lambda v: f"{100 * v:.3f}"),
+    ("max base drift [cm]", "max_base_drift", lambda v: f"{100 * v:.3f}"),
+    ("RMS torso angle [deg]", "rms_torso_angle", lambda v: f"{np.degrees(v):.2f}"),
+    ("steps with lam_y < 0", "unilateral_violation_frac", lambda v: f"{100 * v:.2f}%"),
+    ("steps outside friction cone", "friction_violation_frac", lambda v: f"{100 * v:.2f}%"),
+    ("RMS torque hip / knee [N m]", "rms_torque", lambda v: f"{v[0]:.2f} / {v[1]:.2f}"),
+)
+
+
+def format_table(results: dict[str, dict]) -> str:
+    """A Markdown table with one column per controller."""
+    names = list(results)
+    lines = ["| metric | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
+    for label, key, fmt in _ROWS:
+        lines.append(f"| {label} | " + " | ".join(fmt(results[n][key]) for n in names) + " |")
+    for term in next(iter(results.values()))["mean_reward_terms"]:
+        lines.append(
+            f"| return from reward_{term} | " + " | ".join(f"{results[n]['mean_reward_terms'][term]:.3f}" for n in names) + " |"
+        )
+    return "\n".join(lines)
+
+
+def _write_gif(frames, path: Path, fps: float) -> Path:
+    import imageio.v2 as imageio
+
+    imageio.mimsave(path, [np.asarray(f) for f in frames], duration=1.0 / fps, loop=0)
+    return path
+
+
+@dataclass
+class EvalArgs:
+    """Evaluate a trained policy or the LQR baseline over deterministic episodes and write the results."""
+
+    policy: str = "lqr"
+    """Run or policy folder (with model.zip and vecnormalize.pkl), or 'lqr' for the model-based controller."""
+    baseline: str | None = None
+    """Also evaluate this controller ('lqr' or a folder) on the same seeds and print both side by side."""
+    episodes: int = 20
+    """Number of episodes."""
+    seed: int = EVAL_SEED
+    """Seed of the first episode; episode i uses seed + i."""
+    out: Path | None = None
+    """Output folder (None: <policy>/eval, or runs/eval_lqr when evaluating 'lqr')."""
+    gif: bool = False
+    """Write an animated GIF of the first episode (every 4th step, 320 px)."""
+    plot: bool = True
+    """Write timeseries.png (base drift, torques, contact force of the first episode) and, for a run
+    folder, learning_curve.png with the baseline's level."""
+
+
+def _label(spec: str) -> str:
+    return "lqr" if spec.lower() == "lqr" else (Path(spec).name or "policy")
+
+
+def evaluate(args: EvalArgs) -> Path:
+    """Evaluate ``args.policy`` (and ``args.baseline``) and write the results; returns the output folder."""
+    is_lqr = args.policy.lower() == "lqr"
+    out = Path(args.out) if args.out is not None else (Path("runs/eval_lqr") if is_lqr else Path(args.policy) / "eval")
+    out.mkdir(parents=True, exist_ok=True)
+    seeds = [args.seed + i for i in range(args.episodes)]
+
+    policy = load_policy(args.policy)
+    env_kwargs = {} if is_lqr else policy.env_kwargs
+    controllers = {_label(args.policy): policy}
+    if args.baseline is not None:
+        label = _label(args.baseline)
+        if label in controllers:
+            label = f"{label} (baseline)"
+        controllers[label] = load_policy(args.baseline, env_kwargs=env_kwargs)
+
+    results, series = {}, {}
+    for k, (label, controller) in enumerate(controllers.items()):
+        summary, rec = run_episodes(controller, seeds, env_kwargs, record=0, frames=args.gif and k == 0)
+        summary = {"controller": args.policy if k == 0 else args.baseline, "env_kwargs": env_kwargs, "seeds": seeds, **summary}
+        results[label] = summary
+        series[label] = rec
+        name = "lqr" if label.startswith("lqr") else ("policy" if k == 0 else "baseline")
+        (out / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
+        if k == 0 and args.gif and rec["frames"]:
+            _write_gif(rec["frames"], out / "episode.gif", 1.0 / (rec["dt"] * GIF_FRAME_SKIP))
+
+    table = format_table(results)
+    (out / "table.md").write_text(
+        f"{args.episodes} deterministic episodes, seeds {seeds[0]}..{seeds[-1]}, env kwargs {env_kwargs or 'default'}\n\n"
+        + table
+        + "\n"
+    )
+    print(table)
+    if args.plot:
+        from train.plots import plot_learning_curve, plot_time_series
+
+        first = next(iter(series.values()))
+        plot_time_series(series, out / "timeseries.png", first["dt"], first["torque_limit"])
+        log = Path(args.policy) / "evaluations.json"
+        if not is_lqr and log.is_file():
+            reference = next((results[k] for k in results if k.startswith("lqr")), None)
+            history = json.loads(log.read_text())["evaluations"]
+            plot_learning_curve(history, out / "learning_curve.png", ENV_ID, reference)
+    print(f"results written to {out}/")
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    evaluate(parse_args(EvalArgs, argv, positional=("policy",), prog="python -m train.evaluate"))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,99 @@
+"""Figures of a run: the learning curve and an episode's time series (matplotlib, headless Agg backend)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = ["plot_learning_curve", "plot_time_series"]
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_learning_curve(history: list[dict], path: Path, title: str = "", reference: dict | None = None) -> Path:
+    """Evaluation return (+- std), survival rate and RMS base drift against environment steps, as a PNG.
+
+    ``reference`` (optional) is a summary of the same metrics for a reference controller, drawn
+    as dashed horizontal lines (``mean_return``, ``rms_base_drift``).
+    """
+    plt = _pyplot()
+    steps = [h["timesteps"] for h in history]
+    mean = [h["mean_return"] for h in history]
+    std = [h["std_return"] for h in history]
+    survival = [100.0 * h["survival_rate"] for h in history]
+    drift = [100.0 * h["rms_base_drift"] if "rms_base_drift" in h else float("nan") for h in history]
+    fig, (ax, ax_s) = plt.subplots(2, 1, figsize=(6.4, 5.2), dpi=100, sharex=True, height_ratios=(3, 2))
+    ax.plot(steps, mean, "o-", color="C0", ms=3, label="PPO, deterministic")
+    ax.fill_between(steps, [m - s for m, s in zip(mean, std)], [m + s for m, s in zip(mean, std)], color="C0", alpha=0.2)
+    if reference is not None:
+        ax.axhline(reference["mean_return"], color="k", ls="--", lw=1, label=f"LQR ({reference['mean_return']:.1f})")
+    ax.set_ylabel("episode return")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right", fontsize=8)
+    ax_s.plot(steps, survival, "s-", color="C2", ms=3, label="survival rate [%]")
+    ax_s.set_ylabel("survival [%]", color="C2")
+    ax_s.set_ylim(-5, 105)
+    ax_s.set_xlabel("environment steps")
+    ax_s.grid(alpha=0.3)
+    ax_d = ax_s.twinx()
+    ax_d.plot(steps, drift, "^-", color="C3", ms=3, label="RMS base drift [cm]")
+    if reference is not None:
+        ax_d.axhline(100.0 * reference["rms_base_drift"], color="C3", ls="--", lw=1, label="LQR drift")
+    ax_d.set_ylabel("RMS base drift [cm]", color="C3")
+    ax_d.set_yscale("log")
+    h1, l1 = ax_s.get_legend_handles_labels()
+    h2, l2 = ax_d.get_legend_handles_labels()
+    ax_s.legend(h1 + h2, l1 + l2, loc="center right", fontsize=8)
+    if history and "time" in history[-1]:
+        minutes = history[-1]["time"] / 60.0
+        title = f"{title}  ({steps[-1]:,} steps, {minutes:.1f} min)" if title else f"{minutes:.1f} min"
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_time_series(series: dict[str, dict], path: Path, dt: float, torque_limit=(50.0, 50.0)) -> Path:
+    """Base drift, torso angle, joint torques and contact force over one episode for each controller.
+
+    ``series`` maps a label to a dict of arrays ``base_drift`` (T,), ``torso_angle`` (T,) [rad], ``torque`` (T, 2) and
+    ``contact_force`` (T, 2) [N]; ``weight`` (float) scales the force axis to the robot's weight.
+    """
+    import numpy as np
+
+    plt = _pyplot()
+    fig, axes = plt.subplots(5, 1, figsize=(7.0, 9.5), dpi=100, sharex=True)
+    for k, (label, s) in enumerate(series.items()):
+        t = dt * np.arange(1, len(s["base_drift"]) + 1)
+        color = f"C{k}"
+        axes[0].plot(t, 100.0 * np.asarray(s["base_drift"]), color=color, label=label)
+        axes[1].plot(t, np.degrees(np.asarray(s["torso_angle"])), color=color, label=label)
+        tau = np.asarray(s["torque"])
+        axes[2].plot(t, tau[:, 0], color=color, label=f"{label}: hip")
+        axes[2].plot(t, tau[:, 1], color=color, ls="--", label=f"{label}: knee")
+        lam = np.asarray(s["contact_force"]) / s["weight"]
+        axes[3].plot(t, lam[:, 1], color=color, label=f"{label}")
+        axes[4].plot(t, lam[:, 0], color=color, label=f"{label}")
+    axes[0].set_ylabel("base drift [cm]")
+    axes[1].set_ylabel("torso angle [deg]")
+    axes[2].set_ylabel("torque [N m]")
+    axes[2].axhline(torque_limit[1], color="0.6", lw=0.8)
+    axes[2].axhline(-torque_limit[1], color="0.6", lw=0.8)
+    axes[3].set_ylabel("lam_y / mg")
+    axes[3].axhline(0.0, color="r", lw=0.8)
+    axes[4].set_ylabel("lam_x / mg")
+    axes[4].set_xlabel("time [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right", ncol=2)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)

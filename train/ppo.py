@@ -1,0 +1,432 @@
+"""Train PPO on ``leg_env/PlanarLegStance-v0`` with Stable-Baselines3.
+
+    python -m train.ppo --out runs/ppo_stance              # the default configuration
+    python -m train.ppo --out runs/try --params learning_rate:1.0e-3 n_envs:64
+
+The env is natively batched and reaches SB3 through ``leg_env.sb3``'s VecEnv adapter, wrapped in
+``VecNormalize`` as the file's ``normalize`` says (the default normalises returns only). Hyperparameters come from ``train/hyperparams/ppo.yml``
+(RL Baselines3 Zoo's format, so the Zoo can train the env with the same file).
+
+A run writes one folder::
+
+    model.zip, vecnormalize.pkl   the selected policy and its normalisation statistics: the one with the
+                                  best in-training evaluation (``--no-select-best``: the last one)
+    best/, last/                  model.zip, vecnormalize.pkl, info.json of the best and the last policy
+    config.yaml                   the resolved configuration (everything needed to rerun)
+    command.txt                   the command line of every invocation (first run and resumes)
+    evaluations.json              periodic deterministic evaluations, wall time, fps
+    learning_curve.png            evaluation return, survival rate and RMS base drift against steps
+    tb/                           TensorBoard logs (SB3's plus reward terms and violation rates)
+    checkpoints/                  the last checkpoints (see ``train.checkpoints``)
+
+Resuming: rerunning the same command on a folder with a checkpoint continues from it (with the step
+counter, optimiser, normalisation statistics, evaluation history and random generator states),
+so a Ctrl-C or a ``kill`` (SIGTERM; both save a checkpoint first) loses nothing and a process
+killed outright loses at most one checkpoint interval. The envs restart from fresh episodes with new seeds, so a resumed run is a valid
+continuation but not bit-identical to an uninterrupted one. A folder holding a different
+configuration is never overwritten without ``--overwrite``.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import shlex
+import shutil
+import signal
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from leg_env import ENV_ID  # importing leg_env registers the env
+from train.checkpoints import (
+    file_mode,
+    latest_checkpoint,
+    load_progress,
+    read_snapshot_info,
+    restore_rng,
+    save_checkpoint,
+    save_snapshot,
+    write_json_atomic,
+)
+from train.cli import parse_args
+
+__all__ = ["TrainArgs", "train", "resolve_config", "load_hyperparams", "ENV_ID", "DEFAULT_HYPERPARAMS"]
+
+DEFAULT_HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
+EVAL_SEED = 20_000
+"""Seed of the in-training evaluation episodes (training envs use small seeds, ``train.evaluate`` 10_000+)."""
+
+# keys of a Zoo entry that are not PPO constructor arguments
+_ZOO_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_kwargs")
+_PPO_KEYS = (
+    "learning_rate",
+    "n_steps",
+    "batch_size",
+    "n_epochs",
+    "gamma",
+    "gae_lambda",
+    "clip_range",
+    "clip_range_vf",
+    "normalize_advantage",
+    "ent_coef",
+    "vf_coef",
+    "max_grad_norm",
+    "use_sde",
+    "sde_sample_freq",
+    "target_kl",
+    "stats_window_size",
+    "policy_kwargs",
+)
+# configuration entries that define the training; a resume must match them
+_RESUME_KEYS = ("env_id", "env_kwargs", "eval_env_kwargs", "seed", "n_envs", "policy", "normalize", "ppo")
+_RUN_FILES = (
+    "model.zip",
+    "vecnormalize.pkl",
+    "config.yaml",
+    "command.txt",
+    "evaluations.json",
+    "learning_curve.png",
+    "tb",
+    "checkpoints",
+    "eval",
+    "best",
+    "last",
+)
+
+
+@dataclass
+class TrainArgs:
+    """Train PPO on the planar leg's balance task and write a run folder (see train/ppo.py)."""
+
+    out: Path = Path("runs/ppo_stance")
+    """Run folder: model, normalisation statistics, config, logs and checkpoints are written here."""
+    env_id: str = ENV_ID
+    """Gymnasium id of the environment; its entry in the hyperparameter file is used."""
+    hyperparams: Path = DEFAULT_HYPERPARAMS
+    """Hyperparameter YAML in RL Zoo format (keyed by env id)."""
+    params: list[str] = field(default_factory=list)
+    """Hyperparameter overrides as key:value pairs, values read as YAML literals (e.g. learning_rate:1.0e-3)."""
+    total_timesteps: int | None = None
+    """Environment steps in total, counting those before a resume (None: the file's n_timesteps)."""
+    eval_env_kwargs: list[str] = field(default_factory=list)
+    """Arguments of the evaluation env as key:value pairs (YAML literals). Default: none, i.e. the
+    registered task as is, whatever reward shaping the training env's env_kwargs add."""
+    seed: int = 0
+    """Seed of the training envs, the network initialisation and the sampling."""
+    eval_freq: int = 100_000
+    """Environment steps between evaluations (0 disables them; one is always run at the end)."""
+    eval_episodes: int = 20
+    """Deterministic episodes per evaluation, run in parallel (seeds 20000 + i)."""
+    checkpoint_freq: int = 200_000
+    """Environment steps between checkpoints (0: only on Ctrl-C and at the end)."""
+    resume: bool = True
+    """Continue from the folder's latest checkpoint when its configuration matches."""
+    overwrite: bool = False
+    """Delete an existing run in the folder and start afresh."""
+    select_best: bool = True
+    """Ship the policy with the best in-training evaluation (survival rate, then mean return on the
+    task) as model.zip, as SB3's EvalCallback and the Zoo keep their best model; the last policy is
+    in last/ either way. Guards against PPO's late regressions; evaluation seeds differ from the
+    in-training ones, so the final numbers are not selected on."""
+    progress_bar: bool = True
+    """Show SB3's progress bar."""
+    verbose: int = 1
+    """0: quiet; 1: a line per evaluation; 2: also SB3's training tables."""
+
+
+def _parse_override(item: str) -> tuple[str, object]:
+    key, sep, value = item.partition(":")
+    if not sep or not key:
+        raise ValueError(f"hyperparameter override must be key:value, got {item!r}")
+    return key.strip(), yaml.safe_load(value)
+
+
+def load_hyperparams(path: Path, env_id: str, overrides: list[str] = ()) -> dict:
+    """The Zoo-format entry for ``env_id`` in ``path``, with ``key:value`` overrides applied."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"hyperparameter file not found: {path}")
+    data = yaml.safe_load(path.read_text()) or {}
+    if env_id not in data:
+        raise KeyError(f"{path} has no entry for {env_id!r} (entries: {sorted(data)})")
+    hp = dict(data[env_id])
+    hp.update(_parse_override(item) for item in overrides)
+    unknown = set(hp) - set(_ZOO_KEYS) - set(_PPO_KEYS)
+    if unknown:
+        raise ValueError(f"unknown hyperparameter(s) {sorted(unknown)} for {env_id} in {path}")
+    return hp
+
+
+def resolve_config(args: TrainArgs) -> dict:
+    """Everything that defines the run, as plain data (saved as ``config.yaml``)."""
+    hp = load_hyperparams(args.hyperparams, args.env_id, args.params)
+    normalize = hp.pop("normalize", False)
+    if normalize is True:
+        normalize = {}
+    elif normalize is not False and not isinstance(normalize, dict):
+        raise ValueError(f"normalize must be true, false or a mapping of VecNormalize arguments, got {normalize!r}")
+    if isinstance(normalize, dict):
+        normalize = {"gamma": hp.get("gamma", 0.99), **normalize}
+    total = args.total_timesteps if args.total_timesteps is not None else hp.pop("n_timesteps", None)
+    hp.pop("n_timesteps", None)
+    if total is None or int(total) < 1:
+        raise ValueError("total_timesteps must be given (or n_timesteps in the hyperparameter file) and be >= 1")
+    return {
+        "env_id": args.env_id,
+        "env_kwargs": hp.pop("env_kwargs", None) or {},
+        "eval_env_kwargs": dict(_parse_override(item) for item in args.eval_env_kwargs),
+        "seed": int(args.seed),
+        "n_envs": int(hp.pop("n_envs", 1)),
+        "total_timesteps": int(total),
+        "policy": hp.pop("policy", "MlpPolicy"),
+        "normalize": normalize,
+        "ppo": hp,
+        "eval": {"freq": int(args.eval_freq), "episodes": int(args.eval_episodes), "seed": EVAL_SEED},
+        "checkpoint_freq": int(args.checkpoint_freq),
+        "hyperparams_file": _display_path(args.hyperparams),
+        "overrides": list(args.params),
+    }
+
+
+def _display_path(path: Path) -> str:
+    """``path`` relative to the working directory when it lies below it (no machine paths in configs)."""
+    path = Path(path).resolve()
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
+def _schedule(value):
+    """A Zoo schedule literal: a number, or ``"lin_<initial>"`` for a linear decay to 0."""
+    if isinstance(value, str):
+        kind, _, initial = value.partition("_")
+        if kind != "lin":
+            raise ValueError(f"unknown schedule {value!r}; use a number or 'lin_<initial value>'")
+        initial = float(initial)
+        return lambda progress_remaining: progress_remaining * initial
+    return value
+
+
+def _ppo_kwargs(config: dict) -> dict:
+    kwargs = dict(config["ppo"])
+    for key in ("learning_rate", "clip_range", "clip_range_vf"):
+        if key in kwargs:
+            kwargs[key] = _schedule(kwargs[key])
+    return kwargs
+
+
+def _prepare_folder(out: Path, config: dict, args: TrainArgs) -> Path | None:
+    """Check the run folder; return the checkpoint to resume from, or None to start afresh."""
+    checkpoint = latest_checkpoint(out / "checkpoints") if (out / "checkpoints").is_dir() else None
+    existing = [name for name in _RUN_FILES if (out / name).exists()]
+    if args.overwrite and existing:
+        for name in existing:
+            path = out / name
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+        return None
+    if checkpoint is not None and args.resume:
+        saved = yaml.safe_load((out / "config.yaml").read_text()) if (out / "config.yaml").is_file() else {}
+        different = [k for k in _RESUME_KEYS if saved.get(k) != config[k]]
+        if different:
+            raise ValueError(
+                f"{out} holds a run with a different configuration ({', '.join(different)} differ); "
+                "use another --out, or --overwrite to replace it"
+            )
+        return checkpoint
+    if existing:
+        why = "has a checkpoint but --no-resume was given" if checkpoint is not None else "already holds a run"
+        raise FileExistsError(f"{out} {why}; use another --out, or --overwrite to replace it")
+    return None
+
+
+def _save_atomic(save, path: Path) -> None:
+    """Write through ``save(tmp_path)`` to a temporary file next to ``path``, then ``os.replace``."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        save(tmp)
+        os.chmod(tmp, file_mode())
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _machine() -> dict:
+    import stable_baselines3
+    import torch
+
+    return {
+        "cpu_count": os.cpu_count(),
+        "processor": platform.processor() or platform.machine(),
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "torch_threads": torch.get_num_threads(),
+        "stable_baselines3": stable_baselines3.__version__,
+    }
+
+
+def train(args: TrainArgs) -> Path:
+    """Train (or resume) a run as described by ``args``; returns the run folder."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from leg_env.sb3 import make_sb3_vec_env
+    from train.callbacks import PeriodicCheckpoint, PeriodicEvaluation, RewardTermsLogger, evaluate_now
+    from train.plots import plot_learning_curve
+
+    torch.set_num_threads(1)
+    out = Path(args.out)
+    config = resolve_config(args)
+    out.mkdir(parents=True, exist_ok=True)
+    checkpoint = _prepare_folder(out, config, args)
+
+    if checkpoint is None:
+        progress = {"resumes": 0, "wall_time": 0.0, "evaluations": []}
+    else:
+        progress = load_progress(checkpoint)
+        progress["resumes"] = progress.get("resumes", 0) + 1
+    (out / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))  # a resume may change the totals
+    with open(out / "command.txt", "a") as f:
+        f.write(shlex.join(getattr(sys, "orig_argv", sys.argv)) + "\n")
+
+    n_envs, seed = config["n_envs"], config["seed"]
+    set_random_seed(seed)
+    # each (re)start draws fresh episodes from its own block of small seeds
+    venv = make_sb3_vec_env(n_envs, seed=seed + progress["resumes"] * n_envs, **config["env_kwargs"])
+    if checkpoint is None:
+        if config["normalize"] is not False:
+            venv = VecNormalize(venv, **config["normalize"])
+        model = PPO(
+            config["policy"],
+            venv,
+            seed=seed,
+            device="cpu",
+            tensorboard_log=str(out / "tb"),
+            verbose=max(0, args.verbose - 1),
+            **_ppo_kwargs(config),
+        )
+    else:
+        if (checkpoint / "vecnormalize.pkl").is_file():
+            venv = VecNormalize.load(str(checkpoint / "vecnormalize.pkl"), venv)
+        model = PPO.load(
+            checkpoint / "model.zip", env=venv, device="cpu", tensorboard_log=str(out / "tb"), verbose=max(0, args.verbose - 1)
+        )
+        restore_rng(checkpoint)
+        if args.verbose:
+            print(f"resuming {out} from {model.num_timesteps:,} steps ({checkpoint})")
+    vec_normalize = model.get_vec_normalize_env()
+
+    history = progress["evaluations"]
+    start_wall, t0 = progress["wall_time"], time.perf_counter()
+    start_steps = model.num_timesteps
+
+    def clock() -> float:
+        return start_wall + time.perf_counter() - t0
+
+    def save() -> None:
+        progress["wall_time"] = clock()
+        save_checkpoint(out / "checkpoints", model, vec_normalize, progress)
+
+    def score(info: dict) -> tuple:
+        return (info["survival_rate"], info["mean_return"])
+
+    def report(result: dict) -> None:
+        best = read_snapshot_info(out / "best")
+        info = {k: result[k] for k in ("timesteps", "mean_return", "std_return", "survival_rate", "rms_base_drift")}
+        if best is None or score(info) >= score(best):
+            save_snapshot(out / "best", model, vec_normalize, info)
+        if args.verbose:
+            print(
+                f"[{result['timesteps']:>9,} steps, {result['time'] / 60:5.1f} min] return "
+                f"{result['mean_return']:7.1f} +- {result['std_return']:5.1f}, length {result['mean_length']:6.1f}, "
+                f"survival {100 * result['survival_rate']:5.1f}%, RMS drift {100 * result['rms_base_drift']:.2f} cm",
+                flush=True,
+            )
+
+    eval_cfg = config["eval"]
+    eval_venv = make_sb3_vec_env(eval_cfg["episodes"], seed=eval_cfg["seed"], **config["eval_env_kwargs"])
+    callbacks = [
+        RewardTermsLogger(),
+        PeriodicEvaluation(eval_venv, vec_normalize, eval_cfg["freq"], eval_cfg["seed"], history, report, clock),
+        PeriodicCheckpoint(config["checkpoint_freq"], save),
+    ]
+    remaining = config["total_timesteps"] - model.num_timesteps
+    try:
+        if remaining > 0:
+            model.learn(
+                remaining,
+                callback=callbacks,
+                reset_num_timesteps=False,
+                progress_bar=args.progress_bar,
+                tb_log_name="PPO",
+            )
+        if not history or history[-1]["timesteps"] != model.num_timesteps:
+            result = {"timesteps": int(model.num_timesteps)}
+            result.update(evaluate_now(model, vec_normalize, eval_venv, eval_cfg["seed"]))
+            result["time"] = round(clock(), 2)
+            history.append(result)
+            report(result)
+    except KeyboardInterrupt:
+        save()
+        plot_learning_curve(history, out / "learning_curve.png", config["env_id"]) if history else None
+        print(
+            f"\ninterrupted at {model.num_timesteps:,} steps; checkpoint saved in {out / 'checkpoints'}. "
+            "Run the same command again to resume.",
+            file=sys.stderr,
+        )
+        raise
+    finally:
+        eval_venv.close()
+        venv.close()
+
+    save()
+    save_snapshot(out / "last", model, vec_normalize, {k: history[-1][k] for k in ("timesteps", "mean_return", "std_return", "survival_rate", "rms_base_drift")})
+    selected = out / ("best" if args.select_best and read_snapshot_info(out / "best") else "last")
+    for name in ("model.zip", "vecnormalize.pkl"):
+        if (selected / name).is_file():
+            _save_atomic(lambda tmp, src=selected / name: shutil.copyfile(src, tmp), out / name)
+        elif (out / name).exists():
+            (out / name).unlink()
+    steps = model.num_timesteps - start_steps
+    seconds = time.perf_counter() - t0
+    write_json_atomic(
+        out / "evaluations.json",
+        {
+            "env_id": config["env_id"],
+            "total_timesteps": int(model.num_timesteps),
+            "wall_time_s": round(progress["wall_time"], 1),
+            "fps_this_invocation": round(steps / seconds, 1) if steps > 0 else None,
+            "resumes": progress["resumes"],
+            "selected": {"from": selected.name, **read_snapshot_info(selected)},
+            "machine": _machine(),
+            "evaluations": history,
+        },
+    )
+    plot_learning_curve(history, out / "learning_curve.png", config["env_id"])
+    return out
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(TrainArgs, argv, prog="python -m train.ppo")
+    signal.signal(signal.SIGTERM, _interrupt)  # `kill` saves a checkpoint like Ctrl-C
+    try:
+        train(args)
+    except KeyboardInterrupt:
+        raise SystemExit(130) from None
+
+
+if __name__ == "__main__":
+    main()

@@ -388,7 +388,7 @@ def step_batch(q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra
     _step_range(0, q.shape[0], q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra)
 
 
-@njit(cache=True, parallel=True)
+@njit(parallel=True)  # not cached: numba cannot cache parfor kernels with this structure (it warns)
 def step_batch_threaded(q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra):
     """``step_batch`` split into contiguous chunks over numba's threads (``numba.set_num_threads``).
 

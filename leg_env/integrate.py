@@ -83,13 +83,12 @@ def _accel(stance, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
 
 
 @njit(cache=True, inline="always")
-def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean, work):
+def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
     """One control step of RK4 on one robot, in place.
 
     The state lives in scalars: ``(x, y, a, b, c)`` = ``q`` and ``(vx, vy, va, vb, vc)`` = ``qd``.
     The dynamics depend only on the link angles' sines/cosines and rates, so the trigonometry
     computed after an RK4 step serves both the stance projection and the next step's first stage.
-    ``work`` is unused (kept so existing callers need not change).
     """
     n = _substeps_for(qd, dt, substeps, max_angle)
     h = dt / n
@@ -169,9 +168,8 @@ def step_inplace(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mea
         stance: True for the pinned-foot model, False for flight.
         lam_mean: ``(N, 2)`` output, mean contact force over the step (zero in flight).
     """
-    work = np.empty((6, NQ))
     for i in range(q.shape[0]):
-        _rk4_one(q[i], qd[i], tau[i], p, anchor[i], dt, substeps, max_angle, stance, lam_mean[i], work)
+        _rk4_one(q[i], qd[i], tau[i], p, anchor[i], dt, substeps, max_angle, stance, lam_mean[i])
 
 
 @njit(cache=True)

@@ -317,8 +317,8 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
 
 
 @njit(cache=True, inline="always")
-def _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a, work):
-    """One control step and task evaluation of robot ``i``; the last five arguments are scratch."""
+def _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a):
+    """One control step and task evaluation of robot ``i``; the last four arguments are scratch."""
     for j in range(5):
         q_prev[j] = q[i, j]
         qd_prev[j] = qd[i, j]
@@ -326,7 +326,7 @@ def _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, fl
     a[1] = min(1.0, max(-1.0, action[i, 1]))
     tau[0] = a[0] * c[_C_TAU_HIP]
     tau[1] = a[1] * c[_C_TAU_KNEE]
-    _rk4_one(q[i], qd[i], tau, p, anchor[i], c[_C_DT], int(c[_C_SUBSTEPS]), c[_C_MAX_ANGLE], True, lam[i], work)
+    _rk4_one(q[i], qd[i], tau, p, anchor[i], c[_C_DT], int(c[_C_SUBSTEPS]), c[_C_MAX_ANGLE], True, lam[i])
 
     finite = np.isfinite(lam[i, 0]) and np.isfinite(lam[i, 1])
     for j in range(5):
@@ -361,13 +361,12 @@ def _weight(p):
 @njit(cache=True)
 def _step_range(lo, hi, q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra):
     weight = _weight(p)
-    work = np.empty((6, 5))
     q_prev = np.empty(5)
     qd_prev = np.empty(5)
     tau = np.empty(2)
     a = np.empty(2)
     for i in range(lo, hi):
-        _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a, work)
+        _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a)
 
 
 @njit(cache=True)

@@ -32,8 +32,9 @@ the mass matrix ``A`` is sparse, ``M = T^T A T`` and ``h = T^T h_z``. The hip is
 the torso's COM, so the torso row decouples: ``th_b'' = -tau_hip / I_b`` in
 flight and in stance. In stance the contact fixes ``(x_b, y_b)'' = -Jcdot qd - J_leg
 (th1'', th2'')``, which leaves a 2x2 symmetric positive definite system in the leg
-angles, solved in closed form; flight leaves another 2x2 system. Nothing is
-inverted: each 2x2 system is solved by elimination.
+angles: the inverted double pendulum of shank and thigh about the foot, carrying the
+torso's mass at the hip (``_stance_core`` writes it out). Flight leaves another 2x2
+system. Nothing is inverted: each 2x2 system is solved by Cramer's rule.
 """
 
 from __future__ import annotations
@@ -104,85 +105,89 @@ def _leg_terms(q, qd, p):
 def _stance_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     """Stance KKT solve from the link angles' sines/cosines and rates ``w1 = th1'``, ``w2 = th2'``.
 
-    The stance dynamics depend on nothing else (translation invariance), so the integrator can
-    reuse the trigonometry of its projection. Returns ``(qdd[0..4], lam_x, lam_y)`` as scalars.
+    With the foot pinned, the leg seen from the foot is an inverted double pendulum: the shank
+    turns about the foot, the thigh about the knee, and the torso is a point mass ``m_b`` at the
+    hip (its rotation decouples). Eliminating ``(x_b, y_b)`` from the KKT system with
+    ``s1^2 + c1^2 = 1`` (and ``k = m2 l1 c2 = l1 b``) leaves, in the absolute leg angles::
+
+        [K11      kap c12] [th1'']   [tau_hip - tau_knee + g e1 cos th1 - kap s12 th2'^2]
+        [kap c12  K22    ] [th2''] = [tau_knee           + g e2 cos th2 + kap s12 th1'^2]
+
+        K11 = I1 + m1 (l1 - c1)^2 + m_b l1^2            e1 = m_b l1 + m1 (l1 - c1)
+        K22 = I2 + m2 (l2 - c2)^2 + (m_b + m1) l2^2     e2 = (m_b + m1) l2 + m2 (l2 - c2)
+        kap = l2 e1,  c12 = cos(th1 - th2),  s12 = sin(th1 - th2)
+
+    ``K`` is SPD (the leg's inertia about the foot). The base follows from the contact
+    (``(x_b, y_b)'' = -Jcdot qd - J_leg (th1'', th2'')``) and ``lam = m a_com + m g``, which
+    reduces to the ``e1``, ``e2`` lines below. The stance dynamics depend on nothing else
+    (translation invariance), so the integrator can reuse the trigonometry of its projection.
+    Returns ``(qdd[0..4], lam_x, lam_y)`` as scalars.
     """
     m_b, m1, m2, I_b, I1, I2 = p[0], p[1], p[2], p[3], p[4], p[5]
     l1, l2, c1, c2, g = p[6], p[7], p[8], p[9], p[10]
     m = m_b + m1 + m2
-    a = m1 * c1 + m2 * l1  # first moment of the leg about the hip along the thigh
-    b = m2 * c2  # first moment of the shank about the knee
-    k = m2 * l1 * c2
+    e1 = m_b * l1 + m1 * (l1 - c1)  # first moment about the knee of what the thigh carries
+    e2 = (m_b + m1) * l2 + m2 * (l2 - c2)  # first moment about the foot, thigh and torso lumped at the knee
+    kap = l2 * e1
+    K11 = I1 + m1 * (l1 - c1) ** 2 + m_b * l1 * l1
+    K22 = I2 + m2 * (l2 - c2) ** 2 + (m_b + m1) * l2 * l2
     c12 = co1 * co2 + s1 * s2  # cos(th1 - th2)
     s12 = s1 * co2 - co1 * s2  # sin(th1 - th2)
-    # leg block of A (absolute angles)
-    D11 = I1 + m1 * c1 * c1 + m2 * l1 * l1
-    D22 = I2 + m2 * c2 * c2
-    D12 = k * c12
-    # h_z: Coriolis/centrifugal + gravity in absolute coordinates
-    hx = -a * co1 * w1 * w1 - b * co2 * w2 * w2
-    hy = -a * s1 * w1 * w1 - b * s2 * w2 * w2 + m * g
-    h1 = k * s12 * w2 * w2 + a * g * co1
-    h2 = -k * s12 * w1 * w1 + b * g * co2
-    # foot Jacobian columns w.r.t. th1, th2 (J1, J2) and Jcdot qd (jx, jy)
-    J1x, J1y = -l1 * s1, l1 * co1
-    J2x, J2y = -l2 * s2, l2 * co2
-    jx = -l1 * co1 * w1 * w1 - l2 * co2 * w2 * w2
-    jy = -l1 * s1 * w1 * w1 - l2 * s2 * w2 * w2
-    # A's coupling columns between (x_b, y_b) and (th1, th2)
-    B1x, B1y = -a * s1, a * co1
-    B2x, B2y = -b * s2, b * co2
-    # reduced leg inertia K = D - J^T B - B^T J + m J^T J (SPD)
-    K11 = D11 - 2.0 * (J1x * B1x + J1y * B1y) + m * (J1x * J1x + J1y * J1y)
-    K22 = D22 - 2.0 * (J2x * B2x + J2y * B2y) + m * (J2x * J2x + J2y * J2y)
-    K12 = D12 - (J1x * B2x + J1y * B2y) - (B1x * J2x + B1y * J2y) + m * (J1x * J2x + J1y * J2y)
-    # right-hand side: Q - h + J^T h_xy + (B - m J)^T jd, with Q = (tau_hip - tau_knee, tau_knee)
-    r1 = (tau_hip - tau_knee) - h1 + (J1x * hx + J1y * hy) + ((B1x - m * J1x) * jx + (B1y - m * J1y) * jy)
-    r2 = tau_knee - h2 + (J2x * hx + J2y * hy) + ((B2x - m * J2x) * jx + (B2y - m * J2y) * jy)
-    # solve the 2x2 SPD system by elimination
-    f = K12 / K11
-    dd2 = (r2 - f * r1) / (K22 - f * K12)
-    dd1 = (r1 - K12 * dd2) / K11
-    xdd = -jx - (J1x * dd1 + J2x * dd2)
-    ydd = -jy - (J1y * dd1 + J2y * dd2)
-    lam_x = m * xdd + B1x * dd1 + B2x * dd2 + hx
-    lam_y = m * ydd + B1y * dd1 + B2y * dd2 + hy
+    K12 = kap * c12
+    v1 = w1 * w1
+    v2 = w2 * w2
+    r1 = (tau_hip - tau_knee) + g * e1 * co1 - kap * s12 * v2
+    r2 = tau_knee + g * e2 * co2 + kap * s12 * v1
+    # the 2x2 SPD system by Cramer's rule (one division on the critical path)
+    inv_det = 1.0 / (K11 * K22 - K12 * K12)
+    dd1 = (K22 * r1 - K12 * r2) * inv_det
+    dd2 = (K11 * r2 - K12 * r1) * inv_det
+    # accelerations of the knee relative to the foot (ux, uy) and of the hip relative to the knee (vx, vy), per length
+    ux, uy = co2 * v2 + s2 * dd2, s2 * v2 - co2 * dd2
+    vx, vy = co1 * v1 + s1 * dd1, s1 * v1 - co1 * dd1
+    xdd = l1 * vx + l2 * ux
+    ydd = l1 * vy + l2 * uy
+    lam_x = e1 * vx + e2 * ux
+    lam_y = e1 * vy + e2 * uy + m * g
     thbdd = -tau_hip / I_b
     return xdd, ydd, thbdd, dd1 - thbdd, dd2 - dd1, lam_x, lam_y
 
 
 @njit(cache=True, inline="always")
 def _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
-    """Unconstrained (flight) forward dynamics from the same inputs as ``_stance_core``; returns ``qdd[0..4]``."""
+    """Unconstrained (flight) forward dynamics from the same inputs as ``_stance_core``; returns ``qdd[0..4]``.
+
+    The COM falls freely, ``m (x, y)_com'' = (0, -m g)``, and eliminating it leaves the leg
+    angles' 2x2 SPD system, without gravity (relative motion in free fall)::
+
+        [D11 - a^2/m  kf c12     ] [th1'']   [tau_hip - tau_knee - kf s12 th2'^2]
+        [kf c12       D22 - b^2/m] [th2''] = [tau_knee           + kf s12 th1'^2]
+
+    with ``a = m1 c1 + m2 l1``, ``b = m2 c2``, ``kf = m2 l1 c2 - a b / m``,
+    ``D11 = I1 + m1 c1^2 + m2 l1^2`` and ``D22 = I2 + m2 c2^2``.
+    """
     m_b, m1, m2, I_b, I1, I2 = p[0], p[1], p[2], p[3], p[4], p[5]
     l1, c1, c2, g = p[6], p[8], p[9], p[10]
     m = m_b + m1 + m2
     a = m1 * c1 + m2 * l1
     b = m2 * c2
-    k = m2 * l1 * c2
+    kf = m2 * l1 * c2 - a * b / m
+    K11 = I1 + m1 * c1 * c1 + m2 * l1 * l1 - a * a / m
+    K22 = I2 + m2 * c2 * c2 - b * b / m
     c12 = co1 * co2 + s1 * s2  # cos(th1 - th2)
     s12 = s1 * co2 - co1 * s2  # sin(th1 - th2)
-    D11 = I1 + m1 * c1 * c1 + m2 * l1 * l1
-    D22 = I2 + m2 * c2 * c2
-    D12 = k * c12
-    hx = -a * co1 * w1 * w1 - b * co2 * w2 * w2
-    hy = -a * s1 * w1 * w1 - b * s2 * w2 * w2 + m * g
-    h1 = k * s12 * w2 * w2 + a * g * co1
-    h2 = -k * s12 * w1 * w1 + b * g * co2
-    B1x, B1y = -a * s1, a * co1
-    B2x, B2y = -b * s2, b * co2
-    # (D - B^T B / m) thdd = Q - h_th + B^T h_xy / m
-    K11 = D11 - (B1x * B1x + B1y * B1y) / m
-    K22 = D22 - (B2x * B2x + B2y * B2y) / m
-    K12 = D12 - (B1x * B2x + B1y * B2y) / m
-    r1 = (tau_hip - tau_knee) - h1 + (B1x * hx + B1y * hy) / m
-    r2 = tau_knee - h2 + (B2x * hx + B2y * hy) / m
-    f = K12 / K11
-    dd2 = (r2 - f * r1) / (K22 - f * K12)
-    dd1 = (r1 - K12 * dd2) / K11
+    K12 = kf * c12
+    v1 = w1 * w1
+    v2 = w2 * w2
+    r1 = (tau_hip - tau_knee) - kf * s12 * v2
+    r2 = tau_knee + kf * s12 * v1
+    inv_det = 1.0 / (K11 * K22 - K12 * K12)
+    dd1 = (K22 * r1 - K12 * r2) * inv_det
+    dd2 = (K11 * r2 - K12 * r1) * inv_det
     thbdd = -tau_hip / I_b
-    xdd = -(B1x * dd1 + B2x * dd2 + hx) / m
-    ydd = -(B1y * dd1 + B2y * dd2 + hy) / m
+    # x_b = x_com - (a cos th1 + b cos th2) / m, and likewise y_b; the COM falls freely
+    xdd = (a * (co1 * v1 + s1 * dd1) + b * (co2 * v2 + s2 * dd2)) / m
+    ydd = (a * (s1 * v1 - co1 * dd1) + b * (s2 * v2 - co2 * dd2)) / m - g
     return xdd, ydd, thbdd, dd1 - thbdd, dd2 - dd1
 
 

@@ -82,13 +82,41 @@ def _accel(stance, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     return xdd, ydd, thbdd, q1dd, q2dd, 0.0, 0.0
 
 
+# Taylor coefficients of sin(d) and cos(d) - 1, for |d| <= _TURN_MAX: the first omitted terms,
+# d^11/11! and d^12/12!, are below 3e-19 there, far under the double rounding of the results.
+_S3, _S5, _S7, _S9 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0
+_C2, _C4, _C6, _C8, _C10 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 / 3628800.0
+_TURN_MAX = 0.1
+
+
+@njit(cache=True, inline="always")
+def _turn(s, c, d):
+    """``(sin(th + d), cos(th + d))`` from ``s = sin th``, ``c = cos th`` by angle addition.
+
+    Within a control step the links turn by little (``max_angle`` per RK4 step at the initial
+    rates), so ``sin d`` and ``cos d - 1`` come from short Taylor series instead of a library
+    call; larger (or non-finite) ``d`` falls back to ``np.sin`` / ``np.cos``.
+    """
+    if abs(d) <= _TURN_MAX:
+        d2 = d * d
+        d4 = d2 * d2
+        sd = d + d * d2 * ((_S3 + d2 * _S5) + d4 * (_S7 + d2 * _S9))
+        cm = d2 * ((_C2 + d2 * _C4) + d4 * ((_C6 + d2 * _C8) + d4 * _C10))
+    else:
+        sd = np.sin(d)
+        cm = np.cos(d) - 1.0
+    return s + (s * cm + c * sd), c + (c * cm - s * sd)
+
+
 @njit(cache=True, inline="always")
 def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
     """One control step of RK4 on one robot, in place.
 
     The state lives in scalars: ``(x, y, a, b, c)`` = ``q`` and ``(vx, vy, va, vb, vc)`` = ``qd``.
-    The dynamics depend only on the link angles' sines/cosines and rates, so the trigonometry
-    computed after an RK4 step serves both the stance projection and the next step's first stage.
+    The dynamics depend only on the link angles ``th1 = a + b``, ``th2 = th1 + c`` through their
+    sines/cosines, and on their rates. Those are computed once per control step; every stage and
+    every RK4 step turns them by its angle increment (``_turn``), and the trigonometry after an
+    RK4 step serves both the stance projection and the next step's first stage.
     """
     n = _substeps_for(qd, dt, substeps, max_angle)
     h = dt / n
@@ -104,37 +132,32 @@ def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
     ly = 0.0
     for _ in range(n):
         # stage 1 at the current state
-        ax1, ay1, aa1, ab1, ac1, lx1, ly1 = _accel(stance, s1, co1, s2, co2, va + vb, va + vb + vc, t_hip, t_knee, p)
+        w1, w2 = va + vb, va + vb + vc
+        ax1, ay1, aa1, ab1, ac1, lx1, ly1 = _accel(stance, s1, co1, s2, co2, w1, w2, t_hip, t_knee, p)
         # stage 2: y0 + h/2 k1
-        a2, b2, c2 = a + ch * va, b + ch * vb, c + ch * vc
         vx2, vy2, va2, vb2, vc2 = vx + ch * ax1, vy + ch * ay1, va + ch * aa1, vb + ch * ab1, vc + ch * ac1
-        th1 = a2 + b2
-        th2 = th1 + c2
-        ax2, ay2, aa2, ab2, ac2, lx2, ly2 = _accel(
-            stance, np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), va2 + vb2, va2 + vb2 + vc2, t_hip, t_knee, p
-        )
+        S1, C1 = _turn(s1, co1, ch * w1)
+        S2, C2 = _turn(s2, co2, ch * w2)
+        w1_2, w2_2 = va2 + vb2, va2 + vb2 + vc2
+        ax2, ay2, aa2, ab2, ac2, lx2, ly2 = _accel(stance, S1, C1, S2, C2, w1_2, w2_2, t_hip, t_knee, p)
         # stage 3: y0 + h/2 k2
-        a3, b3, c3 = a + ch * va2, b + ch * vb2, c + ch * vc2
         vx3, vy3, va3, vb3, vc3 = vx + ch * ax2, vy + ch * ay2, va + ch * aa2, vb + ch * ab2, vc + ch * ac2
-        th1 = a3 + b3
-        th2 = th1 + c3
-        ax3, ay3, aa3, ab3, ac3, lx3, ly3 = _accel(
-            stance, np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), va3 + vb3, va3 + vb3 + vc3, t_hip, t_knee, p
-        )
+        S1, C1 = _turn(s1, co1, ch * w1_2)
+        S2, C2 = _turn(s2, co2, ch * w2_2)
+        w1_3, w2_3 = va3 + vb3, va3 + vb3 + vc3
+        ax3, ay3, aa3, ab3, ac3, lx3, ly3 = _accel(stance, S1, C1, S2, C2, w1_3, w2_3, t_hip, t_knee, p)
         # stage 4: y0 + h k3
-        a4, b4, c4 = a + h * va3, b + h * vb3, c + h * vc3
         vx4, vy4, va4, vb4, vc4 = vx + h * ax3, vy + h * ay3, va + h * aa3, vb + h * ab3, vc + h * ac3
-        th1 = a4 + b4
-        th2 = th1 + c4
-        ax4, ay4, aa4, ab4, ac4, lx4, ly4 = _accel(
-            stance, np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), va4 + vb4, va4 + vb4 + vc4, t_hip, t_knee, p
-        )
+        S1, C1 = _turn(s1, co1, h * w1_3)
+        S2, C2 = _turn(s2, co2, h * w2_3)
+        ax4, ay4, aa4, ab4, ac4, lx4, ly4 = _accel(stance, S1, C1, S2, C2, va4 + vb4, va4 + vb4 + vc4, t_hip, t_knee, p)
         # y1 = y0 + h (k1 + 2 k2 + 2 k3 + k4) / 6
+        da = h * (W0 * va + W1 * va2 + W1 * va3 + W0 * va4)
+        db = h * (W0 * vb + W1 * vb2 + W1 * vb3 + W0 * vb4)
+        dc = h * (W0 * vc + W1 * vc2 + W1 * vc3 + W0 * vc4)
         x = x + h * (W0 * vx + W1 * vx2 + W1 * vx3 + W0 * vx4)
         y = y + h * (W0 * vy + W1 * vy2 + W1 * vy3 + W0 * vy4)
-        a = a + h * (W0 * va + W1 * va2 + W1 * va3 + W0 * va4)
-        b = b + h * (W0 * vb + W1 * vb2 + W1 * vb3 + W0 * vb4)
-        c = c + h * (W0 * vc + W1 * vc2 + W1 * vc3 + W0 * vc4)
+        a, b, c = a + da, b + db, c + dc
         vx = vx + h * (W0 * ax1 + W1 * ax2 + W1 * ax3 + W0 * ax4)
         vy = vy + h * (W0 * ay1 + W1 * ay2 + W1 * ay3 + W0 * ay4)
         va = va + h * (W0 * aa1 + W1 * aa2 + W1 * aa3 + W0 * aa4)
@@ -142,9 +165,8 @@ def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
         vc = vc + h * (W0 * ac1 + W1 * ac2 + W1 * ac3 + W0 * ac4)
         lx = lx + W0 * lx1 + W1 * lx2 + W1 * lx3 + W0 * lx4
         ly = ly + W0 * ly1 + W1 * ly2 + W1 * ly3 + W0 * ly4
-        th1 = a + b
-        th2 = th1 + c
-        s1, co1, s2, co2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
+        s1, co1 = _turn(s1, co1, da + db)
+        s2, co2 = _turn(s2, co2, da + db + dc)
         if stance:  # the projection, on the trigonometry just computed
             x, y, vx, vy = _project_core(s1, co1, s2, co2, va + vb, va + vb + vc, anchor, p)
     q[0], q[1], q[2], q[3], q[4] = x, y, a, b, c

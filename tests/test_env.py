@@ -425,6 +425,21 @@ def test_reset_seed_determinism_and_noise():
     np.testing.assert_allclose(contact_jacobian(q, env.params) @ qd, 0.0, atol=1e-15)
 
 
+def test_reset_draws_six_uniforms_from_the_env_generator():
+    """The documented reset: 6 draws of ``np_random.uniform(-s, s)`` on (th_b, q1, q2) and their rates."""
+    env = make()
+    env.reset(seed=123)
+    q, qd, _ = env.state
+    s = env.config.reset_noise_scale
+    noise = np.random.Generator(np.random.PCG64(123)).uniform(-s, s, size=6)
+    np.testing.assert_array_equal(q[2:], env.nominal.q[2:] + noise[:3])
+    np.testing.assert_array_equal(qd[2:], noise[3:])
+    # the generator advanced by exactly those draws
+    after = np.random.Generator(np.random.PCG64(123))
+    after.uniform(size=6)
+    assert env.np_random.random() == after.random()
+
+
 def test_reset_info_has_the_contact_keys():
     _, info = make().reset(seed=0)
     assert set(INFO_KEYS) <= info.keys() and not set(REWARD_KEYS) & info.keys()

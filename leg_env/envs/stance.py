@@ -16,6 +16,11 @@ from ..task import FLAG_NAMES, INFO_NAMES, OBS_DIM, REWARD_TERMS, StanceConfig, 
 __all__ = ["PlanarLegStanceEnv"]
 
 _RESET_OPTIONS = ("qpos", "qvel")
+_STATE_COLS = 14  # q (5), qd (5), anchor (2), action (2)
+_EXTRA0 = 2 + len(REWARD_TERMS)  # first extras column of the output buffer
+_OUT_COLS = _EXTRA0 + len(INFO_NAMES)  # lam (2), reward terms, extras
+# attributes that are views of the buffers (rebuilt by _bind, never pickled)
+_VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_action_row", "_out_row", "_flag_row", "_obs_row", "_kernel_args")
 
 
 class PlanarLegStanceEnv(gym.Env):
@@ -208,20 +213,16 @@ class PlanarLegStanceEnv(gym.Env):
         high[:2] = reach
         self.observation_space = spaces.Box(-high, high, dtype=np.float32)
 
-        # kernel inputs and (1, .) output buffers, shared with nothing
+        # kernel inputs and (1, .) buffers, shared with nothing; _bind() makes the views
         self._p = self.params.array
         self._c = self.config.array()
         self._q_nom = self.nominal.q
         self._tau_nom = np.ascontiguousarray(self.nominal.tau, dtype=np.float64)
-        self._q = np.empty((1, 5))
-        self._qd = np.empty((1, 5))
-        self._anchor = np.empty((1, 2))
-        self._action = np.zeros((1, 2))
-        self._lam = np.zeros((1, 2))
+        self._state = np.zeros((1, _STATE_COLS))  # q | qd | anchor | action
+        self._out = np.zeros((1, _OUT_COLS))  # lam | reward terms | extras
         self._obs = np.zeros((1, OBS_DIM), dtype=np.float32)
-        self._terms = np.zeros((1, len(REWARD_TERMS)))
         self._flags = np.zeros((1, len(FLAG_NAMES)), dtype=np.bool_)
-        self._extra = np.zeros((1, len(INFO_NAMES)))
+        self._bind()
         self._viewer = None
 
         # start at the nominal posture, so that it can be checked against the termination limits
@@ -251,23 +252,29 @@ class PlanarLegStanceEnv(gym.Env):
 
     def step(self, action):
         a0, a1 = _checked_action(action)
-        self._action[0, 0] = a0
-        self._action[0, 1] = a1
-        step_batch(
-            self._q, self._qd, self._anchor, self._action, self._p, self._c, self._q_nom,
-            self._lam, self._obs, self._terms, self._flags, self._extra,
-        )  # fmt: skip
-        alive, drift, unilateral, friction, ctrl = self._terms[0].tolist()
-        reward = alive + drift + unilateral + friction + ctrl
-        info = self._info()
-        info["reward_alive"] = alive
-        info["reward_drift"] = drift
-        info["reward_unilateral"] = unilateral
-        info["reward_friction"] = friction
-        info["reward_ctrl"] = ctrl
+        self._action_row[0] = a0
+        self._action_row[1] = a1
+        step_batch(*self._kernel_args)
+        # one conversion each for the float and the bool outputs
+        lam_x, lam_y, alive, drift, unilateral, friction, ctrl, base_drift, foot_error, normal_force = self._out_row.tolist()
+        terminated, unilateral_violation, friction_violation, failure = self._flag_row.tolist()
+        info = {
+            "contact_force": np.array((lam_x, lam_y)),
+            "normal_force": normal_force,
+            "unilateral_violation": unilateral_violation,
+            "friction_violation": friction_violation,
+            "numerical_failure": failure,
+            "base_drift": base_drift,
+            "foot_error": foot_error,
+            "reward_alive": alive,
+            "reward_drift": drift,
+            "reward_unilateral": unilateral,
+            "reward_friction": friction,
+            "reward_ctrl": ctrl,
+        }
         if self.render_mode == "human":
             self.render()
-        return self._obs[0].copy(), reward, bool(self._flags[0, 0]), False, info
+        return self._obs_row.copy(), alive + drift + unilateral + friction + ctrl, terminated, False, info
 
     def render(self):
         if self.render_mode is None:
@@ -305,6 +312,21 @@ class PlanarLegStanceEnv(gym.Env):
 
     # ------------------------------------------------------------ helpers
 
+    def _bind(self) -> None:
+        """Views of the buffers under their kernel names, and the kernel's argument tuple.
+
+        Rows of one buffer are C-contiguous ``(1, k)`` arrays, the layout the vector env's own
+        arrays have, so both reuse one compiled kernel. Views are not pickled; they are rebuilt.
+        """
+        state, out = self._state, self._out
+        self._q, self._qd, self._anchor, self._action = state[:, 0:5], state[:, 5:10], state[:, 10:12], state[:, 12:14]
+        self._lam, self._terms, self._extra = out[:, 0:2], out[:, 2:_EXTRA0], out[:, _EXTRA0:]
+        self._action_row, self._out_row, self._flag_row, self._obs_row = self._action[0], out[0], self._flags[0], self._obs[0]
+        self._kernel_args = (
+            self._q, self._qd, self._anchor, self._action, self._p, self._c, self._q_nom,
+            self._lam, self._obs, self._terms, self._flags, self._extra,
+        )  # fmt: skip
+
     def _start(self, q, qd, anchor) -> None:
         """Put the robot at ``(q, qd)`` with its foot on ``anchor`` and evaluate it without stepping."""
         self._q[0] = q
@@ -317,7 +339,7 @@ class PlanarLegStanceEnv(gym.Env):
         )  # fmt: skip
 
     def _info(self) -> dict:
-        _, unilateral, friction, failure = self._flags[0].tolist()
+        _, unilateral, friction, failure = self._flag_row.tolist()
         base_drift, foot_error, normal_force = self._extra[0].tolist()
         return {
             "contact_force": self._lam[0].copy(),
@@ -336,9 +358,13 @@ class PlanarLegStanceEnv(gym.Env):
         return explicit_start(options, self.nominal.q)
 
     def __getstate__(self) -> dict:
-        state = self.__dict__.copy()
+        state = {k: v for k, v in self.__dict__.items() if k not in _VIEWS}
         state["_viewer"] = None  # a window does not travel
         return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._bind()
 
 
 def explicit_start(options: dict, q_nominal: np.ndarray, rows: int | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -18,14 +18,20 @@ $(VENV)/.installed-%: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e '.[$*]'
 	touch $@
 
-train: $(VENV)/.installed-train
+# numba caches a compiled kernel under its own file's timestamp, not those of the kernels it inlines
+# from other files: after any edit of the package, drop every cached kernel so that none is stale
+$(VENV)/.numba-fresh: $(wildcard leg_env/*.py leg_env/envs/*.py) | $(BIN)/python
+	find leg_env \( -name '*.nbi' -o -name '*.nbc' \) -delete
+	touch $@
+
+train: $(VENV)/.installed-train $(VENV)/.numba-fresh
 	$(BIN)/python -m train.ppo --out $(RUN)
 	$(BIN)/python -m train.evaluate $(RUN) --baseline lqr --episodes 20 --gif
 
-test: $(VENV)/.installed-test
+test: $(VENV)/.installed-test $(VENV)/.numba-fresh
 	$(BIN)/python -m pytest -q
 
-bench: $(VENV)/.installed-bench
+bench: $(VENV)/.installed-bench $(VENV)/.numba-fresh
 	$(BIN)/python benchmarks/bench_dynamics.py
 	$(BIN)/python benchmarks/bench_env.py
 

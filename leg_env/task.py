@@ -43,6 +43,10 @@ __all__ = [
     "INFO_NAMES",
     "Nominal",
     "nominal_state",
+    "STATE_DIM",
+    "OUT_DIM",
+    "CONSTS_DIM",
+    "task_constants",
     "step_batch",
     "step_batch_threaded",
     "start_batch",
@@ -56,6 +60,18 @@ OBS_DIM = 12
 REWARD_TERMS = ("alive", "drift", "unilateral", "friction", "ctrl")
 FLAG_NAMES = ("terminated", "unilateral_violation", "friction_violation", "numerical_failure")
 INFO_NAMES = ("base_drift", "foot_error", "normal_force")
+
+# The kernels take five arrays, so that a call from Python costs little to dispatch:
+#   state (N, STATE_DIM) float64: q | qd | anchor | action   (columns STATE_Q, STATE_QD, ...)
+#   consts (CONSTS_DIM,) float64: LegParams.array | StanceConfig.array() | q_nom | tau_nom (task_constants)
+#   out (N, OUT_DIM) float64: lam | reward terms (REWARD_TERMS order) | extras (INFO_NAMES order)
+#   obs (N, OBS_DIM) float32, flags (N, len(FLAG_NAMES)) bool
+STATE_Q, STATE_QD, STATE_ANCHOR, STATE_ACTION = slice(0, 5), slice(5, 10), slice(10, 12), slice(12, 14)
+STATE_DIM = 14
+OUT_LAM, OUT_TERMS, OUT_EXTRA = slice(0, 2), slice(2, 2 + len(REWARD_TERMS)), slice(2 + len(REWARD_TERMS), 5 + len(REWARD_TERMS))
+OUT_DIM = 2 + len(REWARD_TERMS) + len(INFO_NAMES)
+_NP, _NC = 11, 22  # lengths of LegParams.array and StanceConfig.array()
+CONSTS_DIM = _NP + _NC + 5 + 2
 
 
 @dataclass(frozen=True)
@@ -242,6 +258,24 @@ def nominal_state(p: LegParams, config: StanceConfig) -> Nominal:
     return Nominal(q=q, tau=tau, lam=lam)
 
 
+def task_constants(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.ndarray:
+    """The kernels' read-only ``consts`` array: parameters, settings, nominal posture and torques."""
+    out = np.concatenate([p.array, config.array(), nominal.q, nominal.tau]).astype(np.float64)
+    assert out.shape == (CONSTS_DIM,)
+    out.setflags(write=False)
+    return out
+
+
+@njit(cache=True, inline="always")
+def _unpack(state, consts, out):
+    """Named views of the packed kernel arrays."""
+    return (
+        state[:, 0:5], state[:, 5:10], state[:, 10:12], state[:, 12:14],
+        consts[:_NP], consts[_NP:_NP + _NC], consts[_NP + _NC:_NP + _NC + 5], consts[_NP + _NC + 5:],
+        out[:, 0:2], out[:, 2:7], out[:, 7:10],
+    )  # fmt: skip
+
+
 @njit(cache=True)
 def observe_batch(q, qd, anchor, lam, weight, obs):
     """Write the float32 observation of each robot (layout in the module docstring)."""
@@ -359,7 +393,8 @@ def _weight(p):
 
 
 @njit(cache=True)
-def _step_range(lo, hi, q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra):
+def _step_range(lo, hi, state, consts, out, obs, flags):
+    q, qd, anchor, action, p, c, q_nom, _, lam, terms, extra = _unpack(state, consts, out)
     weight = _weight(p)
     q_prev = np.empty(5)
     qd_prev = np.empty(5)
@@ -370,50 +405,54 @@ def _step_range(lo, hi, q, qd, anchor, action, p, c, q_nom, lam, obs, terms, fla
 
 
 @njit(cache=True)
-def step_batch(q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra):
+def step_batch(state, consts, out, obs, flags):
     """Advance every robot one control step and evaluate the task, in place (one thread).
 
     Args:
-        q, qd: ``(N, 5)`` float64 state, overwritten (left unchanged on numerical failure).
-        anchor: ``(N, 2)`` foot contact points.
-        action: ``(N, 2)`` float64 actions, already checked finite; clipped here to [-1, 1].
-        p: ``LegParams.array``; c: ``StanceConfig.array()``; q_nom: nominal ``q`` (foot at origin).
-        lam: ``(N, 2)`` out, mean contact force over the step [N].
+        state: ``(N, STATE_DIM)`` float64 ``q | qd | anchor | action`` (columns ``STATE_*``); ``q``
+            and ``qd`` are overwritten (left unchanged on numerical failure); the actions must
+            already be checked finite and are clipped here to [-1, 1].
+        consts: ``task_constants(...)``.
+        out: ``(N, OUT_DIM)`` float64 out: mean contact force over the step [N], the reward terms
+            (they sum to the reward) and the extras (columns ``OUT_*``).
         obs: ``(N, 12)`` float32 out (left at the previous observation on numerical failure).
-        terms: ``(N, 5)`` out, reward terms in ``REWARD_TERMS`` order (they sum to the reward).
         flags: ``(N, 4)`` bool out, in ``FLAG_NAMES`` order.
-        extra: ``(N, 3)`` out, in ``INFO_NAMES`` order.
     """
-    _step_range(0, q.shape[0], q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra)
+    _step_range(0, state.shape[0], state, consts, out, obs, flags)
 
 
 @njit(parallel=True)  # not cached: numba cannot cache parfor kernels with this structure (it warns)
-def step_batch_threaded(q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra):
+def step_batch_threaded(state, consts, out, obs, flags):
     """``step_batch`` split into contiguous chunks over numba's threads (``numba.set_num_threads``).
 
     Robots are independent, so the result is bitwise that of ``step_batch``.
     """
-    n = q.shape[0]
+    n = state.shape[0]
     chunks = numba.get_num_threads()
     for k in numba.prange(chunks):
-        _step_range(k * n // chunks, (k + 1) * n // chunks, q, qd, anchor, action, p, c, q_nom, lam, obs, terms, flags, extra)
+        _step_range(k * n // chunks, (k + 1) * n // chunks, state, consts, out, obs, flags)
 
 
 @njit(cache=True)
-def start_batch(q, qd, anchor, tau, p, c, q_nom, lam, obs, flags, extra):
-    """Evaluate freshly reset robots without stepping: contact force, observation, flags, extras.
+def start_batch(state, consts, out, obs, flags):
+    """Put freshly reset robots on their contact and evaluate them without stepping.
 
-    No control step has been taken yet, so the contact force is the instantaneous stance force
-    at the start state under the torques ``tau`` (``(2,)``; the env passes the nominal holding
-    torques): at the nominal posture it is exactly the nominal ``[0, m g]`` up to round-off.
-    Arguments as in ``step_batch``; ``flags[:, 0]`` tells whether the start state is already terminal.
+    Each robot's base is first projected so that its foot is on its anchor with ``Jc qd = 0``
+    (``project_batch``). No control step has been taken yet, so the contact force is the
+    instantaneous stance force at the start state under the nominal holding torques: at the
+    nominal posture it is exactly the nominal ``[0, m g]`` up to round-off. The reward terms are
+    zeroed. Arguments as in ``step_batch`` (the actions are not read); ``flags[:, 0]`` tells
+    whether the start state is already terminal.
     """
+    q, qd, anchor, _, p, c, q_nom, tau, lam, terms, extra = _unpack(state, consts, out)
     weight = _weight(p)
     qdd = np.empty(5)
-    terms = np.empty((q.shape[0], len(REWARD_TERMS)))
-    for i in range(q.shape[0]):
+    for i in range(state.shape[0]):
+        _project_one(q[i], qd[i], p, anchor[i])
         _stance_one(q[i], qd[i], tau, p, qdd, lam[i])
         _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra)
+        for k in range(terms.shape[1]):
+            terms[i, k] = 0.0
 
 
 @njit(cache=True)
@@ -440,26 +479,35 @@ def reset_state(rng: np.random.Generator, p: LegParams, config: StanceConfig, no
 def reset_states(rngs, p: LegParams, config: StanceConfig, nominal: Nominal):
     """``reset_state`` for several robots at once, robot ``j`` drawing from ``rngs[j]``.
 
-    Row ``j`` is exactly ``reset_state(rngs[j], ...)``; one projection serves the batch.
+    Row ``j`` is exactly ``reset_state(rngs[j], ...)``; one compiled call builds and projects the batch.
 
     Returns:
         ``(q, qd, anchor)`` as float64 arrays of shapes (k, 5), (k, 5), (k, 2), ``k = len(rngs)``.
     """
-    k = len(rngs)
-    q = np.empty((k, 5))
-    q[:] = nominal.q
-    qd = np.zeros((k, 5))
     s = config.reset_noise_scale
+    noise = np.empty((len(rngs), 6))
     if s > 0.0:
-        # rng.uniform(-s, s, 6) is low + (high - low) * rng.random(6): the same numbers, bit for bit,
-        # and filling preallocated rows is 3x faster than one uniform() call per robot
-        noise = np.empty((k, 6))
+        # rng.random into preallocated rows, scaled in _perturbed_starts as rng.uniform(-s, s, 6) scales:
+        # the same numbers bit for bit, 3x faster than one uniform() call per robot
         for j, rng in enumerate(rngs):
             rng.random(out=noise[j])
-        noise *= s - (-s)
-        noise += -s
-        q[:, 2:] += noise[:, :3]
-        qd[:, 2:] += noise[:, 3:]
+    return _perturbed_starts(noise, s, nominal.q, p.array)
+
+
+@njit(cache=True)
+def _perturbed_starts(noise, s, q_nom, p):
+    """Nominal posture + ``uniform(-s, s)`` noise (from ``noise`` in [0, 1)) on (th_b, q1, q2) and their rates, projected."""
+    k = noise.shape[0]
+    q = np.empty((k, 5))
+    qd = np.zeros((k, 5))
     anchor = np.zeros((k, 2))
-    project_batch(q, qd, p.array, anchor)
+    low, width = -s, s - (-s)  # numpy's uniform(low, high): low + (high - low) * random()
+    for i in range(k):
+        for j in range(5):
+            q[i, j] = q_nom[j]
+        if s > 0.0:
+            for j in range(3):
+                q[i, 2 + j] += low + width * noise[i, j]
+                qd[i, 2 + j] += low + width * noise[i, 3 + j]
+        _project_one(q[i], qd[i], p, anchor[i])
     return q, qd, anchor

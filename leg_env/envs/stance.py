@@ -11,14 +11,14 @@ from gymnasium import spaces
 
 from ..dynamics import foot_position
 from ..params import LegParams
-from ..task import FLAG_NAMES, INFO_NAMES, OBS_DIM, REWARD_TERMS, StanceConfig, nominal_state, project_batch, reset_state, start_batch, step_batch
+from ..task import (
+    FLAG_NAMES, OBS_DIM, OUT_DIM, OUT_EXTRA, OUT_LAM, OUT_TERMS, STATE_ACTION, STATE_ANCHOR, STATE_DIM, STATE_Q, STATE_QD,
+    StanceConfig, nominal_state, reset_state, start_batch, step_batch, task_constants,
+)  # fmt: skip
 
 __all__ = ["PlanarLegStanceEnv"]
 
 _RESET_OPTIONS = ("qpos", "qvel")
-_STATE_COLS = 14  # q (5), qd (5), anchor (2), action (2)
-_EXTRA0 = 2 + len(REWARD_TERMS)  # first extras column of the output buffer
-_OUT_COLS = _EXTRA0 + len(INFO_NAMES)  # lam (2), reward terms, extras
 # attributes that are views of the buffers (rebuilt by _bind, never pickled)
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_action_row", "_out_row", "_flag_row", "_obs_row", "_kernel_args")
 
@@ -213,13 +213,10 @@ class PlanarLegStanceEnv(gym.Env):
         high[:2] = reach
         self.observation_space = spaces.Box(-high, high, dtype=np.float32)
 
-        # kernel inputs and (1, .) buffers, shared with nothing; _bind() makes the views
-        self._p = self.params.array
-        self._c = self.config.array()
-        self._q_nom = self.nominal.q
-        self._tau_nom = np.ascontiguousarray(self.nominal.tau, dtype=np.float64)
-        self._state = np.zeros((1, _STATE_COLS))  # q | qd | anchor | action
-        self._out = np.zeros((1, _OUT_COLS))  # lam | reward terms | extras
+        # the kernel's packed arrays (leg_env.task), one row, shared with nothing; _bind() makes the views
+        self._consts = task_constants(self.params, self.config, self.nominal)
+        self._state = np.zeros((1, STATE_DIM))  # q | qd | anchor | action
+        self._out = np.zeros((1, OUT_DIM))  # lam | reward terms | extras
         self._obs = np.zeros((1, OBS_DIM), dtype=np.float32)
         self._flags = np.zeros((1, len(FLAG_NAMES)), dtype=np.bool_)
         self._bind()
@@ -313,30 +310,19 @@ class PlanarLegStanceEnv(gym.Env):
     # ------------------------------------------------------------ helpers
 
     def _bind(self) -> None:
-        """Views of the buffers under their kernel names, and the kernel's argument tuple.
-
-        Rows of one buffer are C-contiguous ``(1, k)`` arrays, the layout the vector env's own
-        arrays have, so both reuse one compiled kernel. Views are not pickled; they are rebuilt.
-        """
+        """Named views of the packed buffers and the kernel's argument tuple (rebuilt after unpickling)."""
         state, out = self._state, self._out
-        self._q, self._qd, self._anchor, self._action = state[:, 0:5], state[:, 5:10], state[:, 10:12], state[:, 12:14]
-        self._lam, self._terms, self._extra = out[:, 0:2], out[:, 2:_EXTRA0], out[:, _EXTRA0:]
+        self._q, self._qd, self._anchor, self._action = state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR], state[:, STATE_ACTION]
+        self._lam, self._terms, self._extra = out[:, OUT_LAM], out[:, OUT_TERMS], out[:, OUT_EXTRA]
         self._action_row, self._out_row, self._flag_row, self._obs_row = self._action[0], out[0], self._flags[0], self._obs[0]
-        self._kernel_args = (
-            self._q, self._qd, self._anchor, self._action, self._p, self._c, self._q_nom,
-            self._lam, self._obs, self._terms, self._flags, self._extra,
-        )  # fmt: skip
+        self._kernel_args = (state, self._consts, out, self._obs, self._flags)
 
     def _start(self, q, qd, anchor) -> None:
         """Put the robot at ``(q, qd)`` with its foot on ``anchor`` and evaluate it without stepping."""
         self._q[0] = q
         self._qd[0] = qd
         self._anchor[0] = anchor
-        project_batch(self._q, self._qd, self._p, self._anchor)
-        start_batch(
-            self._q, self._qd, self._anchor, self._tau_nom, self._p, self._c, self._q_nom,
-            self._lam, self._obs, self._flags, self._extra,
-        )  # fmt: skip
+        start_batch(*self._kernel_args)
 
     def _info(self) -> dict:
         _, unilateral, friction, failure = self._flag_row.tolist()

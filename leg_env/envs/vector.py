@@ -3,7 +3,7 @@
 ``gymnasium.make_vec("leg_env/PlanarLegStance-v0", num_envs=N)`` builds this class (it is the id's
 ``vector_entry_point``). One call of the task kernel ``leg_env.task.step_batch`` advances all N robots,
 the same kernel the single environment calls with N = 1, and resets go through the same
-``reset_states``, ``project_batch`` and ``start_batch``: sub-env ``i`` of a batch reset with
+``reset_states`` and ``start_batch``: sub-env ``i`` of a batch reset with
 ``seed=s`` is exactly a ``PlanarLegStanceEnv`` reset with ``seed=s + i`` under ``TimeLimit``, step for
 step and across autoresets. Observations, rewards, terminations, truncations and ``info`` (keys,
 values and ``_key`` masks) equal, bit for bit, those of ``gymnasium.vector.SyncVectorEnv`` over N
@@ -28,13 +28,22 @@ from ..task import (
     FLAG_NAMES,
     INFO_NAMES,
     OBS_DIM,
+    OUT_DIM,
+    OUT_EXTRA,
+    OUT_LAM,
+    OUT_TERMS,
     REWARD_TERMS,
+    STATE_ACTION,
+    STATE_ANCHOR,
+    STATE_DIM,
+    STATE_Q,
+    STATE_QD,
     StanceConfig,
-    project_batch,
     reset_states,
     start_batch,
     step_batch,
     step_batch_threaded,
+    task_constants,
 )
 from .stance import PlanarLegStanceEnv, explicit_start
 
@@ -56,6 +65,7 @@ STATE_KEYS = (
 _FLAG = {name: k for k, name in enumerate(FLAG_NAMES)}
 _EXTRA = {name: k for k, name in enumerate(INFO_NAMES)}
 _RESET_OPTIONS = ("qpos", "qvel", "reset_mask")
+_VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_kernel_args")  # rebuilt by _bind, never pickled
 
 
 class PlanarLegStanceVectorEnv(VectorEnv):
@@ -177,19 +187,14 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, n)
         self.action_space = batch_space(self.single_action_space, n)
 
-        self._p = self.params.array
-        self._c = self.config.array()
-        self._q_nom = self.nominal.q
-        self._tau_nom = np.ascontiguousarray(self.nominal.tau, dtype=np.float64)
-        # state and kernel outputs: row i is sub-env i
-        self._q = np.tile(self.nominal.q, (n, 1))
-        self._qd = np.zeros((n, 5))
-        self._anchor = np.zeros((n, 2))
-        self._lam = np.zeros((n, 2))
+        # the kernel's packed arrays (leg_env.task), row i is sub-env i; _bind() makes the views
+        self._consts = task_constants(self.params, self.config, self.nominal)
+        self._state = np.zeros((n, STATE_DIM))  # q | qd | anchor | action
+        self._state[:, STATE_Q] = self.nominal.q
+        self._out = np.zeros((n, OUT_DIM))  # lam | reward terms | extras
         self._obs = np.zeros((n, OBS_DIM), dtype=np.float32)
-        self._terms = np.zeros((n, len(REWARD_TERMS)))
         self._flags = np.zeros((n, len(FLAG_NAMES)), dtype=np.bool_)
-        self._extra = np.zeros((n, len(INFO_NAMES)))
+        self._bind()
         self._elapsed = np.zeros(n, dtype=np.int64)
         self._ended = np.zeros(n, dtype=np.bool_)  # ended on the last step and not reset since
         self._rngs: list[np.random.Generator | None] = [None] * n
@@ -293,7 +298,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         the rows that end in this step, after keeping their last observation, flags, extras and
         force in ``final``. The returned ``terms`` are the step's; the buffers hold the reset rows' start.
         """
-        a = self._checked_actions(actions)
+        self._action[:] = self._checked_actions(actions)
         mode = self.autoreset_mode
         restarted = None
         if mode == AutoresetMode.NEXT_STEP and self._ended.any():
@@ -308,25 +313,20 @@ class PlanarLegStanceVectorEnv(VectorEnv):
                 f"sub-env(s) {_some(np.flatnonzero(self._ended))} ended; with autoreset_mode DISABLED reset them "
                 'with reset(options={"reset_mask": mask}) before stepping them again'
             )
-        args = (
-            self._q, self._qd, self._anchor, a, self._p, self._c, self._q_nom,
-            self._lam, self._obs, self._terms, self._flags, self._extra,
-        )  # fmt: skip
         if self.num_threads == 1:
-            step_batch(*args)
+            step_batch(*self._kernel_args)
         else:
             threads = numba.get_num_threads()
             numba.set_num_threads(self.num_threads)
             try:
-                step_batch_threaded(*args)
+                step_batch_threaded(*self._kernel_args)
             finally:
                 numba.set_num_threads(threads)
         self._elapsed += 1
         if restarted is not None:
-            self._start(restarted, *starts)
-            self._terms[restarted] = 0.0
+            self._start(restarted, *starts)  # zeroes their reward terms too
             self._elapsed[restarted] = 0
-        terms = self._terms
+        terms = self._terms.copy()  # the step's, before a SAME_STEP reset zeroes the reset rows' terms
         reward = terms[:, 0] + terms[:, 1] + terms[:, 2] + terms[:, 3] + terms[:, 4]
         terminated = self._flags[:, 0].copy()
         if self.max_episode_steps is None:
@@ -345,7 +345,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             self._ended[:] = False
         else:
             self._ended = ended
-        return _Transition(self._obs.copy(), reward, terminated, truncated, restarted, final, terms.copy())
+        return _Transition(self._obs.copy(), reward, terminated, truncated, restarted, final, terms)
 
     def _checked_actions(self, actions) -> np.ndarray:
         """``actions`` as a C-contiguous float64 ``(num_envs, 2)`` array; ``ValueError`` if malformed or non-finite."""
@@ -369,31 +369,37 @@ class PlanarLegStanceVectorEnv(VectorEnv):
     def _start(self, rows: np.ndarray | None, q, qd, anchor) -> None:
         """Put ``rows`` (all if None) at ``(q, qd)`` on ``anchor`` and evaluate them without stepping.
 
-        ``q, qd, anchor`` are ``(len(rows), .)`` float64 arrays owned by the caller; a subset's are
-        projected in place (projection is idempotent, so a start may be passed twice).
+        Their reward terms become zero. ``q, qd, anchor`` are ``(len(rows), .)`` float64 arrays.
         """
         if rows is None:
             self._q[:] = q
             self._qd[:] = qd
             self._anchor[:] = anchor
-            project_batch(self._q, self._qd, self._p, self._anchor)
-            start_batch(
-                self._q, self._qd, self._anchor, self._tau_nom, self._p, self._c, self._q_nom,
-                self._lam, self._obs, self._flags, self._extra,
-            )  # fmt: skip
+            start_batch(*self._kernel_args)
             return
         k = rows.size
-        lam, obs = np.empty((k, 2)), np.empty((k, OBS_DIM), dtype=np.float32)
-        flags, extra = np.empty((k, len(FLAG_NAMES)), dtype=np.bool_), np.empty((k, len(INFO_NAMES)))
-        project_batch(q, qd, self._p, anchor)
-        start_batch(q, qd, anchor, self._tau_nom, self._p, self._c, self._q_nom, lam, obs, flags, extra)
-        self._q[rows] = q
-        self._qd[rows] = qd
-        self._anchor[rows] = anchor
-        self._lam[rows] = lam
+        state, out = np.zeros((k, STATE_DIM)), np.empty((k, OUT_DIM))
+        obs, flags = np.empty((k, OBS_DIM), dtype=np.float32), np.empty((k, len(FLAG_NAMES)), dtype=np.bool_)
+        state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR] = q, qd, anchor
+        start_batch(state, self._consts, out, obs, flags)
+        self._state[rows] = state
+        self._out[rows] = out
         self._obs[rows] = obs
         self._flags[rows] = flags
-        self._extra[rows] = extra
+
+    def _bind(self) -> None:
+        """Named views of the packed buffers and the kernel's argument tuple (rebuilt after unpickling)."""
+        state, out = self._state, self._out
+        self._q, self._qd, self._anchor, self._action = state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR], state[:, STATE_ACTION]
+        self._lam, self._terms, self._extra = out[:, OUT_LAM], out[:, OUT_TERMS], out[:, OUT_EXTRA]
+        self._kernel_args = (state, self._consts, out, self._obs, self._flags)
+
+    def __getstate__(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if k not in _VIEWS}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._bind()
 
     def _reset_rows(self, reset_mask) -> np.ndarray:
         if reset_mask is None:

@@ -50,8 +50,6 @@ __all__ = [
     "step_batch",
     "step_batch_threaded",
     "start_batch",
-    "observe_batch",
-    "project_batch",
     "reset_state",
     "reset_states",
 ]
@@ -66,12 +64,14 @@ INFO_NAMES = ("base_drift", "foot_error", "normal_force")
 #   consts (CONSTS_DIM,) float64: LegParams.array | StanceConfig.array() | q_nom | tau_nom (task_constants)
 #   out (N, OUT_DIM) float64: lam | reward terms (REWARD_TERMS order) | extras (INFO_NAMES order)
 #   obs (N, OBS_DIM) float32, flags (N, len(FLAG_NAMES)) bool
-STATE_Q, STATE_QD, STATE_ANCHOR, STATE_ACTION = slice(0, 5), slice(5, 10), slice(10, 12), slice(12, 14)
-STATE_DIM = 14
-OUT_LAM, OUT_TERMS, OUT_EXTRA = slice(0, 2), slice(2, 2 + len(REWARD_TERMS)), slice(2 + len(REWARD_TERMS), 5 + len(REWARD_TERMS))
-OUT_DIM = 2 + len(REWARD_TERMS) + len(INFO_NAMES)
+_QD0, _ANCHOR0, _ACTION0, STATE_DIM = 5, 10, 12, 14  # first columns of qd, anchor, action; width
+_TERMS0, _EXTRA0 = 2, 2 + len(REWARD_TERMS)  # first columns of the reward terms and the extras
+OUT_DIM = _EXTRA0 + len(INFO_NAMES)
+STATE_Q, STATE_QD, STATE_ANCHOR, STATE_ACTION = slice(0, _QD0), slice(_QD0, _ANCHOR0), slice(_ANCHOR0, _ACTION0), slice(_ACTION0, STATE_DIM)
+OUT_LAM, OUT_TERMS, OUT_EXTRA = slice(0, _TERMS0), slice(_TERMS0, _EXTRA0), slice(_EXTRA0, OUT_DIM)
 _NP, _NC = 11, 22  # lengths of LegParams.array and StanceConfig.array()
-CONSTS_DIM = _NP + _NC + 5 + 2
+_NOM0, _TAU0 = _NP + _NC, _NP + _NC + 5  # first entries of q_nom and tau_nom in consts
+CONSTS_DIM = _TAU0 + 2
 
 
 @dataclass(frozen=True)
@@ -260,8 +260,10 @@ def nominal_state(p: LegParams, config: StanceConfig) -> Nominal:
 
 def task_constants(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.ndarray:
     """The kernels' read-only ``consts`` array: parameters, settings, nominal posture and torques."""
-    out = np.concatenate([p.array, config.array(), nominal.q, nominal.tau]).astype(np.float64)
-    assert out.shape == (CONSTS_DIM,)
+    parts = (p.array, config.array(), nominal.q, nominal.tau)
+    if [len(x) for x in parts] != [_NP, _NC, 5, 2]:
+        raise RuntimeError(f"task_constants: layout mismatch {[len(x) for x in parts]}")  # a developer error
+    out = np.concatenate(parts).astype(np.float64)
     out.setflags(write=False)
     return out
 
@@ -270,24 +272,10 @@ def task_constants(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.n
 def _unpack(state, consts, out):
     """Named views of the packed kernel arrays."""
     return (
-        state[:, 0:5], state[:, 5:10], state[:, 10:12], state[:, 12:14],
-        consts[:_NP], consts[_NP:_NP + _NC], consts[_NP + _NC:_NP + _NC + 5], consts[_NP + _NC + 5:],
-        out[:, 0:2], out[:, 2:7], out[:, 7:10],
+        state[:, :_QD0], state[:, _QD0:_ANCHOR0], state[:, _ANCHOR0:_ACTION0], state[:, _ACTION0:],
+        consts[:_NP], consts[_NP:_NOM0], consts[_NOM0:_TAU0], consts[_TAU0:],
+        out[:, :_TERMS0], out[:, _TERMS0:_EXTRA0], out[:, _EXTRA0:],
     )  # fmt: skip
-
-
-@njit(cache=True)
-def observe_batch(q, qd, anchor, lam, weight, obs):
-    """Write the float32 observation of each robot (layout in the module docstring)."""
-    for i in range(q.shape[0]):
-        obs[i, 0] = q[i, 0] - anchor[i, 0]
-        obs[i, 1] = q[i, 1] - anchor[i, 1]
-        for j in range(2, 5):
-            obs[i, j] = q[i, j]
-        for j in range(5):
-            obs[i, 5 + j] = qd[i, j]
-        obs[i, 10] = lam[i, 0] / weight
-        obs[i, 11] = lam[i, 1] / weight
 
 
 @njit(cache=True, inline="always")
@@ -438,7 +426,7 @@ def start_batch(state, consts, out, obs, flags):
     """Put freshly reset robots on their contact and evaluate them without stepping.
 
     Each robot's base is first projected so that its foot is on its anchor with ``Jc qd = 0``
-    (``project_batch``). No control step has been taken yet, so the contact force is the
+    (``leg_env.integrate.project_stance``). No control step has been taken yet, so the contact force is the
     instantaneous stance force at the start state under the nominal holding torques: at the
     nominal posture it is exactly the nominal ``[0, m g]`` up to round-off. The reward terms are
     zeroed. Arguments as in ``step_batch`` (the actions are not read); ``flags[:, 0]`` tells
@@ -453,13 +441,6 @@ def start_batch(state, consts, out, obs, flags):
         _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra)
         for k in range(terms.shape[1]):
             terms[i, k] = 0.0
-
-
-@njit(cache=True)
-def project_batch(q, qd, p, anchor):
-    """Put each robot's foot on its anchor and its velocity in the contact nullspace (coordinate partitioning)."""
-    for i in range(q.shape[0]):
-        _project_one(q[i], qd[i], p, anchor[i])
 
 
 def reset_state(rng: np.random.Generator, p: LegParams, config: StanceConfig, nominal: Nominal):

@@ -24,6 +24,7 @@ The contact force is the mean over the last control step (the contact impulse / 
 
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import asdict, dataclass, fields, replace
 
@@ -52,6 +53,8 @@ __all__ = [
     "start_batch",
     "reset_state",
     "reset_states",
+    "starts_from_noise",
+    "BitGeneratorRows",
 ]
 
 OBS_DIM = 12
@@ -465,14 +468,79 @@ def reset_states(rngs, p: LegParams, config: StanceConfig, nominal: Nominal):
     Returns:
         ``(q, qd, anchor)`` as float64 arrays of shapes (k, 5), (k, 5), (k, 2), ``k = len(rngs)``.
     """
-    s = config.reset_noise_scale
     noise = np.empty((len(rngs), 6))
-    if s > 0.0:
-        # rng.random into preallocated rows, scaled in _perturbed_starts as rng.uniform(-s, s, 6) scales:
-        # the same numbers bit for bit, 3x faster than one uniform() call per robot
+    if config.reset_noise_scale > 0.0:
         for j, rng in enumerate(rngs):
             rng.random(out=noise[j])
-    return _perturbed_starts(noise, s, nominal.q, p.array)
+    return starts_from_noise(noise, p, config, nominal)
+
+
+def starts_from_noise(noise: np.ndarray, p: LegParams, config: StanceConfig, nominal: Nominal):
+    """The start states of ``reset_states`` from its ``(k, 6)`` draws of ``rng.random()`` (ignored at zero noise).
+
+    ``rng.uniform(-s, s, 6)`` is ``-s + 2 s rng.random(6)``, computed here exactly as numpy does, so
+    the states are the same bit for bit whether the draws were made in Python or in compiled code
+    (``BitGeneratorRows``).
+    """
+    return _perturbed_starts(noise, config.reset_noise_scale, nominal.q, p.array)
+
+
+class BitGeneratorRows:
+    """Draw ``rng.random()`` for many generators in one compiled call, through numpy's ctypes interface.
+
+    Holds the generators (so their states stay alive) and the addresses of their bit generator
+    states; ``draw(rows, out)`` fills ``out[k]`` with ``out.shape[1]`` draws from generator
+    ``rows[k]``, exactly the numbers (and the state advance) of ``rng.random(out=out[k])``. This is
+    numpy's documented route for numba (``BitGenerator.ctypes``). Generators whose bit generator
+    has another ``next_double`` (not numpy's PCG64) are drawn in Python instead.
+    """
+
+    def __init__(self, n: int):
+        self.generators: list[np.random.Generator | None] = [None] * n
+        self._states = np.zeros(n, dtype=np.int64)
+        self._next_double = None
+        self._compiled = np.zeros(n, dtype=np.bool_)  # row drawn by the compiled path
+
+    def __setitem__(self, i: int, rng: np.random.Generator) -> None:
+        self.generators[i] = rng
+        interface = rng.bit_generator.ctypes
+        if self._next_double is None and isinstance(rng.bit_generator, np.random.PCG64):
+            self._next_double = interface.next_double
+        same = self._next_double is not None and _fn_address(interface.next_double) == _fn_address(self._next_double)
+        self._compiled[i] = same
+        self._states[i] = interface.state_address if same else 0
+
+    def __getitem__(self, i: int) -> np.random.Generator | None:
+        return self.generators[i]
+
+    def draw(self, rows: np.ndarray, out: np.ndarray) -> None:
+        """``out[k] = generators[rows[k]].random(out.shape[1])`` for every k."""
+        if self._compiled[rows].all():
+            _draw_rows(self._next_double, self._states, rows, out)
+            return
+        for k, i in enumerate(rows.tolist()):
+            self.generators[i].random(out=out[k])
+
+    def __getstate__(self) -> dict:
+        return {"generators": self.generators}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(len(state["generators"]))
+        for i, rng in enumerate(state["generators"]):
+            if rng is not None:
+                self[i] = rng
+
+
+def _fn_address(fn) -> int:
+    return ctypes.cast(fn, ctypes.c_void_p).value
+
+
+@njit(cache=True)
+def _draw_rows(next_double, states, rows, out):
+    for k in range(rows.shape[0]):
+        state = states[rows[k]]
+        for j in range(out.shape[1]):
+            out[k, j] = next_double(state)
 
 
 @njit(cache=True)

@@ -2,8 +2,9 @@
 
 ``gymnasium.make_vec("leg_env/PlanarLegStance-v0", num_envs=N)`` builds this class (it is the id's
 ``vector_entry_point``). One call of the task kernel ``leg_env.task.step_batch`` advances all N robots,
-the same kernel the single environment calls with N = 1, and resets go through the same
-``reset_states`` and ``start_batch``: sub-env ``i`` of a batch reset with
+the same kernel the single environment calls with N = 1, and resets build their start states with the
+same ``starts_from_noise`` and ``start_batch`` (the noise drawn in compiled code from each sub-env's own
+generator, ``BitGeneratorRows``, the same numbers as ``rng.random``): sub-env ``i`` of a batch reset with
 ``seed=s`` is exactly a ``PlanarLegStanceEnv`` reset with ``seed=s + i`` under ``TimeLimit``, step for
 step and across autoresets. Observations, rewards, terminations, truncations and ``info`` (keys,
 values and ``_key`` masks) equal, bit for bit, those of ``gymnasium.vector.SyncVectorEnv`` over N
@@ -38,9 +39,10 @@ from ..task import (
     STATE_DIM,
     STATE_Q,
     STATE_QD,
+    BitGeneratorRows,
     StanceConfig,
-    reset_states,
     start_batch,
+    starts_from_noise,
     step_batch,
     step_batch_threaded,
     task_constants,
@@ -197,7 +199,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         self._bind()
         self._elapsed = np.zeros(n, dtype=np.int64)
         self._ended = np.zeros(n, dtype=np.bool_)  # ended on the last step and not reset since
-        self._rngs: list[np.random.Generator | None] = [None] * n
+        self._rngs = BitGeneratorRows(n)  # sub-env i's generator, drawn from in compiled code
 
     # ---------------------------------------------------------------- API
 
@@ -363,8 +365,10 @@ class PlanarLegStanceVectorEnv(VectorEnv):
 
     def _draw_starts(self, rows: np.ndarray):
         """Fresh start states of ``rows``, each drawn from its own generator as the single env draws it."""
-        rngs = self._rngs
-        return reset_states([rngs[i] for i in rows.tolist()], self.params, self.config, self.nominal)
+        noise = np.empty((rows.size, 6))
+        if self.config.reset_noise_scale > 0.0:
+            self._rngs.draw(rows, noise)
+        return starts_from_noise(noise, self.params, self.config, self.nominal)
 
     def _start(self, rows: np.ndarray | None, q, qd, anchor) -> None:
         """Put ``rows`` (all if None) at ``(q, qd)`` on ``anchor`` and evaluate them without stepping.

@@ -110,13 +110,22 @@ def _turn(s, c, d):
 
 @njit(cache=True, inline="always")
 def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
-    """One control step of RK4 on one robot, in place.
+    """One control step of RK4 on one robot, in place (``_rk4_from`` at the state's own trigonometry)."""
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    _rk4_from(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean, np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2))
+
+
+@njit(cache=True, inline="always")
+def _rk4_from(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean, s1, co1, s2, co2):
+    """One control step of RK4 on one robot, in place, given ``sin``/``cos`` of ``th1 = q[2] + q[3]``
+    and ``th2 = th1 + q[4]`` (the caller may have them already: the task kernel keeps them).
 
     The state lives in scalars: ``(x, y, a, b, c)`` = ``q`` and ``(vx, vy, va, vb, vc)`` = ``qd``.
     The dynamics depend only on the link angles ``th1 = a + b``, ``th2 = th1 + c`` through their
-    sines/cosines, and on their rates. Those are computed once per control step; every stage and
-    every RK4 step turns them by its angle increment (``_turn``), and the trigonometry after an
-    RK4 step serves both the stance projection and the next step's first stage.
+    sines/cosines, and on their rates. Every stage and every RK4 step turns the sines/cosines by
+    its angle increment (``_turn``), and the trigonometry after an RK4 step serves both the stance
+    projection and the next step's first stage.
     """
     n = _substeps_for(qd, dt, substeps, max_angle)
     h = dt / n
@@ -125,9 +134,6 @@ def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
     t_hip, t_knee = tau[0], tau[1]
     x, y, a, b, c = q[0], q[1], q[2], q[3], q[4]
     vx, vy, va, vb, vc = qd[0], qd[1], qd[2], qd[3], qd[4]
-    th1 = a + b
-    th2 = th1 + c
-    s1, co1, s2, co2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
     lx = 0.0
     ly = 0.0
     for _ in range(n):

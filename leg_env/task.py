@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 
 from .dynamics import _stance_one, static_equilibrium
-from .integrate import MAX_ANGLE, SUBSTEPS, DT, _project_one, _rk4_one
+from .integrate import MAX_ANGLE, SUBSTEPS, DT, _project_one, _rk4_from
 from .params import LegParams
 
 __all__ = [
@@ -63,14 +63,16 @@ FLAG_NAMES = ("terminated", "unilateral_violation", "friction_violation", "numer
 INFO_NAMES = ("base_drift", "foot_error", "normal_force")
 
 # The kernels take five arrays, so that a call from Python costs little to dispatch:
-#   state (N, STATE_DIM) float64: q | qd | anchor | action   (columns STATE_Q, STATE_QD, ...)
+#   state (N, STATE_DIM) float64: q | qd | anchor | action | trig   (columns STATE_Q, STATE_QD, ...);
+#       trig = sin th1, cos th1, sin th2, cos th2 of q, written by the kernels that write q (start_batch,
+#       step_batch) and read by the next step: callers change q only through start_batch
 #   consts (CONSTS_DIM,) float64: LegParams.array | StanceConfig.array() | q_nom | tau_nom (task_constants)
 #   out (N, OUT_DIM) float64: lam | reward terms (REWARD_TERMS order) | extras (INFO_NAMES order)
 #   obs (N, OBS_DIM) float32, flags (N, len(FLAG_NAMES)) bool
-_QD0, _ANCHOR0, _ACTION0, STATE_DIM = 5, 10, 12, 14  # first columns of qd, anchor, action; width
+_QD0, _ANCHOR0, _ACTION0, _TRIG0, STATE_DIM = 5, 10, 12, 14, 18  # first columns of qd, anchor, action, trig; width
 _TERMS0, _EXTRA0 = 2, 2 + len(REWARD_TERMS)  # first columns of the reward terms and the extras
 OUT_DIM = _EXTRA0 + len(INFO_NAMES)
-STATE_Q, STATE_QD, STATE_ANCHOR, STATE_ACTION = slice(0, _QD0), slice(_QD0, _ANCHOR0), slice(_ANCHOR0, _ACTION0), slice(_ACTION0, STATE_DIM)
+STATE_Q, STATE_QD, STATE_ANCHOR, STATE_ACTION = slice(0, _QD0), slice(_QD0, _ANCHOR0), slice(_ANCHOR0, _ACTION0), slice(_ACTION0, _TRIG0)
 OUT_LAM, OUT_TERMS, OUT_EXTRA = slice(0, _TERMS0), slice(_TERMS0, _EXTRA0), slice(_EXTRA0, OUT_DIM)
 _NP, _NC = 11, 22  # lengths of LegParams.array and StanceConfig.array()
 _NOM0, _TAU0 = _NP + _NC, _NP + _NC + 5  # first entries of q_nom and tau_nom in consts
@@ -275,14 +277,14 @@ def task_constants(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.n
 def _unpack(state, consts, out):
     """Named views of the packed kernel arrays."""
     return (
-        state[:, :_QD0], state[:, _QD0:_ANCHOR0], state[:, _ANCHOR0:_ACTION0], state[:, _ACTION0:],
+        state[:, :_QD0], state[:, _QD0:_ANCHOR0], state[:, _ANCHOR0:_ACTION0], state[:, _ACTION0:_TRIG0], state[:, _TRIG0:],
         consts[:_NP], consts[_NP:_NOM0], consts[_NOM0:_TAU0], consts[_TAU0:],
         out[:, :_TERMS0], out[:, _TERMS0:_EXTRA0], out[:, _EXTRA0:],
     )  # fmt: skip
 
 
 @njit(cache=True, inline="always")
-def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flags, extra):
+def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flags, extra, trig):
     """Reward terms, flags, extras and observation of robot ``i`` at its (finite) state and force.
 
     The one place where the task's predicates (health, feasibility) are written.
@@ -295,9 +297,11 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
     l1, l2 = p[6], p[7]
     th1 = q[i, 2] + q[i, 3]
     th2 = th1 + q[i, 4]
-    knee_y = q[i, 1] + l1 * np.sin(th1)
-    fx = q[i, 0] + l1 * np.cos(th1) + l2 * np.cos(th2) - anchor[i, 0]
-    fy = knee_y + l2 * np.sin(th2) - anchor[i, 1]
+    s1, co1, s2, co2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
+    trig[i, 0], trig[i, 1], trig[i, 2], trig[i, 3] = s1, co1, s2, co2  # for the next step
+    knee_y = q[i, 1] + l1 * s1
+    fx = q[i, 0] + l1 * co1 + l2 * co2 - anchor[i, 0]
+    fy = knee_y + l2 * s2 - anchor[i, 1]
     height = q[i, 1] - anchor[i, 1]
 
     unilateral = max(0.0, -lam_y)
@@ -342,7 +346,7 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
 
 
 @njit(cache=True, inline="always")
-def _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a):
+def _step_one(i, q, qd, anchor, action, trig, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a):
     """One control step and task evaluation of robot ``i``; the last four arguments are scratch."""
     for j in range(5):
         q_prev[j] = q[i, j]
@@ -351,7 +355,10 @@ def _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, fl
     a[1] = min(1.0, max(-1.0, action[i, 1]))
     tau[0] = a[0] * c[_C_TAU_HIP]
     tau[1] = a[1] * c[_C_TAU_KNEE]
-    _rk4_one(q[i], qd[i], tau, p, anchor[i], c[_C_DT], int(c[_C_SUBSTEPS]), c[_C_MAX_ANGLE], True, lam[i])
+    _rk4_from(
+        q[i], qd[i], tau, p, anchor[i], c[_C_DT], int(c[_C_SUBSTEPS]), c[_C_MAX_ANGLE], True, lam[i],
+        trig[i, 0], trig[i, 1], trig[i, 2], trig[i, 3],
+    )  # fmt: skip
 
     finite = np.isfinite(lam[i, 0]) and np.isfinite(lam[i, 1])
     for j in range(5):
@@ -374,7 +381,7 @@ def _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, fl
         extra[i, 1] = 0.0
         extra[i, 2] = 0.0
         return
-    _assess(i, q, qd, anchor, lam, a[0], a[1], p, c, q_nom, weight, obs, terms, flags, extra)
+    _assess(i, q, qd, anchor, lam, a[0], a[1], p, c, q_nom, weight, obs, terms, flags, extra, trig)
 
 
 @njit(cache=True, inline="always")
@@ -385,14 +392,14 @@ def _weight(p):
 
 @njit(cache=True)
 def _step_range(lo, hi, state, consts, out, obs, flags):
-    q, qd, anchor, action, p, c, q_nom, _, lam, terms, extra = _unpack(state, consts, out)
+    q, qd, anchor, action, trig, p, c, q_nom, _, lam, terms, extra = _unpack(state, consts, out)
     weight = _weight(p)
     q_prev = np.empty(5)
     qd_prev = np.empty(5)
     tau = np.empty(2)
     a = np.empty(2)
     for i in range(lo, hi):
-        _step_one(i, q, qd, anchor, action, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a)
+        _step_one(i, q, qd, anchor, action, trig, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a)
 
 
 @njit(cache=True)
@@ -435,13 +442,13 @@ def start_batch(state, consts, out, obs, flags):
     zeroed. Arguments as in ``step_batch`` (the actions are not read); ``flags[:, 0]`` tells
     whether the start state is already terminal.
     """
-    q, qd, anchor, _, p, c, q_nom, tau, lam, terms, extra = _unpack(state, consts, out)
+    q, qd, anchor, _, trig, p, c, q_nom, tau, lam, terms, extra = _unpack(state, consts, out)
     weight = _weight(p)
     qdd = np.empty(5)
     for i in range(state.shape[0]):
         _project_one(q[i], qd[i], p, anchor[i])
         _stance_one(q[i], qd[i], tau, p, qdd, lam[i])
-        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra)
+        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra, trig)
         for k in range(terms.shape[1]):
             terms[i, k] = 0.0
 

@@ -238,6 +238,32 @@ def test_default_control_step_is_converged():
 # ----------------------------------------------------------- rollout invariants
 
 
+def test_env_physics_is_the_integrators_control_step():
+    """Each env step is exactly ``integrate.stance_step`` with the clipped, scaled torques, across
+    resets and explicit states (the task kernel keeps the state's sines/cosines between steps; a
+    stale copy would show here)."""
+    from leg_env.integrate import stance_step
+
+    env = make(torque_limit=(40.0, 60.0))
+    rng = np.random.default_rng(5)
+    for episode, options in enumerate((None, {"qpos": env.nominal.q + [0.0, 0.0, 0.02, -0.03, 0.05]}, None)):
+        env.reset(seed=episode, options=options)
+        for _ in range(60):
+            q, qd, anchor = env.state
+            action = rng.uniform(-1.3, 1.3, 2).astype(np.float32)
+            obs, _, terminated, _, info = env.step(action)
+            if info["numerical_failure"]:
+                break
+            tau = np.clip(action.astype(np.float64), -1.0, 1.0) * [40.0, 60.0]
+            q_ref, qd_ref, lam_ref = stance_step(q, qd, tau, env.params, anchor=anchor)
+            q_env, qd_env, _ = env.state
+            np.testing.assert_array_equal(q_env, q_ref)
+            np.testing.assert_array_equal(qd_env, qd_ref)
+            np.testing.assert_array_equal(info["contact_force"], lam_ref)
+            if terminated:
+                break
+
+
 def test_foot_stays_on_contact_point_over_1000_random_steps():
     env = make()
     env.reset(seed=3)

@@ -307,9 +307,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             restarted = np.flatnonzero(self._ended)
             starts = self._draw_starts(restarted)
             # step the restarting rows from their start (cheap, near nominal), then put them back there
-            self._q[restarted] = starts[0]
-            self._qd[restarted] = starts[1]
-            self._anchor[restarted] = starts[2]
+            self._start(restarted, *starts)
         elif mode == AutoresetMode.DISABLED and self._ended.any():
             raise ValueError(
                 f"sub-env(s) {_some(np.flatnonzero(self._ended))} ended; with autoreset_mode DISABLED reset them "

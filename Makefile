@@ -33,7 +33,7 @@ test: $(VENV)/.installed-test $(VENV)/.numba-fresh
 
 bench: $(VENV)/.installed-bench $(VENV)/.numba-fresh
 	$(BIN)/python benchmarks/bench_dynamics.py
-	$(BIN)/python benchmarks/bench_env.py
+	$(BIN)/python benchmarks/bench_env.py --ppo
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

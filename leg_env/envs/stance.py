@@ -215,7 +215,7 @@ class PlanarLegStanceEnv(gym.Env):
 
         # the kernel's packed arrays (leg_env.task), one row, shared with nothing; _bind() makes the views
         self._consts = task_constants(self.params, self.config, self.nominal)
-        self._state = np.zeros((1, STATE_DIM))  # q | qd | anchor | action
+        self._state = np.zeros((1, STATE_DIM))  # q | qd | anchor | action | trig
         self._out = np.zeros((1, OUT_DIM))  # lam | reward terms | extras
         self._obs = np.zeros((1, OBS_DIM), dtype=np.float32)
         self._flags = np.zeros((1, len(FLAG_NAMES)), dtype=np.bool_)

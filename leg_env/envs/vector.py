@@ -191,12 +191,12 @@ class PlanarLegStanceVectorEnv(VectorEnv):
 
         # the kernel's packed arrays (leg_env.task), row i is sub-env i; _bind() makes the views
         self._consts = task_constants(self.params, self.config, self.nominal)
-        self._state = np.zeros((n, STATE_DIM))  # q | qd | anchor | action
-        self._state[:, STATE_Q] = self.nominal.q
+        self._state = np.zeros((n, STATE_DIM))  # q | qd | anchor | action | trig
         self._out = np.zeros((n, OUT_DIM))  # lam | reward terms | extras
         self._obs = np.zeros((n, OBS_DIM), dtype=np.float32)
         self._flags = np.zeros((n, len(FLAG_NAMES)), dtype=np.bool_)
         self._bind()
+        self._start(None, self.nominal.q, np.zeros(5), np.zeros(2))  # every row at the nominal posture
         self._elapsed = np.zeros(n, dtype=np.int64)
         self._ended = np.zeros(n, dtype=np.bool_)  # ended on the last step and not reset since
         self._rngs = BitGeneratorRows(n)  # sub-env i's generator, drawn from in compiled code

@@ -185,3 +185,42 @@ def test_zoo_trains_the_env_from_the_same_file(tmp_path):
     result = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300, env=env)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
     assert list(tmp_path.rglob("*.zip")), "the Zoo saved no model"
+
+
+def test_train_extra_declares_every_package_that_training_and_evaluation_import():
+    """``make train`` installs only the core and the ``train`` extra: every third-party module that
+    ``leg_env``, ``train/`` and ``policies/`` import must come from a distribution declared there."""
+    import ast
+    import re
+    import tomllib
+    from importlib.metadata import packages_distributions
+
+    def norm(name: str) -> str:
+        return re.sub(r"[-_.]+", "-", name).lower()
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    extras = project["optional-dependencies"]
+    todo = ["train"]
+    requirements = list(project["dependencies"])
+    while todo:  # the train extra and the extras it pulls in (leg-env[render], ...)
+        for req in extras[todo.pop()]:
+            self_ref = re.fullmatch(r"leg-env\[([\w,\s-]+)\]", req)
+            if self_ref:
+                todo += [e.strip() for e in self_ref.group(1).split(",")]
+            else:
+                requirements.append(req)
+    declared = {norm(re.match(r"[A-Za-z0-9_.-]+", r).group(0)) for r in requirements}
+
+    modules = set()
+    for folder in ("leg_env", "train", "policies"):
+        for path in (ROOT / folder).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.Import):
+                    modules |= {alias.name.split(".")[0] for alias in node.names}
+                elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                    modules.add(node.module.split(".")[0])
+    third_party = modules - set(sys.stdlib_module_names) - {"leg_env", "train", "policies"}
+    assert {"numpy", "gymnasium", "stable_baselines3", "scipy", "yaml"} <= third_party  # the walk works
+    providers = packages_distributions()
+    missing = sorted(m for m in third_party if not {norm(d) for d in providers.get(m, [m])} & declared)
+    assert not missing, f"imported but not declared in the core or train dependencies: {missing}"

@@ -98,7 +98,30 @@ def evaluate_now(model, vec_normalize: VecNormalize | None, venv: VecEnv, seed: 
     return run_vec_episodes(predict, venv, seed)
 
 
-class PeriodicEvaluation(BaseCallback):
+class _Periodic(BaseCallback):
+    """Call ``_fire()`` each time the step counter passes a multiple of ``freq`` (never if ``freq <= 0``)."""
+
+    def __init__(self, freq: int):
+        super().__init__()
+        self.freq = freq
+        self._next = None
+
+    def _start_after(self, done: int) -> None:
+        """The first call comes at the first multiple of ``freq`` after ``done`` steps."""
+        self._next = (done // self.freq + 1) * self.freq if self.freq > 0 else None
+
+    def _on_step(self) -> bool:
+        if self._next is not None and self.num_timesteps >= self._next:
+            while self._next <= self.num_timesteps:
+                self._next += self.freq
+            self._fire()
+        return True
+
+    def _fire(self) -> None:
+        raise NotImplementedError
+
+
+class PeriodicEvaluation(_Periodic):
     """Every ``eval_freq`` env steps, run ``venv.num_envs`` deterministic episodes and log the results.
 
     The evaluation env's observations are normalised with the training ``VecNormalize``'s current
@@ -116,26 +139,19 @@ class PeriodicEvaluation(BaseCallback):
         on_result: Callable[[dict], None] | None = None,
         clock: Callable[[], float] = time.perf_counter,
     ):
-        super().__init__()
+        super().__init__(eval_freq)
         self.venv = venv
         self.vec_normalize = vec_normalize
-        self.eval_freq = eval_freq
         self.seed = seed
         self.history = history
         self.on_result = on_result
         self.clock = clock
-        self._next = None
 
     def _init_callback(self) -> None:
-        done = self.history[-1]["timesteps"] if self.history else 0
-        self._next = (done // self.eval_freq + 1) * self.eval_freq if self.eval_freq > 0 else None
+        self._start_after(self.history[-1]["timesteps"] if self.history else 0)  # a resumed run goes on
 
-    def _on_step(self) -> bool:
-        if self._next is not None and self.num_timesteps >= self._next:
-            while self._next <= self.num_timesteps:
-                self._next += self.eval_freq
-            self.evaluate()
-        return True
+    def _fire(self) -> None:
+        self.evaluate()
 
     def evaluate(self) -> dict:
         """Evaluate now, record and return the result."""
@@ -151,22 +167,15 @@ class PeriodicEvaluation(BaseCallback):
         return result
 
 
-class PeriodicCheckpoint(BaseCallback):
+class PeriodicCheckpoint(_Periodic):
     """Call ``save()`` each time the step counter passes a multiple of ``checkpoint_freq``."""
 
     def __init__(self, checkpoint_freq: int, save: Callable[[], None]):
-        super().__init__()
-        self.checkpoint_freq = checkpoint_freq
+        super().__init__(checkpoint_freq)
         self.save = save
-        self._next = None
 
     def _init_callback(self) -> None:
-        f = self.checkpoint_freq
-        self._next = (self.num_timesteps // f + 1) * f if f > 0 else None
+        self._start_after(self.num_timesteps)
 
-    def _on_step(self) -> bool:
-        if self._next is not None and self.num_timesteps >= self._next:
-            while self._next <= self.num_timesteps:
-                self._next += self.checkpoint_freq
-            self.save()
-        return True
+    def _fire(self) -> None:
+        self.save()

@@ -242,7 +242,7 @@ class PlanarLegStanceEnv(gym.Env):
                 raise ValueError(f"unknown reset option(s) {sorted(options)}; valid: {list(_RESET_OPTIONS)}")
             q, qd, anchor = reset_state(self.np_random, self.params, self.config, self.nominal)
         self._start(q, qd, anchor)
-        info = self._info()
+        info = self._info(self._out_row.tolist(), self._flag_row.tolist())
         if self.render_mode == "human":
             self.render()
         return self._obs[0].copy(), info
@@ -252,26 +252,17 @@ class PlanarLegStanceEnv(gym.Env):
         self._action_row[0] = a0
         self._action_row[1] = a1
         step_batch(*self._kernel_args)
-        # one conversion each for the float and the bool outputs
-        lam_x, lam_y, alive, drift, unilateral, friction, ctrl, base_drift, foot_error, normal_force = self._out_row.tolist()
-        terminated, unilateral_violation, friction_violation, failure = self._flag_row.tolist()
-        info = {
-            "contact_force": np.array((lam_x, lam_y)),
-            "normal_force": normal_force,
-            "unilateral_violation": unilateral_violation,
-            "friction_violation": friction_violation,
-            "numerical_failure": failure,
-            "base_drift": base_drift,
-            "foot_error": foot_error,
-            "reward_alive": alive,
-            "reward_drift": drift,
-            "reward_unilateral": unilateral,
-            "reward_friction": friction,
-            "reward_ctrl": ctrl,
-        }
+        out, flags = self._out_row.tolist(), self._flag_row.tolist()  # one conversion each serves every key
+        alive, drift, unilateral, friction, ctrl = out[OUT_TERMS]
+        info = self._info(out, flags)
+        info["reward_alive"] = alive
+        info["reward_drift"] = drift
+        info["reward_unilateral"] = unilateral
+        info["reward_friction"] = friction
+        info["reward_ctrl"] = ctrl
         if self.render_mode == "human":
             self.render()
-        return self._obs_row.copy(), alive + drift + unilateral + friction + ctrl, terminated, False, info
+        return self._obs_row.copy(), alive + drift + unilateral + friction + ctrl, flags[0], False, info
 
     def render(self):
         if self.render_mode is None:
@@ -324,11 +315,13 @@ class PlanarLegStanceEnv(gym.Env):
         self._anchor[0] = anchor
         start_batch(*self._kernel_args)
 
-    def _info(self) -> dict:
-        _, unilateral, friction, failure = self._flag_row.tolist()
-        base_drift, foot_error, normal_force = self._extra[0].tolist()
+    def _info(self, out: list, flags: list) -> dict:
+        """The state keys of ``info`` from the output row and the flags, each as one ``tolist()``."""
+        _, unilateral, friction, failure = flags
+        lam_x, lam_y = out[OUT_LAM]
+        base_drift, foot_error, normal_force = out[OUT_EXTRA]
         return {
-            "contact_force": self._lam[0].copy(),
+            "contact_force": np.array((lam_x, lam_y)),
             "normal_force": normal_force,
             "unilateral_violation": unilateral,
             "friction_violation": friction,

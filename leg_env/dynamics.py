@@ -585,3 +585,34 @@ def static_equilibrium(p: LegParams, knee: float = 0.8) -> tuple[np.ndarray, np.
     # M qdd + G = S^T tau + Jc^T lam with qdd = 0, read on the actuated rows
     tau = G[3:] - (Jc.T @ lam)[3:]
     return q, tau, lam
+
+
+# The unilateral contact (modes, slip, impact map, Painleve bound) lives in leg_env.contact and is
+# re-exported here, the one place users look for the dynamics.
+from .contact import (  # noqa: E402
+    FLIGHT,
+    MODE_NAMES,
+    REST_SPEED,
+    SLIP_BACKWARD,
+    SLIP_FORWARD,
+    STICK,
+    contact_mode,
+    free_foot_acceleration,
+    impact_map,
+    mu_critical,
+    slip_dynamics,
+)
+
+__all__ += [
+    "STICK",
+    "SLIP_FORWARD",
+    "SLIP_BACKWARD",
+    "FLIGHT",
+    "MODE_NAMES",
+    "REST_SPEED",
+    "slip_dynamics",
+    "impact_map",
+    "contact_mode",
+    "mu_critical",
+    "free_foot_acceleration",
+]

@@ -587,23 +587,10 @@ def static_equilibrium(p: LegParams, knee: float = 0.8) -> tuple[np.ndarray, np.
     return q, tau, lam
 
 
-# The unilateral contact (modes, slip, impact map, Painleve bound) lives in leg_env.contact and is
-# re-exported here, the one place users look for the dynamics.
-from .contact import (  # noqa: E402
-    FLIGHT,
-    MODE_NAMES,
-    REST_SPEED,
-    SLIP_BACKWARD,
-    SLIP_FORWARD,
-    STICK,
-    contact_mode,
-    free_foot_acceleration,
-    impact_map,
-    mu_critical,
-    slip_dynamics,
-)
 
-__all__ += [
+# The unilateral contact (modes, slip, impact map, Painleve bound) lives in leg_env.contact and is
+# re-exported here, the one place users look for the dynamics (lazily: leg_env.contact imports this module).
+_CONTACT_NAMES = (
     "STICK",
     "SLIP_FORWARD",
     "SLIP_BACKWARD",
@@ -615,4 +602,13 @@ __all__ += [
     "contact_mode",
     "mu_critical",
     "free_foot_acceleration",
-]
+)
+__all__ += list(_CONTACT_NAMES)
+
+
+def __getattr__(name: str):
+    if name in _CONTACT_NAMES:
+        from . import contact
+
+        return getattr(contact, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

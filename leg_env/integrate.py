@@ -30,6 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
+from .contact import FLIGHT, SLIP_BACKWARD, SLIP_FORWARD, STICK, _slip_core
 from .dynamics import _F64, NQ, NU, _batched, _flight_core, _single_robot, _stance_core, _vec, params_array
 from .params import LegParams
 
@@ -61,10 +62,10 @@ def _project_one(q, qd, p, anchor):
 
 
 @njit(cache=True, inline="always")
-def _substeps_for(qd, dt, substeps, max_angle):
-    """RK4 steps for this control step: at least ``substeps``, and enough that no link
-    turns, and no joint moves, by more than ``max_angle`` per RK4 step at the current rates."""
-    w = max(abs(qd[2]), abs(qd[3]), abs(qd[4]), abs(qd[2] + qd[3]), abs(qd[2] + qd[3] + qd[4]))
+def _substeps_for_rates(va, vb, vc, dt, substeps, max_angle):
+    """RK4 steps for a control step of length ``dt``: at least ``substeps``, and enough that no link
+    turns, and no joint moves, by more than ``max_angle`` per RK4 step at the rates ``th_b', q1', q2'``."""
+    w = max(abs(va), abs(vb), abs(vc), abs(va + vb), abs(va + vb + vc))
     need = w * dt / max_angle
     if need > substeps:
         if need > 4096.0:  # infinite or absurd rates: cap the work, the caller flags the state
@@ -74,12 +75,20 @@ def _substeps_for(qd, dt, substeps, max_angle):
 
 
 @njit(cache=True, inline="always")
-def _accel(stance, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
-    """``(qdd[0..4], lam_x, lam_y)`` of the stance model, or of flight with ``lam = 0``."""
-    if stance:
+def _substeps_for(qd, dt, substeps, max_angle):
+    """``_substeps_for_rates`` at the velocity ``qd``."""
+    return _substeps_for_rates(qd[2], qd[3], qd[4], dt, substeps, max_angle)
+
+
+@njit(cache=True, inline="always")
+def _accel(mode, mu, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
+    """``(qdd[0..4], lam_x, lam_y)`` of the contact mode ``mode`` (``leg_env.contact``'s constants)."""
+    if mode == STICK:
         return _stance_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p)
-    xdd, ydd, thbdd, q1dd, q2dd = _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p)
-    return xdd, ydd, thbdd, q1dd, q2dd, 0.0, 0.0
+    if mode == FLIGHT:
+        xdd, ydd, thbdd, q1dd, q2dd = _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p)
+        return xdd, ydd, thbdd, q1dd, q2dd, 0.0, 0.0
+    return _slip_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, mu, 1.0 if mode == SLIP_FORWARD else -1.0, p)
 
 
 # Taylor coefficients of sin(d) and cos(d) - 1, for |d| <= _TURN_MAX: the first omitted terms,
@@ -109,6 +118,76 @@ def _turn(s, c, d):
 
 
 @njit(cache=True, inline="always")
+def _rk4_substep(mode, mu, anchor, X, k1, h, t_hip, t_knee, p, lx, ly):
+    """One classical RK4 step of length ``h`` in contact mode ``mode``, then the mode's projection.
+
+    ``X = (x, y, a, b, c, vx, vy, va, vb, vc, s1, co1, s2, co2)``: ``q``, ``qd`` and the sines/cosines
+    of ``th1 = a + b`` and ``th2 = th1 + c``; ``k1`` the accelerations and force at ``X`` (``_accel``).
+    The dynamics depend only on the link angles through their sines/cosines, and on their rates:
+    every stage turns the sines/cosines by its angle increment (``_turn``), and the trigonometry after
+    the step serves the projection and the next step's first stage. The projection keeps the foot on
+    its contact: at ``anchor`` with ``Jc qd = 0`` in stick, on the line ``y = anchor[1]`` with zero normal
+    velocity in slip (coordinate partitioning: only the base moves); none in flight.
+
+    Returns ``(X_next, lx, ly, power)``: ``lx, ly`` are the inputs plus the RK4-weighted stage force
+    ``sum_k w_k lam_k`` (``h`` times it is the contact impulse of the step), ``power`` the RK4-weighted
+    dissipated power of friction, ``sum_k w_k (-lam_x x_f')_k`` (slip only, else 0).
+    """
+    x, y, a, b, c, vx, vy, va, vb, vc, s1, co1, s2, co2 = X
+    ax1, ay1, aa1, ab1, ac1, lx1, ly1 = k1
+    ch = _RK4_C[1] * h  # stage offsets: h/2, h/2, h
+    W0, W1 = _RK4_W[0], _RK4_W[1]  # weights 1/6, 2/6, 2/6, 1/6
+    w1, w2 = va + vb, va + vb + vc
+    # stage 2: y0 + h/2 k1
+    vx2, vy2, va2, vb2, vc2 = vx + ch * ax1, vy + ch * ay1, va + ch * aa1, vb + ch * ab1, vc + ch * ac1
+    S1, C1 = _turn(s1, co1, ch * w1)
+    S2, C2 = _turn(s2, co2, ch * w2)
+    w1_2, w2_2 = va2 + vb2, va2 + vb2 + vc2
+    ax2, ay2, aa2, ab2, ac2, lx2, ly2 = _accel(mode, mu, S1, C1, S2, C2, w1_2, w2_2, t_hip, t_knee, p)
+    power = 0.0
+    if mode == SLIP_FORWARD or mode == SLIP_BACKWARD:
+        l1, l2 = p[6], p[7]
+        power = W0 * -lx1 * (vx - l1 * s1 * w1 - l2 * s2 * w2) + W1 * -lx2 * (vx2 - l1 * S1 * w1_2 - l2 * S2 * w2_2)
+    # stage 3: y0 + h/2 k2
+    vx3, vy3, va3, vb3, vc3 = vx + ch * ax2, vy + ch * ay2, va + ch * aa2, vb + ch * ab2, vc + ch * ac2
+    S1, C1 = _turn(s1, co1, ch * w1_2)
+    S2, C2 = _turn(s2, co2, ch * w2_2)
+    w1_3, w2_3 = va3 + vb3, va3 + vb3 + vc3
+    ax3, ay3, aa3, ab3, ac3, lx3, ly3 = _accel(mode, mu, S1, C1, S2, C2, w1_3, w2_3, t_hip, t_knee, p)
+    if mode == SLIP_FORWARD or mode == SLIP_BACKWARD:
+        power += W1 * -lx3 * (vx3 - p[6] * S1 * w1_3 - p[7] * S2 * w2_3)
+    # stage 4: y0 + h k3
+    vx4, vy4, va4, vb4, vc4 = vx + h * ax3, vy + h * ay3, va + h * aa3, vb + h * ab3, vc + h * ac3
+    S1, C1 = _turn(s1, co1, h * w1_3)
+    S2, C2 = _turn(s2, co2, h * w2_3)
+    ax4, ay4, aa4, ab4, ac4, lx4, ly4 = _accel(mode, mu, S1, C1, S2, C2, va4 + vb4, va4 + vb4 + vc4, t_hip, t_knee, p)
+    if mode == SLIP_FORWARD or mode == SLIP_BACKWARD:
+        power += W0 * -lx4 * (vx4 - p[6] * S1 * (va4 + vb4) - p[7] * S2 * (va4 + vb4 + vc4))
+    # y1 = y0 + h (k1 + 2 k2 + 2 k3 + k4) / 6
+    da = h * (W0 * va + W1 * va2 + W1 * va3 + W0 * va4)
+    db = h * (W0 * vb + W1 * vb2 + W1 * vb3 + W0 * vb4)
+    dc = h * (W0 * vc + W1 * vc2 + W1 * vc3 + W0 * vc4)
+    x = x + h * (W0 * vx + W1 * vx2 + W1 * vx3 + W0 * vx4)
+    y = y + h * (W0 * vy + W1 * vy2 + W1 * vy3 + W0 * vy4)
+    a, b, c = a + da, b + db, c + dc
+    vx = vx + h * (W0 * ax1 + W1 * ax2 + W1 * ax3 + W0 * ax4)
+    vy = vy + h * (W0 * ay1 + W1 * ay2 + W1 * ay3 + W0 * ay4)
+    va = va + h * (W0 * aa1 + W1 * aa2 + W1 * aa3 + W0 * aa4)
+    vb = vb + h * (W0 * ab1 + W1 * ab2 + W1 * ab3 + W0 * ab4)
+    vc = vc + h * (W0 * ac1 + W1 * ac2 + W1 * ac3 + W0 * ac4)
+    lx = lx + W0 * lx1 + W1 * lx2 + W1 * lx3 + W0 * lx4
+    ly = ly + W0 * ly1 + W1 * ly2 + W1 * ly3 + W0 * ly4
+    s1, co1 = _turn(s1, co1, da + db)
+    s2, co2 = _turn(s2, co2, da + db + dc)
+    if mode == STICK:  # the projection, on the trigonometry just computed
+        x, y, vx, vy = _project_core(s1, co1, s2, co2, va + vb, va + vb + vc, anchor, p)
+    elif mode != FLIGHT:  # slip: the foot on the ground line, its normal velocity zero
+        y = anchor[1] - p[6] * s1 - p[7] * s2
+        vy = -(p[6] * co1 * (va + vb) + p[7] * co2 * (va + vb + vc))
+    return (x, y, a, b, c, vx, vy, va, vb, vc, s1, co1, s2, co2), lx, ly, power
+
+
+@njit(cache=True, inline="always")
 def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
     """One control step of RK4 on one robot, in place (``_rk4_from`` at the state's own trigonometry)."""
     th1 = q[2] + q[3]
@@ -129,52 +208,16 @@ def _rk4_from(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean, 
     """
     n = _substeps_for(qd, dt, substeps, max_angle)
     h = dt / n
-    ch = _RK4_C[1] * h  # stage offsets: h/2, h/2, h
-    W0, W1 = _RK4_W[0], _RK4_W[1]  # weights 1/6, 2/6, 2/6, 1/6
+    mode = STICK if stance else FLIGHT
     t_hip, t_knee = tau[0], tau[1]
-    x, y, a, b, c = q[0], q[1], q[2], q[3], q[4]
-    vx, vy, va, vb, vc = qd[0], qd[1], qd[2], qd[3], qd[4]
+    X = (q[0], q[1], q[2], q[3], q[4], qd[0], qd[1], qd[2], qd[3], qd[4], s1, co1, s2, co2)
     lx = 0.0
     ly = 0.0
     for _ in range(n):
-        # stage 1 at the current state
-        w1, w2 = va + vb, va + vb + vc
-        ax1, ay1, aa1, ab1, ac1, lx1, ly1 = _accel(stance, s1, co1, s2, co2, w1, w2, t_hip, t_knee, p)
-        # stage 2: y0 + h/2 k1
-        vx2, vy2, va2, vb2, vc2 = vx + ch * ax1, vy + ch * ay1, va + ch * aa1, vb + ch * ab1, vc + ch * ac1
-        S1, C1 = _turn(s1, co1, ch * w1)
-        S2, C2 = _turn(s2, co2, ch * w2)
-        w1_2, w2_2 = va2 + vb2, va2 + vb2 + vc2
-        ax2, ay2, aa2, ab2, ac2, lx2, ly2 = _accel(stance, S1, C1, S2, C2, w1_2, w2_2, t_hip, t_knee, p)
-        # stage 3: y0 + h/2 k2
-        vx3, vy3, va3, vb3, vc3 = vx + ch * ax2, vy + ch * ay2, va + ch * aa2, vb + ch * ab2, vc + ch * ac2
-        S1, C1 = _turn(s1, co1, ch * w1_2)
-        S2, C2 = _turn(s2, co2, ch * w2_2)
-        w1_3, w2_3 = va3 + vb3, va3 + vb3 + vc3
-        ax3, ay3, aa3, ab3, ac3, lx3, ly3 = _accel(stance, S1, C1, S2, C2, w1_3, w2_3, t_hip, t_knee, p)
-        # stage 4: y0 + h k3
-        vx4, vy4, va4, vb4, vc4 = vx + h * ax3, vy + h * ay3, va + h * aa3, vb + h * ab3, vc + h * ac3
-        S1, C1 = _turn(s1, co1, h * w1_3)
-        S2, C2 = _turn(s2, co2, h * w2_3)
-        ax4, ay4, aa4, ab4, ac4, lx4, ly4 = _accel(stance, S1, C1, S2, C2, va4 + vb4, va4 + vb4 + vc4, t_hip, t_knee, p)
-        # y1 = y0 + h (k1 + 2 k2 + 2 k3 + k4) / 6
-        da = h * (W0 * va + W1 * va2 + W1 * va3 + W0 * va4)
-        db = h * (W0 * vb + W1 * vb2 + W1 * vb3 + W0 * vb4)
-        dc = h * (W0 * vc + W1 * vc2 + W1 * vc3 + W0 * vc4)
-        x = x + h * (W0 * vx + W1 * vx2 + W1 * vx3 + W0 * vx4)
-        y = y + h * (W0 * vy + W1 * vy2 + W1 * vy3 + W0 * vy4)
-        a, b, c = a + da, b + db, c + dc
-        vx = vx + h * (W0 * ax1 + W1 * ax2 + W1 * ax3 + W0 * ax4)
-        vy = vy + h * (W0 * ay1 + W1 * ay2 + W1 * ay3 + W0 * ay4)
-        va = va + h * (W0 * aa1 + W1 * aa2 + W1 * aa3 + W0 * aa4)
-        vb = vb + h * (W0 * ab1 + W1 * ab2 + W1 * ab3 + W0 * ab4)
-        vc = vc + h * (W0 * ac1 + W1 * ac2 + W1 * ac3 + W0 * ac4)
-        lx = lx + W0 * lx1 + W1 * lx2 + W1 * lx3 + W0 * lx4
-        ly = ly + W0 * ly1 + W1 * ly2 + W1 * ly3 + W0 * ly4
-        s1, co1 = _turn(s1, co1, da + db)
-        s2, co2 = _turn(s2, co2, da + db + dc)
-        if stance:  # the projection, on the trigonometry just computed
-            x, y, vx, vy = _project_core(s1, co1, s2, co2, va + vb, va + vb + vc, anchor, p)
+        w1, w2 = X[7] + X[8], X[7] + X[8] + X[9]
+        k1 = _accel(mode, 0.0, X[10], X[11], X[12], X[13], w1, w2, t_hip, t_knee, p)
+        X, lx, ly, _ = _rk4_substep(mode, 0.0, anchor, X, k1, h, t_hip, t_knee, p, lx, ly)
+    x, y, a, b, c, vx, vy, va, vb, vc = X[0], X[1], X[2], X[3], X[4], X[5], X[6], X[7], X[8], X[9]
     q[0], q[1], q[2], q[3], q[4] = x, y, a, b, c
     qd[0], qd[1], qd[2], qd[3], qd[4] = vx, vy, va, vb, vc
     lam_mean[0] = lx / n

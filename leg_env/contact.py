@@ -179,7 +179,7 @@ def _impulse_velocity(s1, co1, s2, co2, B1x, B1y, B2x, B2y, Px, Py, p):
     return (Px + a * s1 * dw1 + b * s2 * dw2) / m, (Py - a * co1 * dw1 - b * co2 * dw2) / m, 0.0, dw1, dw2 - dw1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _impact_core(vfx, vfy, mu, Lxx, Lxy, Lyy):
     """Plastic (``e = 0``) foot impulse ``(Px, Py, status)`` for the foot velocity ``v_f-``.
 
@@ -218,7 +218,7 @@ def _impact_core(vfx, vfy, mu, Lxx, Lxy, Lyy):
     return -sigma * mu * p1 - s2 * mu * p2, p1 + p2, IMPACT_SLIDE
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _mode_at_rest(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, mu, p, exclude):
     """The consistent mode of a foot at rest on the ground, by enumeration; returns ``(mode, painleve)``.
 
@@ -251,7 +251,7 @@ def _mode_at_rest(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, mu, p, exclude):
     return STICK, True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _mode_sliding(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, mu, sigma, p):
     """Mode of a foot sliding on the ground in direction ``sigma``: ``(mode, painleve)``.
 

@@ -192,6 +192,28 @@ def _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
 
 
 @njit(cache=True, inline="always")
+def _energy_core(s1, co1, s2, co2, y_b, vx, vy, w_b, w1, w2, p):
+    """Mechanical energy ``T + V`` [J] from the link trigonometry, base height and velocity, and rates.
+
+    By Koenig's theorem ``T = m |v_com|^2 / 2 + I_b th_b'^2 / 2 + theta'^T K theta' / 2``, ``K`` the flight
+    inertia of the leg angles ``theta = (th1, th2)`` about the COM (``_flight_core``); ``V = m g y_com``.
+    """
+    m_b, m1, m2, I_b, I1, I2 = p[0], p[1], p[2], p[3], p[4], p[5]
+    l1, c1, c2, g = p[6], p[8], p[9], p[10]
+    m = m_b + m1 + m2
+    a = m1 * c1 + m2 * l1
+    b = m2 * c2
+    kf = m2 * l1 * c2 - a * b / m
+    K11 = I1 + m1 * c1 * c1 + m2 * l1 * l1 - a * a / m
+    K22 = I2 + m2 * c2 * c2 - b * b / m
+    K12 = kf * (co1 * co2 + s1 * s2)
+    vcx = vx - (a * s1 * w1 + b * s2 * w2) / m
+    vcy = vy + (a * co1 * w1 + b * co2 * w2) / m
+    T = 0.5 * (m * (vcx * vcx + vcy * vcy) + I_b * w_b * w_b + K11 * w1 * w1 + 2.0 * K12 * w1 * w2 + K22 * w2 * w2)
+    return T + g * (m * y_b + a * s1 + b * s2)
+
+
+@njit(cache=True, inline="always")
 def _stance_one(q, qd, tau, p, qdd, lam):
     """Stance KKT solve for one robot; writes ``qdd`` (5,) and ``lam`` (2,)."""
     th1 = q[2] + q[3]

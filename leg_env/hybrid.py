@@ -202,7 +202,7 @@ def _watched(kind, settled, events):
 # ---------------------------------------------------------------- reset maps and mode choice
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _kick(X, Px, Py, p, acc):
     """Apply the foot impulse ``P`` to ``X``'s velocity; book it and the kinetic energy it removes."""
     s1, co1, s2, co2 = X[10], X[11], X[12], X[13]
@@ -217,7 +217,7 @@ def _kick(X, Px, Py, p, acc):
     return X
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _stop_foot(X, p, acc):
     """The sticking impulse ``-Lambda^-1 v_f``: the foot at rest."""
     Lxx, Lxy, Lyy, _, _, _, _, _, _, _, _ = _foot_response(X[10], X[11], X[12], X[13], p)
@@ -226,7 +226,7 @@ def _stop_foot(X, p, acc):
     return _kick(X, Px, Py, p, acc)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _choose_mode(mode, X, anchor, t_hip, t_knee, mu, p, exclude, settled, acc):
     """The consistent mode at ``X`` (module docstring); applies the impulses it needs.
 
@@ -271,7 +271,7 @@ def _choose_mode(mode, X, anchor, t_hip, t_knee, mu, p, exclude, settled, acc):
     return new, X
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _locate(mode, mu, X, k, h, X1, k1, lx1, ly1, pw1, t_hip, t_knee, anchor, p, watch_a, watch_b):
     """Earliest crossing of the watched witnesses inside the substep ``X -> X1`` of length ``h``.
 
@@ -312,7 +312,7 @@ def _locate(mode, mu, X, k, h, X1, k1, lx1, ly1, pw1, t_hip, t_knee, anchor, p, 
     return b, Xb, kb, lxb, lyb, pwb, kind_a
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _transition(kind, mode, X, anchor, t_hip, t_knee, mu, p, settled, acc):
     """The reset map of event ``kind`` at ``X`` (just past it), then the mode choice; returns ``(mode, X, settled)``."""
     if kind == TOUCHDOWN:
@@ -342,7 +342,7 @@ def _book(mode, h, X0, X1, lx, ly, power, p, acc):
         acc[ACC_SLIP_DISSIPATION] += h * power
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _hybrid_from(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, s1, co1, s2, co2, acc, log_t, log_k):
     """One hybrid control step of one robot, in place; returns the mode at its end.
 

@@ -10,6 +10,11 @@ friction cone (faint), the shank, the thigh, the torso (a schematic box centred 
 turned by ``th_b``), the joints, the whole-body centre of mass, and the ground's force on the foot
 as an arrow (the robot's weight is drawn as ``0.5 (l1 + l2)``), green while the force is
 feasible and red when a contact constraint is violated (``lam_y < 0`` or outside the cone).
+
+On the unilateral ground (``mode`` given) the foot shows its contact mode: a green disc in stick, an
+orange disc with an arrow along the sliding direction in slip, a hollow blue ring in flight (with a
+dashed line down to the ground); the friction cone is drawn only in contact. A step with an impact
+draws a yellow burst at the foot whose size grows with the impulse.
 """
 
 from __future__ import annotations
@@ -35,6 +40,9 @@ OUTLINE = (25, 25, 30)
 COM = (230, 150, 20)
 FEASIBLE = (30, 160, 60)
 VIOLATED = (215, 35, 35)
+SLIPPING = (235, 130, 20)
+FLYING = (40, 120, 220)
+BURST = (250, 200, 30)
 
 
 def _pygame():
@@ -90,7 +98,7 @@ def _arrow(pygame, surface, start, end, colour, width_px: int) -> None:
     pygame.draw.polygon(surface, colour, [(ex, ey), (bx - half * uy, by + half * ux), (bx + half * uy, by - half * ux)])
 
 
-def _paint(pygame, surface, q, anchor, lam, params: LegParams, violated: bool, mu: float | None) -> None:
+def _paint(pygame, surface, q, anchor, lam, params: LegParams, violated: bool, mu: float | None, mode=None, impulse=None) -> None:
     """Paint one frame of the robot on ``surface`` (see the module docstring)."""
     width, height = surface.get_size()
     p = params
@@ -109,7 +117,8 @@ def _paint(pygame, surface, q, anchor, lam, params: LegParams, violated: bool, m
     pygame.draw.line(surface, GROUND_LINE, (0, round(ground_y)), (width, round(ground_y)), 3)
 
     contact = camera(float(anchor[0]), float(anchor[1]))
-    if mu is not None and mu > 0.0:  # friction cone: the feasible force directions
+    flying = mode is not None and int(mode) == 3
+    if mu is not None and mu > 0.0 and not flying:  # friction cone: the feasible force directions
         r = 0.45 * leg
         for side in (-1.0, 1.0):
             s = side * mu / math.hypot(1.0, mu)
@@ -130,6 +139,10 @@ def _paint(pygame, surface, q, anchor, lam, params: LegParams, violated: bool, m
     _disc(pygame, surface, camera(*hip), joint_px, JOINT)
     _disc(pygame, surface, camera(*knee), joint_px, JOINT)
     _disc(pygame, surface, camera(*foot), 0.7 * joint_px, OUTLINE)
+    if mode is not None:
+        _contact_mode_marker(pygame, surface, camera, foot, float(anchor[1]), int(mode), joint_px)
+    if impulse is not None and math.hypot(float(impulse[0]), float(impulse[1])) > 0.0:
+        _burst(pygame, surface, camera(*foot), math.hypot(float(impulse[0]), float(impulse[1])) / max(p.total_mass, 1e-9), joint_px)
 
     # whole-body centre of mass
     m = p.total_mass
@@ -151,7 +164,40 @@ def _paint(pygame, surface, q, anchor, lam, params: LegParams, violated: bool, m
         _arrow(pygame, surface, camera(*foot), tip, VIOLATED if violated else FEASIBLE, max(3, round(0.012 * height)))
 
 
-def draw(q, anchor, lam, params: LegParams, violated: bool = False, width: int = 480, height: int = 480, mu: float | None = None) -> np.ndarray:
+def _contact_mode_marker(pygame, surface, camera, foot, ground: float, mode: int, joint_px: float) -> None:
+    """The foot's contact mode: 0 stick, 1 / 2 slip forward / backward, 3 flight (``leg_env.contact``)."""
+    centre = camera(*foot)
+    r = max(4, round(1.1 * joint_px))
+    c = (round(centre[0]), round(centre[1]))
+    if mode == 3:
+        pygame.draw.circle(surface, FLYING, c, r, 3)
+        gx, gy = camera(foot[0], ground)
+        y = centre[1] + r
+        while y < gy:  # a dashed drop line to the ground
+            pygame.draw.line(surface, FLYING, (gx, y), (gx, min(gy, y + 6)), 2)
+            y += 12
+        return
+    pygame.draw.circle(surface, FEASIBLE if mode == 0 else SLIPPING, c, r)
+    pygame.draw.circle(surface, OUTLINE, c, r, 2)
+    if mode in (1, 2):
+        side = 1.0 if mode == 1 else -1.0
+        _arrow(pygame, surface, (c[0] + side * r, c[1] + r), (c[0] + side * 4 * r, c[1] + r), SLIPPING, 3)
+
+
+def _burst(pygame, surface, centre, speed_change: float, joint_px: float) -> None:
+    """An impact: yellow rays around the foot, longer for a larger impulse (``speed_change = |P| / m`` [m/s])."""
+    length = joint_px * (1.5 + 4.0 * min(1.0, speed_change))
+    for k in range(8):
+        a = k * math.pi / 4.0
+        start = (centre[0] + 0.8 * joint_px * math.cos(a), centre[1] + 0.8 * joint_px * math.sin(a))
+        end = (centre[0] + length * math.cos(a), centre[1] + length * math.sin(a))
+        pygame.draw.line(surface, BURST, start, end, 3)
+
+
+def draw(
+    q, anchor, lam, params: LegParams, violated: bool = False, width: int = 480, height: int = 480, mu: float | None = None,
+    mode: int | None = None, impulse=None,
+) -> np.ndarray:  # fmt: skip
     """One frame of the robot, off-screen (no display needed).
 
     Args:
@@ -162,13 +208,15 @@ def draw(q, anchor, lam, params: LegParams, violated: bool = False, width: int =
         violated: draw the force red (a contact constraint is violated) instead of green.
         width, height: frame size in pixels.
         mu: friction coefficient; if given, the friction cone is drawn at the contact point.
+        mode: the contact mode on the unilateral ground (``leg_env.contact`` constants), or None (pinned).
+        impulse: ``(2,)`` impact impulse of the last step [N s] (a burst is drawn if it is not zero).
 
     Returns:
         ``(height, width, 3)`` uint8 RGB frame.
     """
     pygame = _pygame()
     surface = pygame.Surface((int(width), int(height)))
-    _paint(pygame, surface, q, anchor, lam, params, violated, mu)
+    _paint(pygame, surface, q, anchor, lam, params, violated, mu, mode, impulse)
     return np.ascontiguousarray(np.transpose(pygame.surfarray.array3d(surface), (1, 0, 2)))
 
 
@@ -183,10 +231,10 @@ class Viewer:
         self.clock = pygame.time.Clock()
         self.fps = fps
 
-    def show(self, q, anchor, lam, params: LegParams, violated: bool = False, mu: float | None = None) -> None:
-        """Draw the robot in the window and wait for the next frame time."""
+    def show(self, q, anchor, lam, params: LegParams, violated: bool = False, mu: float | None = None, mode=None, impulse=None) -> None:
+        """Draw the robot in the window (arguments of ``draw``) and wait for the next frame time."""
         pygame = self._pygame
-        _paint(pygame, self.screen, q, anchor, lam, params, violated, mu)
+        _paint(pygame, self.screen, q, anchor, lam, params, violated, mu, mode, impulse)
         pygame.event.pump()
         pygame.display.flip()
         self.clock.tick(self.fps)

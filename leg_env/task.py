@@ -32,7 +32,14 @@ import numba
 import numpy as np
 from numba import njit
 
-from .dynamics import _stance_one, static_equilibrium
+from .contact import FLIGHT, MODE_NAMES, SLIP_BACKWARD, SLIP_FORWARD, STICK, _foot_velocity
+from .dynamics import _energy_core, _stance_one, static_equilibrium
+from .hybrid import (
+    ACC_DIM, ACC_EVENTS, ACC_FLIGHT_TIME, ACC_IMPACT_DISSIPATION, ACC_IMPULSE_X, ACC_IMPULSE_Y, ACC_KICK_X, ACC_KICK_Y,
+    ACC_PAINLEVE, ACC_SETTLES, ACC_SLIP_DISSIPATION, ACC_SLIP_DISTANCE, ACC_SLIP_TIME, ACC_STICK_TIME, ACC_WORK, GROUND_TOL,
+    LOG_SIZE,
+    _choose_mode, _derivative, _hybrid_from,
+)  # fmt: skip
 from .integrate import MAX_ANGLE, SUBSTEPS, DT, _project_one, _rk4_from
 from .params import LegParams
 
@@ -55,26 +62,52 @@ __all__ = [
     "reset_states",
     "starts_from_noise",
     "BitGeneratorRows",
+    "OBS_DIM_UNILATERAL",
+    "CONTACT_MODELS",
+    "DEFAULT_MU",
+    "UNILATERAL_KEYS",
+    "unilateral_info",
+    "unilateral_columns",
 ]
 
 OBS_DIM = 12
+OBS_DIM_UNILATERAL = 18  # the pinned observation and the foot's height, velocity, contact, slip and impulse
+CONTACT_MODELS = ("pinned", "unilateral")
+DEFAULT_MU = {"pinned": 0.8, "unilateral": 0.5}
+"""Default friction coefficient per contact model. Pinned: the cone of the violation check (as in v0).
+Unilateral: 0.5, below the Painleve bound ``mu_critical`` everywhere in the joint box at the default
+parameters (its minimum there is about 0.52; 0.8 would leave about 8% of postures past it), so
+sliding is always well posed and the Painleve rule stays a fallback."""
 REWARD_TERMS = ("alive", "drift", "unilateral", "friction", "ctrl")
 FLAG_NAMES = ("terminated", "unilateral_violation", "friction_violation", "numerical_failure")
 INFO_NAMES = ("base_drift", "foot_error", "normal_force")
+HYBRID_NAMES = ("energy", "foot_height")  # unilateral extras after the step's accumulators (leg_env.hybrid.ACC_*)
+UNILATERAL_KEYS = (
+    "contact_mode", "foot_height", "impulse", "stick_time", "slip_time", "flight_time", "slip_distance",
+    "work_actuators", "dissipation_slip", "dissipation_impacts", "energy", "contact_events", "painleve_fallbacks",
+    "zeno_settles",
+)  # fmt: skip
+"""``info`` keys of the unilateral contact model, after ``reset`` and ``step`` (``unilateral_info``)."""
 
 # The kernels take five arrays, so that a call from Python costs little to dispatch:
-#   state (N, STATE_DIM) float64: q | qd | anchor | action | trig   (columns STATE_Q, STATE_QD, ...);
+#   state (N, STATE_DIM) float64: q | qd | anchor | action | trig | mode  (columns STATE_Q, STATE_QD, ...);
 #       trig = sin th1, cos th1, sin th2, cos th2 of q, written by the kernels that write q (start_batch,
 #       step_batch) and read by the next step: callers change q only through start_batch
 #   consts (CONSTS_DIM,) float64: LegParams.array | StanceConfig.array() | q_nom | tau_nom (task_constants)
+#       mode: the contact mode (leg_env.contact constants; unilateral model only), as a float
 #   out (N, OUT_DIM) float64: lam | reward terms (REWARD_TERMS order) | extras (INFO_NAMES order)
-#   obs (N, OBS_DIM) float32, flags (N, len(FLAG_NAMES)) bool
-_QD0, _ANCHOR0, _ACTION0, _TRIG0, STATE_DIM = 5, 10, 12, 14, 18  # first columns of qd, anchor, action, trig; width
+#       | the hybrid step's accumulators (leg_env.hybrid.ACC_*) | HYBRID_NAMES (unilateral model only)
+#   obs (N, OBS_DIM or OBS_DIM_UNILATERAL) float32, flags (N, len(FLAG_NAMES)) bool
+_QD0, _ANCHOR0, _ACTION0, _TRIG0, _MODE0, STATE_DIM = 5, 10, 12, 14, 18, 19  # first columns of qd ... mode; width
 _TERMS0, _EXTRA0 = 2, 2 + len(REWARD_TERMS)  # first columns of the reward terms and the extras
-OUT_DIM = _EXTRA0 + len(INFO_NAMES)
+_ACC0 = _EXTRA0 + len(INFO_NAMES)  # first column of the hybrid accumulators
+_HYB0 = _ACC0 + ACC_DIM
+OUT_DIM = _HYB0 + len(HYBRID_NAMES)
 STATE_Q, STATE_QD, STATE_ANCHOR, STATE_ACTION = slice(0, _QD0), slice(_QD0, _ANCHOR0), slice(_ANCHOR0, _ACTION0), slice(_ACTION0, _TRIG0)
-OUT_LAM, OUT_TERMS, OUT_EXTRA = slice(0, _TERMS0), slice(_TERMS0, _EXTRA0), slice(_EXTRA0, OUT_DIM)
-_NP, _NC = 11, 22  # lengths of LegParams.array and StanceConfig.array()
+STATE_MODE = _MODE0
+OUT_LAM, OUT_TERMS, OUT_EXTRA = slice(0, _TERMS0), slice(_TERMS0, _EXTRA0), slice(_EXTRA0, _ACC0)
+OUT_ACC, OUT_HYBRID = slice(_ACC0, _HYB0), slice(_HYB0, OUT_DIM)
+_NP, _NC = 11, 23  # lengths of LegParams.array and StanceConfig.array()
 _NOM0, _TAU0 = _NP + _NC, _NP + _NC + 5  # first entries of q_nom and tau_nom in consts
 CONSTS_DIM = _TAU0 + 2
 
@@ -100,7 +133,7 @@ class StanceConfig:
     unilateral_weight: float = 10.0  # per unit of max(0, -lam_y) / weight
     friction_weight: float = 10.0  # per unit of max(0, |lam_x| - mu lam_y) / weight
     ctrl_cost_weight: float = 0.01  # per unit of |action|^2
-    mu: float = 0.8  # friction coefficient of the cone check
+    mu: float | None = None  # friction coefficient; None: DEFAULT_MU of the contact model (0.8 pinned, 0.5 unilateral)
     # termination
     min_base_height: float = 0.5  # torso above the contact point [m]
     max_torso_angle: float = 1.0  # |th_b| [rad]
@@ -111,13 +144,21 @@ class StanceConfig:
     max_rate: float = 1.0e3  # any |qd| above this is a numerical failure [m/s, rad/s]
     # reset
     reset_noise_scale: float = 0.01  # uniform noise half-width on (th_b, q1, q2) [rad] and their rates [rad/s]
+    # physics
+    contact: str = "pinned"  # "pinned": the foot is a bilateral pin (v0); "unilateral": exact unilateral contact
 
     def __post_init__(self) -> None:
         def bad(name, why):
             raise ValueError(f"StanceConfig.{name} {why}, got {getattr(self, name)!r}")
 
+        if self.contact not in CONTACT_MODELS:
+            bad("contact", f"must be one of {list(CONTACT_MODELS)}")
+        if self.mu is None:
+            object.__setattr__(self, "mu", DEFAULT_MU[self.contact])
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.name == "contact":
+                continue
             if f.name in ("torque_limit", "hip_range", "knee_range"):
                 if f.name == "torque_limit" and isinstance(v, (int, float, np.floating, np.integer)):
                     v = (v, v)  # one limit for both joints
@@ -208,6 +249,7 @@ class StanceConfig:
                 float(self.terminate_on_contact_loss),
                 self.contact_loss_threshold,
                 self.max_rate,
+                float(self.contact == "unilateral"),
             ],
             dtype=np.float64,
         )
@@ -236,7 +278,8 @@ class StanceConfig:
     _C_TERM_CONTACT,
     _C_CONTACT_THRESH,
     _C_MAX_RATE,
-) = range(22)
+    _C_UNILATERAL,
+) = range(23)
 
 
 @dataclass(frozen=True)
@@ -277,17 +320,18 @@ def task_constants(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.n
 def _unpack(state, consts, out):
     """Named views of the packed kernel arrays."""
     return (
-        state[:, :_QD0], state[:, _QD0:_ANCHOR0], state[:, _ANCHOR0:_ACTION0], state[:, _ACTION0:_TRIG0], state[:, _TRIG0:],
+        state[:, :_QD0], state[:, _QD0:_ANCHOR0], state[:, _ANCHOR0:_ACTION0], state[:, _ACTION0:_TRIG0], state[:, _TRIG0:_MODE0],
         consts[:_NP], consts[_NP:_NOM0], consts[_NOM0:_TAU0], consts[_TAU0:],
-        out[:, :_TERMS0], out[:, _TERMS0:_EXTRA0], out[:, _EXTRA0:],
+        out[:, :_TERMS0], out[:, _TERMS0:_EXTRA0], out[:, _EXTRA0:_ACC0],
     )  # fmt: skip
 
 
 @njit(cache=True, inline="always")
-def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flags, extra, trig):
+def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb):
     """Reward terms, flags, extras and observation of robot ``i`` at its (finite) state and force.
 
-    The one place where the task's predicates (health, feasibility) are written.
+    The one place where the task's predicates (health, feasibility) are written. ``mode`` and ``hyb``
+    (the step's accumulators and the unilateral extras) are read and written in the unilateral model only.
     """
     lam_x, lam_y = lam[i, 0], lam[i, 1]
     dx = q[i, 0] - anchor[i, 0] - q_nom[0]
@@ -303,6 +347,7 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
     fx = q[i, 0] + l1 * co1 + l2 * co2 - anchor[i, 0]
     fy = knee_y + l2 * s2 - anchor[i, 1]
     height = q[i, 1] - anchor[i, 1]
+    unilateral_model = c[_C_UNILATERAL] > 0.5
 
     unilateral = max(0.0, -lam_y)
     friction = max(0.0, abs(lam_x) - c[_C_MU] * lam_y)
@@ -315,7 +360,12 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
         or q[i, 4] < c[_C_KNEE_LO]
         or q[i, 4] > c[_C_KNEE_HI]
     )
-    lost = c[_C_TERM_CONTACT] > 0.5 and lam_y < c[_C_CONTACT_THRESH]
+    if unilateral_model:  # the ground cannot pull: what is charged is time off it and sliding on it
+        dt = c[_C_DT]
+        flight_time = hyb[i, ACC_FLIGHT_TIME]
+        lost = c[_C_TERM_CONTACT] > 0.5 and (flight_time > 0.0 or lam_y < c[_C_CONTACT_THRESH])
+    else:
+        lost = c[_C_TERM_CONTACT] > 0.5 and lam_y < c[_C_CONTACT_THRESH]
     terminated = fell or lost
 
     terms[i, 0] = 0.0 if terminated else c[_C_ALIVE]
@@ -324,12 +374,17 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
         + c[_C_W_ANG] * th_b * th_b
         + c[_C_W_VEL] * (qd[i, 0] ** 2 + qd[i, 1] ** 2 + qd[i, 2] ** 2)
     )
-    terms[i, 2] = -c[_C_W_UNI] * unilateral / weight
-    terms[i, 3] = -c[_C_W_FRIC] * friction / weight
+    if unilateral_model:
+        terms[i, 2] = -c[_C_W_UNI] * flight_time / dt
+        terms[i, 3] = -c[_C_W_FRIC] * hyb[i, ACC_SLIP_DISTANCE] / dt
+        flags[i, 2] = friction > 1e-9 * weight  # a stick force outside the cone: only by the Painleve rule
+    else:
+        terms[i, 2] = -c[_C_W_UNI] * unilateral / weight
+        terms[i, 3] = -c[_C_W_FRIC] * friction / weight
+        flags[i, 2] = friction > 0.0
     terms[i, 4] = -c[_C_W_CTRL] * (a0 * a0 + a1 * a1)
     flags[i, 0] = terminated
     flags[i, 1] = lam_y < 0.0
-    flags[i, 2] = friction > 0.0
     flags[i, 3] = False
     extra[i, 0] = np.sqrt(dx * dx + dy * dy)
     extra[i, 1] = np.sqrt(fx * fx + fy * fy)
@@ -343,11 +398,25 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
         obs[i, 5 + j] = qd[i, j]
     obs[i, 10] = lam_x / weight
     obs[i, 11] = lam_y / weight
+    if unilateral_model:
+        w1 = qd[i, 2] + qd[i, 3]
+        w2 = w1 + qd[i, 4]
+        vfx, vfy = _foot_velocity(s1, co1, s2, co2, qd[i, 0], qd[i, 1], w1, w2, p)
+        m = mode[i]
+        obs[i, 12] = fy
+        obs[i, 13] = vfx
+        obs[i, 14] = vfy
+        obs[i, 15] = 0.0 if m == FLIGHT else 1.0
+        obs[i, 16] = 1.0 if m == SLIP_FORWARD else (-1.0 if m == SLIP_BACKWARD else 0.0)
+        obs[i, 17] = hyb[i, ACC_KICK_Y] / (weight * c[_C_DT])
+        hyb[i, ACC_DIM] = _energy_core(s1, co1, s2, co2, q[i, 1] - anchor[i, 1], qd[i, 0], qd[i, 1], qd[i, 2], w1, w2, p)
+        hyb[i, ACC_DIM + 1] = fy
 
 
 @njit(cache=True, inline="always")
-def _step_one(i, q, qd, anchor, action, trig, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a):
-    """One control step and task evaluation of robot ``i``; the last four arguments are scratch."""
+def _step_one(i, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, scratch, log_k):
+    """One control step and task evaluation of robot ``i``; ``scratch`` and ``log_k`` are scratch space."""
+    q_prev, qd_prev, tau, a, log_t = scratch[0:5], scratch[5:10], scratch[10:12], scratch[12:14], scratch[14:]
     for j in range(5):
         q_prev[j] = q[i, j]
         qd_prev[j] = qd[i, j]
@@ -355,10 +424,19 @@ def _step_one(i, q, qd, anchor, action, trig, p, c, q_nom, weight, lam, obs, ter
     a[1] = min(1.0, max(-1.0, action[i, 1]))
     tau[0] = a[0] * c[_C_TAU_HIP]
     tau[1] = a[1] * c[_C_TAU_KNEE]
-    _rk4_from(
-        q[i], qd[i], tau, p, anchor[i], c[_C_DT], int(c[_C_SUBSTEPS]), c[_C_MAX_ANGLE], True, lam[i],
-        trig[i, 0], trig[i, 1], trig[i, 2], trig[i, 3],
-    )  # fmt: skip
+    mode_prev, anchor_prev = mode[i], anchor[i, 0]
+    if c[_C_UNILATERAL] > 0.5:
+        mode[i] = _hybrid_from(
+            q[i], qd[i], tau, p, c[_C_MU], int(mode[i]), anchor[i], c[_C_DT], int(c[_C_SUBSTEPS]), c[_C_MAX_ANGLE],
+            trig[i, 0], trig[i, 1], trig[i, 2], trig[i, 3], hyb[i], log_t, log_k,
+        )  # fmt: skip
+        lam[i, 0] = hyb[i, ACC_IMPULSE_X] / c[_C_DT]
+        lam[i, 1] = hyb[i, ACC_IMPULSE_Y] / c[_C_DT]
+    else:
+        _rk4_from(
+            q[i], qd[i], tau, p, anchor[i], c[_C_DT], int(c[_C_SUBSTEPS]), c[_C_MAX_ANGLE], True, lam[i],
+            trig[i, 0], trig[i, 1], trig[i, 2], trig[i, 3],
+        )  # fmt: skip
 
     finite = np.isfinite(lam[i, 0]) and np.isfinite(lam[i, 1])
     for j in range(5):
@@ -369,10 +447,14 @@ def _step_one(i, q, qd, anchor, action, trig, p, c, q_nom, weight, lam, obs, ter
         for j in range(5):
             q[i, j] = q_prev[j]
             qd[i, j] = qd_prev[j]
+        mode[i] = mode_prev
+        anchor[i, 0] = anchor_prev
         lam[i, 0] = 0.0
         lam[i, 1] = 0.0
         for k in range(terms.shape[1]):
             terms[i, k] = 0.0
+        for k in range(hyb.shape[1]):
+            hyb[i, k] = 0.0
         flags[i, 0] = True
         flags[i, 1] = False
         flags[i, 2] = False
@@ -381,7 +463,7 @@ def _step_one(i, q, qd, anchor, action, trig, p, c, q_nom, weight, lam, obs, ter
         extra[i, 1] = 0.0
         extra[i, 2] = 0.0
         return
-    _assess(i, q, qd, anchor, lam, a[0], a[1], p, c, q_nom, weight, obs, terms, flags, extra, trig)
+    _assess(i, q, qd, anchor, lam, a[0], a[1], p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
 
 
 @njit(cache=True, inline="always")
@@ -393,13 +475,12 @@ def _weight(p):
 @njit(cache=True)
 def _step_range(lo, hi, state, consts, out, obs, flags):
     q, qd, anchor, action, trig, p, c, q_nom, _, lam, terms, extra = _unpack(state, consts, out)
+    mode, hyb = state[:, _MODE0], out[:, _ACC0:]
     weight = _weight(p)
-    q_prev = np.empty(5)
-    qd_prev = np.empty(5)
-    tau = np.empty(2)
-    a = np.empty(2)
+    scratch = np.empty(14 + LOG_SIZE)
+    log_k = np.empty(LOG_SIZE, dtype=np.int64)
     for i in range(lo, hi):
-        _step_one(i, q, qd, anchor, action, trig, p, c, q_nom, weight, lam, obs, terms, flags, extra, q_prev, qd_prev, tau, a)
+        _step_one(i, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, scratch, log_k)
 
 
 @njit(cache=True)
@@ -435,22 +516,53 @@ def step_batch_threaded(state, consts, out, obs, flags):
 def start_batch(state, consts, out, obs, flags):
     """Put freshly reset robots on their contact and evaluate them without stepping.
 
-    Each robot's base is first projected so that its foot is on its anchor with ``Jc qd = 0``
-    (``leg_env.integrate.project_stance``). No control step has been taken yet, so the contact force is the
-    instantaneous stance force at the start state under the nominal holding torques: at the
-    nominal posture it is exactly the nominal ``[0, m g]`` up to round-off. The reward terms are
-    zeroed. Arguments as in ``step_batch`` (the actions are not read); ``flags[:, 0]`` tells
-    whether the start state is already terminal.
+    Pinned model: each robot's base is first projected so that its foot is on its anchor with
+    ``Jc qd = 0`` (``leg_env.integrate.project_stance``). Unilateral model: a foot within
+    ``GROUND_TOL`` of the ground (``y = anchor[1]``) is put on it by moving the base, and the mode is
+    chosen as at the start of a control step (``leg_env.hybrid``; a foot moving into the ground gets the
+    impact map); a foot above it flies. No control step has been taken yet, so the contact force is
+    the instantaneous force of that mode under the nominal holding torques: at the nominal posture it
+    is exactly the nominal ``[0, m g]`` up to round-off. The reward terms and the step's accumulators
+    are zeroed. Arguments as in ``step_batch`` (the actions are not read); ``flags[:, 0]`` tells whether
+    the start state is already terminal.
     """
     q, qd, anchor, _, trig, p, c, q_nom, tau, lam, terms, extra = _unpack(state, consts, out)
+    mode, hyb = state[:, _MODE0], out[:, _ACC0:]
     weight = _weight(p)
     qdd = np.empty(5)
     for i in range(state.shape[0]):
-        _project_one(q[i], qd[i], p, anchor[i])
-        _stance_one(q[i], qd[i], tau, p, qdd, lam[i])
-        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra, trig)
+        if c[_C_UNILATERAL] > 0.5:
+            _start_unilateral(q[i], qd[i], anchor[i], mode, i, tau, c[_C_MU], p, lam[i], hyb[i])
+        else:
+            _project_one(q[i], qd[i], p, anchor[i])
+            _stance_one(q[i], qd[i], tau, p, qdd, lam[i])
+        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
         for k in range(terms.shape[1]):
             terms[i, k] = 0.0
+
+
+@njit(cache=True)
+def _start_unilateral(q, qd, anchor, mode, i, tau, mu, p, lam, hyb):
+    """Mode, ground contact and instantaneous force of a unilateral start state (``start_batch``)."""
+    l1, l2 = p[6], p[7]
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    s1, co1, s2, co2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
+    height = q[1] + l1 * s1 + l2 * s2 - anchor[1]
+    if height <= GROUND_TOL:
+        q[1] -= height
+    X = (q[0], q[1], q[2], q[3], q[4], qd[0], qd[1], qd[2], qd[3], qd[4], s1, co1, s2, co2)
+    m, X = _choose_mode(FLIGHT, X, anchor, tau[0], tau[1], mu, p, -1, False, hyb)
+    for j in range(5):
+        q[j] = X[j]
+        qd[j] = X[5 + j]
+    if m != STICK:
+        anchor[0] = q[0] + l1 * co1 + l2 * co2
+    mode[i] = m
+    k = _derivative(m, mu, X, tau[0], tau[1], p)
+    lam[0], lam[1] = k[5], k[6]
+    for j in range(hyb.shape[0]):
+        hyb[j] = 0.0
 
 
 def reset_state(rng: np.random.Generator, p: LegParams, config: StanceConfig, nominal: Nominal):
@@ -567,3 +679,53 @@ def _perturbed_starts(noise, s, q_nom, p):
                 qd[i, 2 + j] += low + width * noise[i, 3 + j]
         _project_one(q[i], qd[i], p, anchor[i])
     return q, qd, anchor
+
+
+def unilateral_info(out: list, mode: float) -> dict:
+    """The ``UNILATERAL_KEYS`` of one robot from its output row (as a list) and its mode.
+
+    ``contact_mode`` is ``"stick"``, ``"slip"`` or ``"flight"`` at the end of the step; ``foot_height`` [m];
+    ``impulse`` the sum of impact impulses on the foot in the step [N s], shape (2,); ``stick_time``,
+    ``slip_time``, ``flight_time`` [s] (they sum to ``dt``); ``slip_distance`` [m]; ``work_actuators``,
+    ``dissipation_slip``, ``dissipation_impacts`` [J] (``energy(t) - energy(0)`` is the sum over the steps
+    of the first minus the other two) and ``energy`` (kinetic + potential, [J]); ``contact_events``,
+    ``painleve_fallbacks``, ``zeno_settles`` (ints) count what ``leg_env.hybrid`` describes.
+    """
+    acc = out[_ACC0:]
+    return {
+        "contact_mode": MODE_NAMES[int(mode)],
+        "foot_height": acc[ACC_DIM + 1],
+        "impulse": np.array(acc[ACC_KICK_X:ACC_KICK_Y + 1]),
+        "stick_time": acc[ACC_STICK_TIME],
+        "slip_time": acc[ACC_SLIP_TIME],
+        "flight_time": acc[ACC_FLIGHT_TIME],
+        "slip_distance": acc[ACC_SLIP_DISTANCE],
+        "work_actuators": acc[ACC_WORK],
+        "dissipation_slip": acc[ACC_SLIP_DISSIPATION],
+        "dissipation_impacts": acc[ACC_IMPACT_DISSIPATION],
+        "energy": acc[ACC_DIM],
+        "contact_events": int(acc[ACC_EVENTS]),
+        "painleve_fallbacks": int(acc[ACC_PAINLEVE]),
+        "zeno_settles": int(acc[ACC_SETTLES]),
+    }
+
+
+def unilateral_columns(out: np.ndarray, modes: np.ndarray) -> dict:
+    """``unilateral_info`` of many robots at once: one fresh array per key over the rows of ``out``."""
+    acc = out[:, _ACC0:].T.copy()
+    return {
+        "contact_mode": np.array(MODE_NAMES)[modes.astype(np.int64)],
+        "foot_height": acc[ACC_DIM + 1],
+        "impulse": out[:, _ACC0 + ACC_KICK_X:_ACC0 + ACC_KICK_Y + 1].copy(),
+        "stick_time": acc[ACC_STICK_TIME],
+        "slip_time": acc[ACC_SLIP_TIME],
+        "flight_time": acc[ACC_FLIGHT_TIME],
+        "slip_distance": acc[ACC_SLIP_DISTANCE],
+        "work_actuators": acc[ACC_WORK],
+        "dissipation_slip": acc[ACC_SLIP_DISSIPATION],
+        "dissipation_impacts": acc[ACC_IMPACT_DISSIPATION],
+        "energy": acc[ACC_DIM],
+        "contact_events": acc[ACC_EVENTS].astype(np.int64),
+        "painleve_fallbacks": acc[ACC_PAINLEVE].astype(np.int64),
+        "zeno_settles": acc[ACC_SETTLES].astype(np.int64),
+    }

@@ -11,9 +11,11 @@ from gymnasium import spaces
 
 from ..dynamics import foot_position
 from ..params import LegParams
+from ..hybrid import ACC_KICK_X, ACC_KICK_Y, GROUND_TOL
 from ..task import (
-    FLAG_NAMES, OBS_DIM, OUT_DIM, OUT_EXTRA, OUT_LAM, OUT_TERMS, STATE_ACTION, STATE_ANCHOR, STATE_DIM, STATE_Q, STATE_QD,
-    StanceConfig, nominal_state, reset_state, start_batch, step_batch, task_constants,
+    FLAG_NAMES, OBS_DIM, OBS_DIM_UNILATERAL, OUT_ACC, OUT_DIM, OUT_EXTRA, OUT_LAM, OUT_TERMS, STATE_ACTION, STATE_ANCHOR,
+    STATE_DIM, STATE_MODE, STATE_Q, STATE_QD, StanceConfig, nominal_state, reset_state, start_batch, step_batch,
+    task_constants, unilateral_info,
 )  # fmt: skip
 
 __all__ = ["PlanarLegStanceEnv"]
@@ -207,17 +209,15 @@ class PlanarLegStanceEnv(gym.Env):
         if fps != self.metadata["render_fps"]:
             self.metadata = {**type(self).metadata, "render_fps": fps}
 
+        self.unilateral = self.config.contact == "unilateral"
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
-        reach = 1.01 * (self.params.l1 + self.params.l2)
-        high = np.full(OBS_DIM, np.inf, dtype=np.float32)
-        high[:2] = reach
-        self.observation_space = spaces.Box(-high, high, dtype=np.float32)
+        self.observation_space = observation_space(self.params, self.config)
 
         # the kernel's packed arrays (leg_env.task), one row, shared with nothing; _bind() makes the views
         self._consts = task_constants(self.params, self.config, self.nominal)
         self._state = np.zeros((1, STATE_DIM))  # q | qd | anchor | action | trig
         self._out = np.zeros((1, OUT_DIM))  # lam | reward terms | extras
-        self._obs = np.zeros((1, OBS_DIM), dtype=np.float32)
+        self._obs = np.zeros((1, self.observation_space.shape[0]), dtype=np.float32)
         self._flags = np.zeros((1, len(FLAG_NAMES)), dtype=np.bool_)
         self._bind()
         self._viewer = None
@@ -236,7 +236,7 @@ class PlanarLegStanceEnv(gym.Env):
         super().reset(seed=seed)
         if options and any(k in options for k in _RESET_OPTIONS):
             q, qd = self._explicit_state(options)
-            anchor = foot_position(q, self.params)
+            anchor = start_anchor(q, self.params, self.unilateral)
         else:
             if options:
                 raise ValueError(f"unknown reset option(s) {sorted(options)}; valid: {list(_RESET_OPTIONS)}")
@@ -274,11 +274,14 @@ class PlanarLegStanceEnv(gym.Env):
         from .. import render
 
         violated = bool(self._flags[0, 1] or self._flags[0, 2])
+        mode, impulse = contact_marks(self._state, self._out, 0, self.unilateral)
         if self.render_mode == "rgb_array":
-            return render.draw(self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.width, self.height, self.config.mu)
+            return render.draw(
+                self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.width, self.height, self.config.mu, mode, impulse
+            )
         if self._viewer is None:
             self._viewer = render.Viewer(self.width, self.height, self.metadata["render_fps"])
-        self._viewer.show(self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.config.mu)
+        self._viewer.show(self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.config.mu, mode, impulse)
         return None
 
     def close(self):
@@ -320,7 +323,7 @@ class PlanarLegStanceEnv(gym.Env):
         _, unilateral, friction, failure = flags
         lam_x, lam_y = out[OUT_LAM]
         base_drift, foot_error, normal_force = out[OUT_EXTRA]
-        return {
+        info = {
             "contact_force": np.array((lam_x, lam_y)),
             "normal_force": normal_force,
             "unilateral_violation": unilateral,
@@ -329,6 +332,9 @@ class PlanarLegStanceEnv(gym.Env):
             "base_drift": base_drift,
             "foot_error": foot_error,
         }
+        if self.unilateral:
+            info.update(unilateral_info(out, self._state[0, STATE_MODE]))
+        return info
 
     def _explicit_state(self, options: dict) -> tuple[np.ndarray, np.ndarray]:
         unknown = set(options) - set(_RESET_OPTIONS)
@@ -367,6 +373,50 @@ def explicit_start(options: dict, q_nominal: np.ndarray, rows: int | None = None
             raise ValueError(f"reset option {key!r} must be finite, got {value.tolist()}")
         out.append(value if rows is None else np.array(np.broadcast_to(value, (rows, 5))))
     return out[0], out[1]
+
+
+def observation_space(params: LegParams, config: StanceConfig) -> spaces.Box:
+    """The single env's observation space: 12 entries (pinned) or 18 (unilateral); see the docstring's table."""
+    reach = 1.01 * (params.l1 + params.l2)
+    unilateral = config.contact == "unilateral"
+    high = np.full(OBS_DIM_UNILATERAL if unilateral else OBS_DIM, np.inf, dtype=np.float32)
+    high[0] = reach
+    if not unilateral:  # on the unilateral ground the base may fly: its height has no bound
+        high[1] = reach
+    else:
+        high[15] = 1.0  # contact flag
+        high[16] = 1.0  # slip direction
+    low = -high
+    if unilateral:
+        low[15] = 0.0
+    return spaces.Box(low, high, dtype=np.float32)
+
+
+def contact_marks(state: np.ndarray, out: np.ndarray, i: int, unilateral: bool):
+    """``(mode, impulse)`` of row ``i`` for the renderer: ``(None, None)`` in the pinned model."""
+    if not unilateral:
+        return None, None
+    return int(state[i, STATE_MODE]), out[i, OUT_ACC][ACC_KICK_X:ACC_KICK_Y + 1]
+
+
+def start_anchor(q: np.ndarray, params: LegParams, unilateral: bool) -> np.ndarray:
+    """The contact point(s) of explicit start states ``q`` ``(..., 5)``.
+
+    Pinned: wherever the foot is. Unilateral: the point of the ground ``y = 0`` below the foot; a foot
+    below the ground by more than ``GROUND_TOL`` raises ``ValueError``.
+    """
+    foot = foot_position(q, params)
+    if not unilateral:
+        return foot
+    low = foot[..., 1] < -GROUND_TOL
+    if np.any(low):
+        raise ValueError(
+            f"reset option 'qpos' puts the foot below the ground (y_f = {float(foot[..., 1].min()):.3e} m); "
+            f"on the unilateral ground the foot must be at y_f >= -{GROUND_TOL} m (on it within that) or above it"
+        )
+    anchor = foot.copy()
+    anchor[..., 1] = 0.0
+    return anchor
 
 
 def _checked_action(action) -> tuple[float, float]:

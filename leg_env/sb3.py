@@ -25,6 +25,7 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
 from .envs.vector import REWARD_KEYS, STATE_KEYS, PlanarLegStanceVectorEnv
+from .task import STATE_MODE, UNILATERAL_KEYS
 
 __all__ = ["LegStanceVecEnv", "make_sb3_vec_env"]
 
@@ -81,7 +82,7 @@ class LegStanceVecEnv(VecEnv):
         obs, info = self.env.reset(seed=seeds, options=self._merged_options())
         self._reset_seeds()
         self._reset_options()
-        self.reset_infos = _per_env_state_infos(info, range(self.num_envs))
+        self.reset_infos = _per_env_state_infos(info, range(self.num_envs), self.env.state_keys)
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -118,12 +119,17 @@ class LegStanceVecEnv(VecEnv):
                 contact_force, truncated,
             ) in zip(*scalars, columns["contact_force"], time_limit.tolist())  # _SCALAR_KEYS order
         ]  # fmt: skip
+        if env.unilateral:  # the contact model's keys, as the single env's info has them
+            for key in UNILATERAL_KEYS:
+                values = columns[key] if key == "impulse" else columns[key].tolist()
+                for info, value in zip(infos, values):
+                    info[key] = value
         if t.restarted is not None:
             rows = t.restarted.tolist()
             for k, i in enumerate(rows):
                 infos[i]["terminal_observation"] = t.final.obs[k]
-            state = env._state_columns(env._lam[t.restarted], env._flags[t.restarted], env._extra[t.restarted])
-            for k, reset_info in enumerate(_per_env_state_infos(state, range(len(rows)))):
+            state = env._state_columns(env._out[t.restarted], env._flags[t.restarted], env._state[t.restarted, STATE_MODE])
+            for k, reset_info in enumerate(_per_env_state_infos(state, range(len(rows)), env.state_keys)):
                 self.reset_infos[rows[k]] = reset_info
         dones = t.terminated | t.truncated
         return t.obs, t.reward.astype(np.float32), dones, infos
@@ -165,10 +171,13 @@ class LegStanceVecEnv(VecEnv):
         return {key: np.stack([np.asarray(o[key], dtype=np.float64) for o in self._options]) for key in keys}
 
 
-def _per_env_state_infos(info: dict, rows) -> list[dict]:
-    """Per-row dicts of the state keys of a vector-style ``info`` (or of row-aligned columns)."""
-    columns = [info[key] for key in STATE_KEYS]
-    return [{key: column[i] if key == "contact_force" else column[i].item() for key, column in zip(STATE_KEYS, columns)} for i in rows]
+_ARRAY_KEYS = ("contact_force", "impulse")  # per-env values that stay arrays
+
+
+def _per_env_state_infos(info: dict, rows, keys) -> list[dict]:
+    """Per-row dicts of the state ``keys`` of a vector-style ``info`` (or of row-aligned columns)."""
+    columns = [info[key] for key in keys]
+    return [{key: column[i] if key in _ARRAY_KEYS else column[i].item() for key, column in zip(keys, columns)} for i in rows]
 
 
 def make_sb3_vec_env(num_envs: int, seed: int | None = None, **env_kwargs: Any) -> LegStanceVecEnv:

@@ -28,7 +28,6 @@ from ..params import LegParams
 from ..task import (
     FLAG_NAMES,
     INFO_NAMES,
-    OBS_DIM,
     OUT_DIM,
     OUT_EXTRA,
     OUT_LAM,
@@ -39,6 +38,9 @@ from ..task import (
     STATE_DIM,
     STATE_Q,
     STATE_QD,
+    STATE_MODE,
+    UNILATERAL_KEYS,
+    unilateral_columns,
     BitGeneratorRows,
     StanceConfig,
     start_batch,
@@ -47,7 +49,7 @@ from ..task import (
     step_batch_threaded,
     task_constants,
 )
-from .stance import PlanarLegStanceEnv, explicit_start
+from .stance import PlanarLegStanceEnv, contact_marks, explicit_start, start_anchor
 
 __all__ = ["PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
 
@@ -62,7 +64,8 @@ STATE_KEYS = (
     "base_drift",
     "foot_error",
 )
-"""``info`` keys after both ``reset`` and ``step``, as in the single environment."""
+"""``info`` keys after both ``reset`` and ``step``, as in the single environment (and, with
+``contact="unilateral"``, ``leg_env.task.UNILATERAL_KEYS`` after them: ``state_keys``)."""
 
 _FLAG = {name: k for k, name in enumerate(FLAG_NAMES)}
 _EXTRA = {name: k for k, name in enumerate(INFO_NAMES)}
@@ -182,6 +185,8 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         self.render_envs = int(render_envs)
         self.num_threads = int(num_threads)
         self.width, self.height = single.width, single.height
+        self.unilateral = single.unilateral
+        self.state_keys = STATE_KEYS + (UNILATERAL_KEYS if self.unilateral else ())
         self.params, self.config, self.nominal = single.params, single.config, single.nominal
         self.metadata = {**type(self).metadata, "render_fps": single.metadata["render_fps"], "autoreset_mode": autoreset_mode}
         self.single_observation_space = single.observation_space
@@ -193,7 +198,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         self._consts = task_constants(self.params, self.config, self.nominal)
         self._state = np.zeros((n, STATE_DIM))  # q | qd | anchor | action | trig
         self._out = np.zeros((n, OUT_DIM))  # lam | reward terms | extras
-        self._obs = np.zeros((n, OBS_DIM), dtype=np.float32)
+        self._obs = np.zeros((n, self.single_observation_space.shape[0]), dtype=np.float32)
         self._flags = np.zeros((n, len(FLAG_NAMES)), dtype=np.bool_)
         self._bind()
         self._start(None, self.nominal.q, np.zeros(5), np.zeros(2))  # every row at the nominal posture
@@ -227,9 +232,9 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         self._ended[rows] = False
         info = {}
         if rows.size == n:
-            self._add_state_info(info, self._lam, self._flags, self._extra)
+            self._add_state_info(info, self._out, self._flags, self._state[:, STATE_MODE])
         else:
-            self._add_state_info(info, self._lam[rows], self._flags[rows], self._extra[rows], rows)
+            self._add_state_info(info, self._out[rows], self._flags[rows], self._state[rows, STATE_MODE], rows)
         return self._obs.copy(), info
 
     def step(self, actions):
@@ -241,7 +246,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             stepped[t.restarted] = False
         info = {}
         self._add_reward_info(info, stepped, t.terms)
-        self._add_state_info(info, self._lam, self._flags, self._extra)
+        self._add_state_info(info, self._out, self._flags, self._state[:, STATE_MODE])
         if t.final is not None:  # SAME_STEP: the ended rows report their reset, their last step goes to final_*
             ended = np.logical_not(stepped)
             final_obs = np.full(self.num_envs, None, dtype=object)
@@ -249,7 +254,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
                 final_obs[i] = t.final.obs[k]
             final_info = {}
             self._add_reward_info(final_info, ended, t.terms)
-            self._add_state_info(final_info, t.final.lam, t.final.flags, t.final.extra, t.restarted)
+            self._add_state_info(final_info, t.final.out, t.final.flags, t.final.mode, t.restarted)
             info["final_obs"] = final_obs
             info["_final_obs"] = ended
             info["final_info"] = final_info
@@ -268,9 +273,13 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         frames = []
         for i in range(min(self.render_envs, self.num_envs)):
             violated = bool(self._flags[i, _FLAG["unilateral_violation"]] or self._flags[i, _FLAG["friction_violation"]])
+            mode, impulse = contact_marks(self._state, self._out, i, self.unilateral)
             frames.append(
-                render.draw(self._q[i], self._anchor[i], self._lam[i], self.params, violated, self.width, self.height, self.config.mu)
-            )
+                render.draw(
+                    self._q[i], self._anchor[i], self._lam[i], self.params, violated, self.width, self.height, self.config.mu,
+                    mode, impulse,
+                )
+            )  # fmt: skip
         return tuple(frames)
 
     # ---------------------------------------------------------- accessors
@@ -339,7 +348,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         final = None
         if mode == AutoresetMode.SAME_STEP and ended.any():
             restarted = np.flatnonzero(ended)
-            final = _Final(self._obs[restarted], self._flags[restarted], self._extra[restarted], self._lam[restarted])
+            final = _Final(self._obs[restarted], self._flags[restarted], self._out[restarted], self._state[restarted, STATE_MODE])
             self._start(restarted, *self._draw_starts(restarted))
             self._elapsed[restarted] = 0
             self._ended[:] = False
@@ -380,8 +389,8 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             start_batch(*self._kernel_args)
             return
         k = rows.size
-        state, out = np.zeros((k, STATE_DIM)), np.empty((k, OUT_DIM))
-        obs, flags = np.empty((k, OBS_DIM), dtype=np.float32), np.empty((k, len(FLAG_NAMES)), dtype=np.bool_)
+        state, out = np.zeros((k, STATE_DIM)), np.zeros((k, OUT_DIM))
+        obs, flags = np.empty((k, self._obs.shape[1]), dtype=np.float32), np.empty((k, len(FLAG_NAMES)), dtype=np.bool_)
         state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR] = q, qd, anchor
         start_batch(state, self._consts, out, obs, flags)
         self._state[rows] = state
@@ -431,7 +440,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
     def _explicit_states(self, options: dict, k: int):
         """``(q, qd, anchor)`` for ``k`` rows from the ``qpos`` / ``qvel`` options (single env semantics)."""
         q, qd = explicit_start(options, self.nominal.q, rows=k)
-        return q, qd, foot_position(q, self.params)
+        return q, qd, start_anchor(q, self.params, self.unilateral)
 
     def _step_info_columns(self, t: "_Transition") -> dict:
         """Every ``info`` key of the step itself, one array per key over all rows.
@@ -440,9 +449,9 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         (what Stable-Baselines3 puts in a sub-env's ``info``). Shared with ``leg_env.sb3``.
         """
         columns = {key: t.terms[:, k] for k, key in enumerate(REWARD_KEYS)}
-        state = self._state_columns(self._lam, self._flags, self._extra)
+        state = self._state_columns(self._out, self._flags, self._state[:, STATE_MODE])
         if t.final is not None:
-            for key, rows_values in self._state_columns(t.final.lam, t.final.flags, t.final.extra).items():
+            for key, rows_values in self._state_columns(t.final.out, t.final.flags, t.final.mode).items():
                 state[key][t.restarted] = rows_values
         columns.update(state)
         return columns
@@ -463,15 +472,15 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             info[key] = columns[k]
             info["_" + key] = masks[k]
 
-    def _add_state_info(self, info: dict, lam, flags, extra, rows: np.ndarray | None = None) -> None:
-        """The state keys from row-aligned ``lam, flags, extra`` of ``rows`` (all if None); zeros elsewhere."""
+    def _add_state_info(self, info: dict, out, flags, modes, rows: np.ndarray | None = None) -> None:
+        """The state keys from row-aligned ``out, flags, modes`` of ``rows`` (all if None); zeros elsewhere."""
         n = self.num_envs
         if rows is None:
-            masks = np.ones((len(STATE_KEYS), n), dtype=np.bool_)
+            masks = np.ones((len(self.state_keys), n), dtype=np.bool_)
         else:
-            masks = np.zeros((len(STATE_KEYS), n), dtype=np.bool_)
+            masks = np.zeros((len(self.state_keys), n), dtype=np.bool_)
             masks[:, rows] = True
-        for k, (key, values) in enumerate(self._state_columns(lam, flags, extra).items()):
+        for k, (key, values) in enumerate(self._state_columns(out, flags, modes).items()):
             if rows is not None:
                 column = np.zeros((n, *values.shape[1:]), dtype=values.dtype)
                 column[rows] = values
@@ -479,12 +488,11 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             info[key] = values
             info["_" + key] = masks[k]
 
-    @staticmethod
-    def _state_columns(lam, flags, extra) -> dict:
-        """The state keys as fresh arrays over the rows of ``lam (k, 2), flags (k, 4), extra (k, 3)``."""
-        flag_rows, extra_rows = flags.T.copy(), extra.T.copy()  # two copies serve six keys
-        return {
-            "contact_force": lam.copy(),
+    def _state_columns(self, out, flags, modes) -> dict:
+        """The state keys as fresh arrays over the rows of ``out (k, OUT_DIM), flags (k, 4), modes (k,)``."""
+        flag_rows, extra_rows = flags.T.copy(), out[:, OUT_EXTRA].T.copy()  # two copies serve six keys
+        columns = {
+            "contact_force": out[:, OUT_LAM].copy(),
             "normal_force": extra_rows[_EXTRA["normal_force"]],
             "unilateral_violation": flag_rows[_FLAG["unilateral_violation"]],
             "friction_violation": flag_rows[_FLAG["friction_violation"]],
@@ -492,6 +500,9 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             "base_drift": extra_rows[_EXTRA["base_drift"]],
             "foot_error": extra_rows[_EXTRA["foot_error"]],
         }
+        if self.unilateral:
+            columns.update(unilateral_columns(out, modes))
+        return columns
 
 
 class _Final(NamedTuple):
@@ -499,8 +510,8 @@ class _Final(NamedTuple):
 
     obs: np.ndarray
     flags: np.ndarray
-    extra: np.ndarray
-    lam: np.ndarray
+    out: np.ndarray
+    mode: np.ndarray
 
 
 class _Transition(NamedTuple):

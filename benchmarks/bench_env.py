@@ -23,6 +23,10 @@ Rows:
 (c) env-steps per second of Stable-Baselines3 ``VecEnv.step``: leg-env's adapter
     (``leg_env.sb3``, which builds the per-env ``infos`` dicts SB3 wants) and SB3's
     ``DummyVecEnv`` of ``Hopper-v5`` with 8 envs (the ratio's reference).
+(d) the unilateral contact model (``contact="unilateral"``) next to the pinned one: ``env.step``
+    (ratio to Hopper-v5), ``gym.make_vec`` at N = 4096 under the same random actions (lift-offs, slips and
+    touchdowns included; ratio to the pinned batch), and both models balancing: the nominal holding
+    action plus uniform noise of +-``BALANCE_NOISE`` (ratio of unilateral to pinned).
 With ``--ppo``: SB3 PPO (``MlpPolicy``, SB3's default hyperparameters, 16,384-step rollouts) for
 50,000 steps on the adapter with 64 envs and on ``InvertedDoublePendulum-v5`` with 8
 ``DummyVecEnv`` envs; fps = steps / wall time, and the rollout-collection rate alone.
@@ -72,6 +76,11 @@ PPO_PENDULUM_ENVS = 8
 TARGET_SINGLE_RATIO = 20.0
 TARGET_VECTOR_RATIO = 200.0
 TARGET_VECTOR_RATE = 500_000.0
+TARGET_UNILATERAL_RATE = 1_000_000.0  # make_vec N = 4096, unilateral, random actions
+TARGET_UNILATERAL_RANDOM = 0.5  # ... as a share of the pinned batch's rate under the same actions
+TARGET_UNILATERAL_BALANCE = 0.8  # balancing: unilateral over pinned
+BALANCE_NOISE = 0.02  # half-width of the noise on the holding action in the balancing rows
+UNILATERAL = {"contact": "unilateral"}
 
 
 def sampled_actions(space: gym.spaces.Box, calls: int, n: int | None, seed: int = SEED) -> np.ndarray:
@@ -96,9 +105,9 @@ class Runner:
         return statistics.median(self.rates)
 
 
-def single_env_runner(env_id: str) -> Runner:
+def single_env_runner(env_id: str, **kwargs) -> Runner:
     """``env.step`` calls through ``gymnasium.make``, resetting when an episode ends."""
-    env = gym.make(env_id)
+    env = gym.make(env_id, **kwargs)
     env.reset(seed=SEED)
     steps = SINGLE_STEPS[env_id]
     actions = sampled_actions(env.action_space, steps, None)
@@ -117,11 +126,16 @@ def calls_for(n: int) -> int:
     return int(np.clip(ENV_STEPS_PER_REPEAT // n, MIN_CALLS, MAX_CALLS))
 
 
-def vector_env_runner(envs, calls: int | None = None) -> Runner:
-    """Env-steps of a ``gymnasium.vector.VectorEnv`` (it autoresets)."""
+def vector_env_runner(envs, calls: int | None = None, balance: bool = False) -> Runner:
+    """Env-steps of a ``gymnasium.vector.VectorEnv`` (it autoresets); ``balance``: holding actions + small noise."""
     n = envs.num_envs
     calls = calls or calls_for(n)
-    actions = sampled_actions(envs.single_action_space, calls, n)
+    if balance:
+        hold = (envs.nominal.tau / np.asarray(envs.config.torque_limit)).astype(np.float32)
+        noise = np.random.default_rng(SEED).uniform(-BALANCE_NOISE, BALANCE_NOISE, size=(calls, n, 2))
+        actions = (hold + noise).astype(np.float32)
+    else:
+        actions = sampled_actions(envs.single_action_space, calls, n)
     envs.reset(seed=SEED)
 
     def run() -> int:
@@ -189,6 +203,11 @@ def env_table() -> dict:
     from leg_env.sb3 import make_sb3_vec_env
 
     runners = {("single", env_id): single_env_runner(env_id) for env_id in (LEG, HOPPER, PENDULUM)}
+    runners["single", "unilateral"] = single_env_runner(LEG, **UNILATERAL)
+    n = max(VECTOR_SIZES)
+    runners["vector", "unilateral"] = vector_env_runner(gym.make_vec(LEG, num_envs=n, **UNILATERAL))
+    runners["balance", "pinned"] = vector_env_runner(gym.make_vec(LEG, num_envs=n), balance=True)
+    runners["balance", "unilateral"] = vector_env_runner(gym.make_vec(LEG, num_envs=n, **UNILATERAL), balance=True)
     runners["sync", HOPPER] = vector_env_runner(
         gym.make_vec(HOPPER, num_envs=REFERENCE_ENVS, vectorization_mode="sync"), REFERENCE_CALLS
     )
@@ -206,18 +225,24 @@ def env_table() -> dict:
     for env_id in (LEG, HOPPER, PENDULUM):
         r = rate["single", env_id]
         rows.append(("`gym.make` `env.step`", env_id, 1, r, r / rate["single", HOPPER]))
+    r = rate["single", "unilateral"]
+    rows.append(("`gym.make` `env.step`, unilateral", LEG, 1, r, r / rate["single", HOPPER]))
     for n in VECTOR_SIZES:
         rows.append(("`gym.make_vec` (native)", LEG, n, rate["vector", n], rate["vector", n] / rate["sync", HOPPER]))
     for (kind, n), r in rate.items():
         if kind == "threaded":
             rows.append((f"`gym.make_vec` (native, {threads} threads)", LEG, n, r, r / rate["sync", HOPPER]))
     rows.append(("`gym.make_vec` (`SyncVectorEnv`)", HOPPER, REFERENCE_ENVS, rate["sync", HOPPER], 1.0))
+    big = max(VECTOR_SIZES)
+    rows.append(("`gym.make_vec`, unilateral, random (ratio: to pinned)", LEG, big, rate["vector", "unilateral"], rate["vector", "unilateral"] / rate["vector", big]))
+    rows.append(("`gym.make_vec`, pinned, balancing", LEG, big, rate["balance", "pinned"], 1.0))
+    rows.append(("`gym.make_vec`, unilateral, balancing (ratio: to pinned)", LEG, big, rate["balance", "unilateral"], rate["balance", "unilateral"] / rate["balance", "pinned"]))
     for n in SB3_SIZES:
         rows.append(("SB3 `VecEnv` (`leg_env.sb3`)", LEG, n, rate["sb3", n], rate["sb3", n] / rate["dummy", HOPPER]))
     rows.append(("SB3 `DummyVecEnv`", HOPPER, REFERENCE_ENVS, rate["dummy", HOPPER], 1.0))
 
     print(f"\nEnvironment speed, median of {REPEATS} round-robin repeats, random actions, resets included.")
-    print("ratio: (a) vs Hopper-v5 `env.step`; (b) vs `SyncVectorEnv(Hopper-v5, 8)`; (c) vs `DummyVecEnv(Hopper-v5, 8)`.\n")
+    print("ratio: (a) vs Hopper-v5 `env.step`; (b) vs `SyncVectorEnv(Hopper-v5, 8)`; (c) vs `DummyVecEnv(Hopper-v5, 8)`; (d) as the row says.\n")
     print("| interface | environment | N | us per call | env-steps/s | ratio |")
     print("|---|---|---:|---:|---:|---:|")
     for interface, env_id, n, r, ratio in rows:
@@ -240,6 +265,27 @@ def check_targets(rate: dict) -> bool:
             f"`gym.make_vec` N={n} >= {fmt_rate(TARGET_VECTOR_RATE)} env-steps/s",
             fmt_rate(rate["vector", n]),
             rate["vector", n] >= TARGET_VECTOR_RATE,
+        ),
+    ]
+    uni_single = rate["single", "unilateral"] / rate["single", HOPPER]
+    uni_random = rate["vector", "unilateral"]
+    uni_balance = rate["balance", "unilateral"] / rate["balance", "pinned"]
+    checks += [
+        (f"unilateral `env.step` vs Hopper-v5 >= {TARGET_SINGLE_RATIO:.0f}x", f"{uni_single:.1f}x", uni_single >= TARGET_SINGLE_RATIO),
+        (
+            f"unilateral `gym.make_vec` N={n}, random actions >= {fmt_rate(TARGET_UNILATERAL_RATE)} env-steps/s",
+            fmt_rate(uni_random),
+            uni_random >= TARGET_UNILATERAL_RATE,
+        ),
+        (
+            f"unilateral vs pinned `gym.make_vec` N={n}, random actions >= {TARGET_UNILATERAL_RANDOM:.0%}",
+            f"{uni_random / rate['vector', n]:.0%}",
+            uni_random / rate["vector", n] >= TARGET_UNILATERAL_RANDOM,
+        ),
+        (
+            f"unilateral vs pinned `gym.make_vec` N={n}, balancing >= {TARGET_UNILATERAL_BALANCE:.0%}",
+            f"{uni_balance:.0%}",
+            uni_balance >= TARGET_UNILATERAL_BALANCE,
         ),
     ]
     if ("threaded", n) in rate:

@@ -110,10 +110,17 @@ class _Periodic(BaseCallback):
         """The first call comes at the first multiple of ``freq`` after ``done`` steps."""
         self._next = (done // self.freq + 1) * self.freq if self.freq > 0 else None
 
+    def _due(self) -> bool:
+        """Whether the counter has passed the next multiple of ``freq`` (which then moves on)."""
+        steps = self.model.num_timesteps
+        if self._next is None or steps < self._next:
+            return False
+        while self._next <= steps:
+            self._next += self.freq
+        return True
+
     def _on_step(self) -> bool:
-        if self._next is not None and self.num_timesteps >= self._next:
-            while self._next <= self.num_timesteps:
-                self._next += self.freq
+        if self._due():
             self._fire()
         return True
 
@@ -168,14 +175,32 @@ class PeriodicEvaluation(_Periodic):
 
 
 class PeriodicCheckpoint(_Periodic):
-    """Call ``save()`` each time the step counter passes a multiple of ``checkpoint_freq``."""
+    """Call ``save()`` between PPO iterations, once the step counter has passed a multiple of ``checkpoint_freq``.
+
+    A checkpoint is taken when a rollout starts: the previous rollout's update is done, and the
+    step counter counts exactly the samples the model has learnt from. A run resumed from one goes
+    through the same iterations, so it ends at the same step count as an uninterrupted run.
+    ``rollout_start`` is the step counter at the start of the current rollout, and ``collecting``
+    says whether a rollout is being collected (as opposed to the update that follows it).
+    """
 
     def __init__(self, checkpoint_freq: int, save: Callable[[], None]):
         super().__init__(checkpoint_freq)
         self.save = save
+        self.rollout_start: int | None = None
+        self.collecting = False
 
     def _init_callback(self) -> None:
-        self._start_after(self.num_timesteps)
+        self._start_after(self.model.num_timesteps)
 
-    def _fire(self) -> None:
-        self.save()
+    def _on_rollout_start(self) -> None:
+        self.rollout_start = self.model.num_timesteps
+        self.collecting = True
+        if self._due():
+            self.save()
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        self.collecting = False

@@ -1,16 +1,24 @@
-"""Atomic training checkpoints: model, normalisation statistics, progress and random generator states.
+"""Training checkpoints, written atomically and read back with a fall-back to the previous intact one.
 
 Layout under ``<run>/checkpoints/``::
 
     <num_timesteps>/model.zip          the PPO model (policy, optimiser, step counter)
-    <num_timesteps>/vecnormalize.pkl   observation/return statistics
+    <num_timesteps>/vecnormalize.pkl   observation/return statistics (only when the run normalises)
     <num_timesteps>/progress.json      steps, wall time, evaluation history, resume count
     <num_timesteps>/rng.pkl            Python, NumPy and torch generator states
-    latest.json                        {"dir": "<num_timesteps>"}: the newest complete checkpoint
+    <num_timesteps>.corrupt/           a checkpoint found unusable on resume, kept for inspection
 
-A checkpoint is written into a temporary folder, renamed into place, and only then does
-``latest.json`` (itself replaced atomically) point at it; a process killed at any moment leaves
-the previous checkpoint intact. The ``keep`` newest checkpoints are kept.
+``save_checkpoint`` writes a checkpoint into a hidden temporary folder and renames it into place,
+so a process killed at any moment leaves only complete checkpoint folders (and hidden leftovers,
+which the next save removes). It keeps the ``keep`` newest ones.
+
+``load_checkpoint`` reads the newest one and checks every file: a missing, truncated or garbage
+file, statistics missing although the run normalises (or present although it does not), or a
+model whose step counter disagrees with its ``progress.json`` make the checkpoint unusable. It is
+then moved aside to ``<name>.corrupt`` with a ``CheckpointWarning`` naming the file, and the
+previous checkpoint is tried. When none is intact, ``CheckpointError`` lists what is wrong with each.
+
+Both expect to be the only writer of the folder (``train.ppo`` holds the run folder's lock).
 """
 
 from __future__ import annotations
@@ -19,25 +27,42 @@ import json
 import os
 import pickle
 import random
+import re
 import shutil
 import tempfile
+import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
 __all__ = [
+    "Checkpoint",
+    "CheckpointError",
+    "CheckpointWarning",
     "save_checkpoint",
-    "latest_checkpoint",
-    "load_progress",
+    "checkpoint_dirs",
+    "load_checkpoint",
     "restore_rng",
     "write_json_atomic",
+    "write_text_atomic",
     "file_mode",
     "save_snapshot",
     "read_snapshot_info",
+    "recover_snapshot",
 ]
 
-LATEST = "latest.json"
+_NAME = re.compile(r"\d{12}")  # a checkpoint folder: the step counter, zero-padded so names sort by steps
+CORRUPT_SUFFIX = ".corrupt"
+
+
+class CheckpointError(ValueError):
+    """No checkpoint in the folder can be resumed from; the message names each one and what is wrong."""
+
+
+class CheckpointWarning(UserWarning):
+    """A checkpoint was unusable (the message names the file) and an older one is used instead."""
 
 
 def file_mode(directory: bool = False) -> int:
@@ -48,15 +73,54 @@ def file_mode(directory: bool = False) -> int:
     return (0o777 if directory else 0o666) & ~umask
 
 
-def write_json_atomic(path: Path, data) -> None:
-    """Write ``data`` as JSON to ``path`` through a temporary file and ``os.replace``."""
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file next to it and ``os.replace``."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        json.dump(data, f, indent=2)
-        f.write("\n")
-    os.chmod(tmp, file_mode())
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.chmod(tmp, file_mode())
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def write_json_atomic(path: Path, data) -> None:
+    """Write ``data`` as JSON to ``path`` through a temporary file and ``os.replace``."""
+    write_text_atomic(path, json.dumps(data, indent=2) + "\n")
+
+
+# ------------------------------------------------------------------ snapshots (best/, last/)
+
+
+def _aside(path: Path) -> Path:
+    """Where ``path`` waits while a new version replaces it (directories cannot be replaced in one rename)."""
+    return path.with_name(f".{path.name}.old")
+
+
+def recover_snapshot(path: Path) -> None:
+    """Undo a replacement of the directory ``path`` that a killed process left half done: the old
+    version, moved aside, goes back in place if nothing replaced it."""
+    path, old = Path(path), _aside(Path(path))
+    if old.exists():
+        if path.exists():
+            shutil.rmtree(old)
+        else:
+            os.replace(old, path)
+
+
+def _replace_dir(tmp: Path, path: Path) -> None:
+    """Rename the complete directory ``tmp`` to ``path``, replacing what is there."""
+    old = _aside(path)
+    if old.exists():
+        shutil.rmtree(old)
+    if path.exists():
+        os.replace(path, old)
     os.replace(tmp, path)
+    if old.exists():
+        shutil.rmtree(old)
 
 
 def save_snapshot(path: Path, model, vec_normalize, info: dict) -> Path:
@@ -67,23 +131,18 @@ def save_snapshot(path: Path, model, vec_normalize, info: dict) -> Path:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    recover_snapshot(path)
     tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}."))
-    old = path.with_name(f".{path.name}.old")
     try:
         model.save(tmp / "model.zip")
         if vec_normalize is not None:
             vec_normalize.save(tmp / "vecnormalize.pkl")
         write_json_atomic(tmp / "info.json", info)
         os.chmod(tmp, file_mode(directory=True))
-        if old.exists():
-            shutil.rmtree(old)
-        if path.exists():
-            os.replace(path, old)
-        os.replace(tmp, path)
+        _replace_dir(tmp, path)
     finally:
-        for leftover in (tmp, old):
-            if leftover.exists():
-                shutil.rmtree(leftover, ignore_errors=True)
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
     return path
 
 
@@ -95,61 +154,153 @@ def read_snapshot_info(path: Path) -> dict | None:
     return json.loads((path / "info.json").read_text())
 
 
+# ------------------------------------------------------------------ checkpoints
+
+
+def checkpoint_dirs(folder: Path) -> list[Path]:
+    """The checkpoint directories under ``folder``, newest (most steps) first."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted((p for p in folder.iterdir() if p.is_dir() and _NAME.fullmatch(p.name)), reverse=True)
+
+
 def save_checkpoint(folder: Path, model, vec_normalize, progress: dict, keep: int = 2) -> Path:
-    """Save a checkpoint of ``model`` and ``vec_normalize`` under ``folder``; returns its directory."""
+    """Save a checkpoint of ``model`` and ``vec_normalize`` (None: the run does not normalise) under
+    ``folder``; returns its directory. Older checkpoints beyond the ``keep`` newest are deleted,
+    and so are hidden leftovers of writes a killed process did not finish."""
+    if keep < 2:
+        raise ValueError(f"keep must be >= 2 so that a corrupt checkpoint has an intact predecessor, got {keep}")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     name = f"{model.num_timesteps:012d}"
-    final = folder / name
     tmp = Path(tempfile.mkdtemp(dir=folder, prefix=f".{name}."))
     try:
         model.save(tmp / "model.zip")
-        vec_normalize.save(tmp / "vecnormalize.pkl")
+        if vec_normalize is not None:
+            vec_normalize.save(tmp / "vecnormalize.pkl")
         with open(tmp / "rng.pkl", "wb") as f:
             pickle.dump(
                 {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state()}, f
             )
         write_json_atomic(tmp / "progress.json", {**progress, "num_timesteps": int(model.num_timesteps)})
-        if final.exists():
-            shutil.rmtree(final)
         os.chmod(tmp, file_mode(directory=True))
-        os.replace(tmp, final)
+        _replace_dir(tmp, folder / name)  # a second save at the same step count (Ctrl-C, the end) replaces the first
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
-    write_json_atomic(folder / LATEST, {"dir": name})
-    for old in sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))[:-keep]:
-        if old.name != name:
-            shutil.rmtree(old, ignore_errors=True)
-    return final
+    for old in checkpoint_dirs(folder)[keep:]:
+        shutil.rmtree(old, ignore_errors=True)
+    for leftover in folder.glob(".*"):  # temporary folders of saves that a kill interrupted
+        if leftover.is_dir():
+            shutil.rmtree(leftover, ignore_errors=True)
+    return folder / name
 
 
-def latest_checkpoint(folder: Path) -> Path | None:
-    """The newest complete checkpoint directory under ``folder``, or None."""
-    pointer = Path(folder) / LATEST
-    if not pointer.is_file():
-        return None
-    try:
-        path = Path(folder) / json.loads(pointer.read_text())["dir"]
-    except (ValueError, KeyError) as e:
-        raise ValueError(f"corrupt checkpoint pointer {pointer}: {e}") from e
-    if not (path / "model.zip").is_file():
-        raise FileNotFoundError(f"{pointer} points at {path}, which has no model.zip")
-    return path
+@dataclass
+class Checkpoint:
+    """A checkpoint read back: the model and statistics without an env (attach one with
+    ``vec_normalize.set_venv`` and ``model.set_env``), the progress record and the generator states."""
+
+    path: Path
+    model: object
+    vec_normalize: object | None
+    progress: dict
+    rng: dict
 
 
-def load_progress(checkpoint: Path) -> dict:
-    """The ``progress.json`` of a checkpoint directory."""
-    return json.loads((Path(checkpoint) / "progress.json").read_text())
+class _Unusable(Exception):
+    """Why a checkpoint cannot be resumed from; the message names the file."""
 
 
-def restore_rng(checkpoint: Path) -> None:
-    """Restore the Python, NumPy and torch generator states saved with a checkpoint (if present)."""
-    path = Path(checkpoint) / "rng.pkl"
+def _read(path: Path, reader):
     if not path.is_file():
-        return
+        raise _Unusable(f"{path} is missing")
+    try:
+        return reader(path)
+    except Exception as e:  # truncated or garbage files raise from pickle, json, zipfile, torch...
+        raise _Unusable(f"cannot read {path}: {type(e).__name__}: {e}") from e
+
+
+def _load_pickle(path: Path):
     with open(path, "rb") as f:
-        state = pickle.load(f)
+        return pickle.load(f)
+
+
+def _read_checkpoint(path: Path, normalize: bool, algo, load_kwargs: dict) -> Checkpoint:
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    progress = _read(path / "progress.json", lambda p: json.loads(p.read_text()))
+    if not isinstance(progress, dict) or not isinstance(progress.get("num_timesteps"), int):
+        raise _Unusable(f"{path / 'progress.json'} has no step count")
+    rng = _read(path / "rng.pkl", _load_pickle)
+    if not isinstance(rng, dict) or not {"python", "numpy", "torch"} <= set(rng):
+        raise _Unusable(f"{path / 'rng.pkl'} does not hold the Python, NumPy and torch generator states")
+    stats_file = path / "vecnormalize.pkl"
+    vec_normalize = None
+    if normalize:
+        if not stats_file.is_file():
+            raise _Unusable(
+                f"{stats_file} is missing, but the run normalises (config.yaml: normalize); "
+                "resuming without it would silently train without normalisation"
+            )
+        vec_normalize = _read(stats_file, _load_pickle)
+        if not isinstance(vec_normalize, VecNormalize):
+            raise _Unusable(f"{stats_file} does not hold VecNormalize statistics (got {type(vec_normalize).__name__})")
+    elif stats_file.exists():
+        raise _Unusable(f"{stats_file} exists, but the run does not normalise (config.yaml: normalize: false)")
+    model = _read(path / "model.zip", lambda p: algo.load(p, device="cpu", **load_kwargs))
+    if model.num_timesteps != progress["num_timesteps"]:
+        raise _Unusable(
+            f"{path / 'model.zip'} is at {model.num_timesteps} steps, {path / 'progress.json'} at {progress['num_timesteps']}"
+        )
+    if vec_normalize is not None and vec_normalize.observation_space.shape != model.observation_space.shape:
+        raise _Unusable(f"{stats_file} has statistics for observations of another shape than the model's")
+    return Checkpoint(path, model, vec_normalize, progress, rng)
+
+
+def load_checkpoint(folder: Path, normalize: bool, algo=None, **load_kwargs) -> Checkpoint:
+    """The newest intact checkpoint under ``folder``; unusable newer ones are moved aside with a warning.
+
+    Args:
+        folder: the run's ``checkpoints/``.
+        normalize: whether the run normalises, i.e. whether a checkpoint must hold ``vecnormalize.pkl``.
+        algo: the SB3 algorithm class (default PPO).
+        load_kwargs: passed to ``algo.load`` (``tensorboard_log``, ``verbose``...).
+
+    Raises:
+        CheckpointError: no checkpoint, or none intact; the message names every file at fault.
+    """
+    if algo is None:
+        from stable_baselines3 import PPO as algo
+    folder = Path(folder)
+    candidates = checkpoint_dirs(folder)
+    if not candidates:
+        raise CheckpointError(f"no checkpoint in {folder}")
+    rejected = []
+    for path in candidates:
+        try:
+            checkpoint = _read_checkpoint(path, normalize, algo, load_kwargs)
+        except _Unusable as e:
+            rejected.append((path, str(e)))
+            continue
+        for bad, why in rejected:
+            target = bad.with_name(bad.name + CORRUPT_SUFFIX)
+            if target.exists():
+                shutil.rmtree(target)
+            os.replace(bad, target)
+            warnings.warn(
+                f"checkpoint unusable: {why}; moved it to {target} and resumed from the previous checkpoint, {path}",
+                CheckpointWarning,
+                stacklevel=2,
+            )
+        return checkpoint
+    reasons = "; ".join(why for _, why in rejected)
+    raise CheckpointError(f"no intact checkpoint in {folder}: {reasons}")
+
+
+def restore_rng(state: dict) -> None:
+    """Restore the Python, NumPy and torch generator states saved with a checkpoint."""
     random.setstate(state["python"])
     np.random.set_state(state["numpy"])
     torch.set_rng_state(state["torch"])

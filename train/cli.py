@@ -78,6 +78,14 @@ def parser_for(cls: type, positional: tuple[str, ...] = (), **parser_kwargs) -> 
 
 
 def parse_args(cls: type, argv: list[str] | None = None, positional: tuple[str, ...] = (), prog: str | None = None):
-    """Parse ``argv`` (default: ``sys.argv[1:]``) into an instance of the dataclass ``cls``."""
-    ns = parser_for(cls, positional, prog=prog).parse_args(argv)
-    return cls(**vars(ns))
+    """Parse ``argv`` (default: ``sys.argv[1:]``) into an instance of the dataclass ``cls``.
+
+    A ``ValueError`` from the dataclass's own validation (``__post_init__``) is reported like any
+    other bad argument: usage and message on stderr, exit status 2.
+    """
+    parser = parser_for(cls, positional, prog=prog)
+    ns = parser.parse_args(argv)
+    try:
+        return cls(**vars(ns))
+    except ValueError as e:
+        parser.error(str(e))

@@ -37,11 +37,24 @@ import numpy as np
 from leg_env import ENV_ID  # importing leg_env registers the env
 from train.cli import parse_args
 
-__all__ = ["EvalArgs", "PolicyLoadError", "TrainedPolicy", "load_policy", "run_episodes", "evaluate", "format_table"]
+__all__ = [
+    "EvalArgs",
+    "PolicyNotFoundError",
+    "PolicyLoadError",
+    "TrainedPolicy",
+    "load_policy",
+    "run_episodes",
+    "evaluate",
+    "format_table",
+]
 
 EVAL_SEED = 10_000
 GIF_FRAME_SKIP = 4  # one frame per 4 control steps: 25 frames per simulated second at dt = 0.01 s
 GIF_SIZE = 320  # pixels
+
+
+class PolicyNotFoundError(FileNotFoundError):
+    """The policy folder or one of its files is missing; the message names the path."""
 
 
 class PolicyLoadError(ValueError):
@@ -90,8 +103,8 @@ def load_policy(path, env_kwargs: dict | None = None):
     the evaluation env's arguments.
 
     Raises:
-        FileNotFoundError: the folder, ``model.zip`` or (when the run normalised observations)
-            ``vecnormalize.pkl`` is missing; the message names the path.
+        PolicyNotFoundError: the folder, ``model.zip`` or (when the run normalised) ``vecnormalize.pkl``
+            is missing; the message names the path (a ``FileNotFoundError``).
         PolicyLoadError: a file exists but is corrupt or of the wrong kind; the message names it.
     """
     if isinstance(path, str) and path.lower() == "lqr":
@@ -113,9 +126,9 @@ def load_policy(path, env_kwargs: dict | None = None):
     folder = path.parent if path.suffix == ".zip" else path
     model_file = path if path.suffix == ".zip" else folder / "model.zip"
     if not folder.is_dir():
-        raise FileNotFoundError(f"policy folder not found: {folder}")
+        raise PolicyNotFoundError(f"policy folder not found: {folder}")
     if not model_file.is_file():
-        raise FileNotFoundError(f"model file not found: {model_file}")
+        raise PolicyNotFoundError(f"model file not found: {model_file}")
     config = _read_config(folder)
     try:
         model = PPO.load(model_file, device="cpu")
@@ -126,7 +139,7 @@ def load_policy(path, env_kwargs: dict | None = None):
     stats_file = folder / "vecnormalize.pkl"
     if config.get("normalize", True) is not False or stats_file.exists():
         if not stats_file.is_file():
-            raise FileNotFoundError(f"normalisation statistics not found: {stats_file}")
+            raise PolicyNotFoundError(f"normalisation statistics not found: {stats_file}")
         try:
             with open(stats_file, "rb") as f:
                 vec_normalize = pickle.load(f)
@@ -167,6 +180,8 @@ def run_episodes(policy, seeds, env_kwargs: dict | None = None, record: int | No
 
     from leg_env.task import REWARD_TERMS
 
+    if len(seeds) == 0:
+        raise ValueError("run_episodes needs at least one seed")
     env_kwargs = dict(env_kwargs or {})
     per_episode = []
     drift_sq, drift_max, torque_sq, steps, unilateral, friction = 0.0, 0.0, np.zeros(2), 0, 0, 0
@@ -307,6 +322,12 @@ class EvalArgs:
     """Write timeseries.png (base drift, torques, contact force of the first episode) and, for a run
     folder, learning_curve.png with the baseline's level."""
 
+    def __post_init__(self):
+        if self.episodes < 1:
+            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0 (episode seeds are non-negative), got {self.seed}")
+
 
 def _label(spec: str) -> str:
     return "lqr" if spec.lower() == "lqr" else (Path(spec).name or "policy")
@@ -315,8 +336,6 @@ def _label(spec: str) -> str:
 def evaluate(args: EvalArgs) -> Path:
     """Evaluate ``args.policy`` (and ``args.baseline``) and write the results; returns the output folder."""
     is_lqr = args.policy.lower() == "lqr"
-    out = Path(args.out) if args.out is not None else (Path("runs/eval_lqr") if is_lqr else Path(args.policy) / "eval")
-    out.mkdir(parents=True, exist_ok=True)
     seeds = [args.seed + i for i in range(args.episodes)]
 
     policy = load_policy(args.policy)
@@ -327,6 +346,9 @@ def evaluate(args: EvalArgs) -> Path:
         if label in controllers:
             label = f"{label} (baseline)"
         controllers[label] = load_policy(args.baseline, env_kwargs=env_kwargs)
+    # only once every controller has loaded: a mistyped policy folder must not be created as <policy>/eval
+    out = Path(args.out) if args.out is not None else (Path("runs/eval_lqr") if is_lqr else policy.path / "eval")
+    out.mkdir(parents=True, exist_ok=True)
 
     results, series = {}, {}
     for k, (label, controller) in enumerate(controllers.items()):
@@ -351,7 +373,7 @@ def evaluate(args: EvalArgs) -> Path:
 
         first = next(iter(series.values()))
         plot_time_series(series, out / "timeseries.png", first["dt"], first["torque_limit"])
-        log = Path(args.policy) / "evaluations.json"
+        log = None if is_lqr else policy.path / "evaluations.json"
         if not is_lqr and log.is_file():
             reference = next((results[k] for k in results if k.startswith("lqr")), None)
             history = json.loads(log.read_text())["evaluations"]
@@ -361,7 +383,11 @@ def evaluate(args: EvalArgs) -> Path:
 
 
 def main(argv: list[str] | None = None) -> None:
-    evaluate(parse_args(EvalArgs, argv, positional=("policy",), prog="python -m train.evaluate"))
+    args = parse_args(EvalArgs, argv, positional=("policy",), prog="python -m train.evaluate")
+    try:
+        evaluate(args)
+    except (PolicyNotFoundError, PolicyLoadError) as e:
+        raise SystemExit(f"python -m train.evaluate: error: {e}") from None
 
 
 if __name__ == "__main__":

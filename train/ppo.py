@@ -18,13 +18,19 @@ A run writes one folder::
     learning_curve.png            evaluation return, survival rate and RMS base drift against steps
     tb/                           TensorBoard logs (SB3's plus reward terms and violation rates)
     checkpoints/                  the last checkpoints (see ``train.checkpoints``)
+    train.lock                    present while a process trains into the folder (see ``train.runfolder``)
 
-Resuming: rerunning the same command on a folder with a checkpoint continues from it (with the step
-counter, optimiser, normalisation statistics, evaluation history and random generator states),
-so a Ctrl-C or a ``kill`` (SIGTERM; both save a checkpoint first) loses nothing and a process
-killed outright loses at most one checkpoint interval. The envs restart from fresh episodes with new seeds, so a resumed run is a valid
-continuation but not bit-identical to an uninterrupted one. A folder holding a different
-configuration is never overwritten without ``--overwrite``.
+Resuming: rerunning the same command on a folder with a checkpoint continues from the newest intact
+one (with the step counter, optimiser, normalisation statistics, evaluation history and random
+generator states); a corrupt one is set aside with a warning that names the file, and the one
+before it is used (``train.checkpoints``). Periodic checkpoints are taken between PPO iterations, so
+a process killed outright loses at most one checkpoint interval and still ends at the same step
+count. A Ctrl-C or a ``kill`` (SIGTERM) saves a checkpoint first; the steps of a rollout it cuts short
+are not counted, as their samples are dropped. A run that ended before its first checkpoint is
+started again by the same command. The envs restart from fresh episodes with new seeds, so a resumed
+run is a valid continuation but not bit-identical to an uninterrupted one. A folder holding a
+different configuration is never overwritten without ``--overwrite``, and a folder that another
+process is training into is refused.
 """
 
 from __future__ import annotations
@@ -44,16 +50,18 @@ import yaml
 
 from leg_env import ENV_ID  # importing leg_env registers the env
 from train.checkpoints import (
+    CheckpointError,
     file_mode,
-    latest_checkpoint,
-    load_progress,
+    load_checkpoint,
     read_snapshot_info,
     restore_rng,
     save_checkpoint,
     save_snapshot,
     write_json_atomic,
+    write_text_atomic,
 )
 from train.cli import parse_args
+from train.runfolder import RunFolderError, RunLock, prepare_run_folder
 
 __all__ = ["TrainArgs", "train", "resolve_config", "load_hyperparams", "ENV_ID", "DEFAULT_HYPERPARAMS"]
 
@@ -81,21 +89,6 @@ _PPO_KEYS = (
     "target_kl",
     "stats_window_size",
     "policy_kwargs",
-)
-# configuration entries that define the training; a resume must match them
-_RESUME_KEYS = ("env_id", "env_kwargs", "eval_env_kwargs", "seed", "n_envs", "policy", "normalize", "ppo")
-_RUN_FILES = (
-    "model.zip",
-    "vecnormalize.pkl",
-    "config.yaml",
-    "command.txt",
-    "evaluations.json",
-    "learning_curve.png",
-    "tb",
-    "checkpoints",
-    "eval",
-    "best",
-    "last",
 )
 
 
@@ -137,6 +130,15 @@ class TrainArgs:
     """Show SB3's progress bar."""
     verbose: int = 1
     """0: quiet; 1: a line per evaluation; 2: also SB3's training tables."""
+
+    def __post_init__(self):
+        if self.total_timesteps is not None and self.total_timesteps < 1:
+            raise ValueError(f"total_timesteps must be >= 1, got {self.total_timesteps}")
+        if self.eval_episodes < 1:
+            raise ValueError(f"eval_episodes must be >= 1 (one is always run at the end), got {self.eval_episodes}")
+        for name in ("eval_freq", "checkpoint_freq", "seed"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
 
 
 def _parse_override(item: str) -> tuple[str, object]:
@@ -221,30 +223,6 @@ def _ppo_kwargs(config: dict) -> dict:
     return kwargs
 
 
-def _prepare_folder(out: Path, config: dict, args: TrainArgs) -> Path | None:
-    """Check the run folder; return the checkpoint to resume from, or None to start afresh."""
-    checkpoint = latest_checkpoint(out / "checkpoints") if (out / "checkpoints").is_dir() else None
-    existing = [name for name in _RUN_FILES if (out / name).exists()]
-    if args.overwrite and existing:
-        for name in existing:
-            path = out / name
-            shutil.rmtree(path) if path.is_dir() else path.unlink()
-        return None
-    if checkpoint is not None and args.resume:
-        saved = yaml.safe_load((out / "config.yaml").read_text()) if (out / "config.yaml").is_file() else {}
-        different = [k for k in _RESUME_KEYS if saved.get(k) != config[k]]
-        if different:
-            raise ValueError(
-                f"{out} holds a run with a different configuration ({', '.join(different)} differ); "
-                "use another --out, or --overwrite to replace it"
-            )
-        return checkpoint
-    if existing:
-        why = "has a checkpoint but --no-resume was given" if checkpoint is not None else "already holds a run"
-        raise FileExistsError(f"{out} {why}; use another --out, or --overwrite to replace it")
-    return None
-
-
 def _save_atomic(save, path: Path) -> None:
     """Write through ``save(tmp_path)`` to a temporary file next to ``path``, then ``os.replace``."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
@@ -272,9 +250,31 @@ def _machine() -> dict:
     }
 
 
+def _notice(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
 def train(args: TrainArgs) -> Path:
-    """Train (or resume) a run as described by ``args``; returns the run folder."""
+    """Train (or resume) a run as described by ``args``; returns the run folder.
+
+    Raises:
+        RunLockedError: another process is training into ``args.out`` (a ``RunFolderError``).
+        RunFolderError: the folder holds a run this call may not continue or replace.
+        CheckpointError: the folder's checkpoints are all unusable.
+    """
     import torch
+
+    torch.set_num_threads(1)
+    out = Path(args.out)
+    config = resolve_config(args)
+    out.mkdir(parents=True, exist_ok=True)
+    with RunLock(out) as lock:
+        if lock.stale_pid is not None:
+            _notice(f"took over the lock {lock.path} left by process {lock.stale_pid}, which no longer runs")
+        return _train_locked(args, config, out)
+
+
+def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
     from stable_baselines3 import PPO
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
@@ -283,18 +283,19 @@ def train(args: TrainArgs) -> Path:
     from train.callbacks import PeriodicCheckpoint, PeriodicEvaluation, RewardTermsLogger, evaluate_now
     from train.plots import plot_learning_curve
 
-    torch.set_num_threads(1)
-    out = Path(args.out)
-    config = resolve_config(args)
-    out.mkdir(parents=True, exist_ok=True)
-    checkpoint = _prepare_folder(out, config, args)
-
-    if checkpoint is None:
-        progress = {"resumes": 0, "wall_time": 0.0, "evaluations": []}
-    else:
-        progress = load_progress(checkpoint)
+    checkpoint = None
+    if prepare_run_folder(out, config, resume=args.resume, overwrite=args.overwrite, log=_notice):
+        checkpoint = load_checkpoint(
+            out / "checkpoints",
+            normalize=config["normalize"] is not False,
+            tensorboard_log=str(out / "tb"),
+            verbose=max(0, args.verbose - 1),
+        )
+        progress = checkpoint.progress
         progress["resumes"] = progress.get("resumes", 0) + 1
-    (out / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))  # a resume may change the totals
+    else:
+        progress = {"resumes": 0, "wall_time": 0.0, "evaluations": []}
+    write_text_atomic(out / "config.yaml", yaml.safe_dump(config, sort_keys=False))  # a resume may change the totals
     with open(out / "command.txt", "a") as f:
         f.write(shlex.join(getattr(sys, "orig_argv", sys.argv)) + "\n")
 
@@ -315,14 +316,14 @@ def train(args: TrainArgs) -> Path:
             **_ppo_kwargs(config),
         )
     else:
-        if (checkpoint / "vecnormalize.pkl").is_file():
-            venv = VecNormalize.load(str(checkpoint / "vecnormalize.pkl"), venv)
-        model = PPO.load(
-            checkpoint / "model.zip", env=venv, device="cpu", tensorboard_log=str(out / "tb"), verbose=max(0, args.verbose - 1)
-        )
-        restore_rng(checkpoint)
+        if checkpoint.vec_normalize is not None:
+            checkpoint.vec_normalize.set_venv(venv)
+            venv = checkpoint.vec_normalize
+        model = checkpoint.model
+        model.set_env(venv)
+        restore_rng(checkpoint.rng)
         if args.verbose:
-            print(f"resuming {out} from {model.num_timesteps:,} steps ({checkpoint})")
+            print(f"resuming {out} from {model.num_timesteps:,} steps ({checkpoint.path})")
     vec_normalize = model.get_vec_normalize_env()
 
     history = progress["evaluations"]
@@ -354,10 +355,11 @@ def train(args: TrainArgs) -> Path:
 
     eval_cfg = config["eval"]
     eval_venv = make_sb3_vec_env(eval_cfg["episodes"], seed=eval_cfg["seed"], **config["eval_env_kwargs"])
+    checkpointer = PeriodicCheckpoint(config["checkpoint_freq"], save)
     callbacks = [
         RewardTermsLogger(),
         PeriodicEvaluation(eval_venv, vec_normalize, eval_cfg["freq"], eval_cfg["seed"], history, report, clock),
-        PeriodicCheckpoint(config["checkpoint_freq"], save),
+        checkpointer,
     ]
     remaining = config["total_timesteps"] - model.num_timesteps
     try:
@@ -376,6 +378,8 @@ def train(args: TrainArgs) -> Path:
             history.append(result)
             report(result)
     except KeyboardInterrupt:
+        if checkpointer.collecting:  # the cut-short rollout's samples are dropped: so are its steps
+            model.num_timesteps = checkpointer.rollout_start
         save()
         plot_learning_curve(history, out / "learning_curve.png", config["env_id"]) if history else None
         print(
@@ -426,6 +430,8 @@ def main(argv: list[str] | None = None) -> None:
         train(args)
     except KeyboardInterrupt:
         raise SystemExit(130) from None
+    except (RunFolderError, CheckpointError) as e:
+        raise SystemExit(f"python -m train.ppo: error: {e}") from None
 
 
 if __name__ == "__main__":

@@ -12,10 +12,12 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# torch is pinned and installed first: an unpinned torch (via SB3) would pull a multi-GB CUDA build
+# torch is pinned and installed first: an unpinned torch (via SB3, TorchRL) would pull a multi-GB CUDA
+# build; the pin is repeated in the second install so that no resolution can replace it
+TORCH := torch==2.13.0
 $(VENV)/.installed-%: pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e '.[$*]'
+	$(BIN)/python -m pip install --quiet '$(TORCH)'
+	$(BIN)/python -m pip install --quiet -e '.[$*]' '$(TORCH)'
 	touch $@
 
 # numba caches a compiled kernel under its own file's timestamp, not those of the kernels it inlines

@@ -59,8 +59,10 @@ class LegStanceVecEnv(VecEnv):
     ``get_attr(name)`` returns its attribute for each requested index (``observation_space`` and
     ``action_space`` are the single-env spaces), ``set_attr`` sets it for all sub-envs (a strict
     subset raises ``ValueError``), ``env_method`` calls the method once and returns its result for
-    each index, and ``env_is_wrapped`` is False (no Gymnasium wrappers). ``get_images`` returns the
-    frames of the first ``render_envs`` sub-envs (``render_mode="rgb_array"``).
+    each index, and ``env_is_wrapped`` is False (no Gymnasium wrappers). ``get_images`` returns one
+    frame per sub-env (``render_mode="rgb_array"``; of the first ``render_envs`` if the batched env
+    was given that), and ``metadata["render_fps"]`` is the env's real rate, ``1 / dt``, so SB3's
+    ``VecVideoRecorder`` plays videos at real speed.
     """
 
     def __init__(self, env: PlanarLegStanceVectorEnv):
@@ -74,6 +76,7 @@ class LegStanceVecEnv(VecEnv):
         self.env = env
         self._actions: np.ndarray | None = None
         super().__init__(env.num_envs, env.single_observation_space, env.single_action_space)
+        self.metadata = {**self.metadata, "render_fps": env.metadata["render_fps"]}  # SB3's VecEnv sets render_modes only
 
     # ---------------------------------------------------------------- API
 

@@ -211,13 +211,23 @@ class StanceConfig:
 
     @classmethod
     def from_kwargs(cls, config: "StanceConfig | dict | None" = None, **overrides) -> "StanceConfig":
-        """A config from an instance or dict, with keyword overrides; unknown names raise ValueError."""
-        base = {} if config is None else (asdict(config) if isinstance(config, StanceConfig) else dict(config))
-        base.update(overrides)
+        """A config from an instance or dict, with keyword overrides.
+
+        An unknown keyword raises ``TypeError`` worded as Python's own ("got an unexpected keyword
+        argument 'name'"; wrappers such as TorchRL's ``GymEnv`` read that to drop an optional
+        argument); an unknown key of a ``config`` dict is a bad value, ``ValueError``.
+        """
         names = {f.name for f in fields(cls)}
-        unknown = set(base) - names
+        unknown = [name for name in overrides if name not in names]
         if unknown:
-            raise ValueError(f"unknown StanceConfig argument(s): {sorted(unknown)}")
+            listed = ", ".join(repr(name) for name in unknown)
+            what = f"an unexpected keyword argument {listed}" if len(unknown) == 1 else f"unexpected keyword arguments {listed}"
+            raise TypeError(f"got {what}: not an argument of the env nor a StanceConfig field")
+        base = {} if config is None else (asdict(config) if isinstance(config, StanceConfig) else dict(config))
+        unknown = sorted(set(base) - names)
+        if unknown:
+            raise ValueError(f"config has unknown StanceConfig field(s): {unknown}")
+        base.update(overrides)
         return cls(**base)
 
     def replace(self, **changes) -> "StanceConfig":

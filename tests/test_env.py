@@ -52,7 +52,7 @@ INVALID_ARGS = [
     dict(params={"m_b": -1.0}),
     dict(params={"mass": 1.0}),
     dict(params="heavy"),
-    dict(no_such_argument=1),
+    dict(config={"no_such_field": 1}),  # a bad value of config; an unknown keyword is a TypeError
     dict(torque_limit=10.0),  # the knee needs 24.1 N m to hold the nominal posture
     dict(min_base_height=2.0),  # the nominal posture would be a fall
     dict(render_mode="ansi"),
@@ -413,6 +413,20 @@ def test_invalid_constructor_arguments(kwargs):
     with pytest.raises(ValueError), warnings.catch_warnings():
         warnings.filterwarnings("ignore", ".*The environment is being initialised with render_mode")  # gym.make's own
         gym.make(ENV_ID, **kwargs)
+
+
+@pytest.mark.parametrize("unknown", [{"frameskip": 1}, {"no_such_argument": 1, "alive_bonus": 2.0, "other": 2}])
+def test_unknown_keyword_argument_is_a_type_error_naming_it(unknown):
+    """As Python's own: wrappers (TorchRL's GymEnv passes frameskip) catch exactly this TypeError."""
+    names = [k for k in unknown if k != "alive_bonus"]
+    for build in (make, lambda **kw: gym.make(ENV_ID, **kw), lambda **kw: gym.make_vec(ENV_ID, num_envs=2, **kw)):
+        with pytest.raises(TypeError, match="unexpected keyword argument") as error:
+            build(**unknown)
+        assert all(repr(name) in str(error.value) for name in names), error.value
+    with pytest.raises(TypeError, match=r"got an unexpected keyword argument 'frameskip'"):
+        make(frameskip=1)
+    with pytest.raises(ValueError, match="alive_bonus"):  # a bad value stays a ValueError naming the field
+        make(alive_bonus=-1.0)
 
 
 def test_constructor_accepts_params_and_config_objects():

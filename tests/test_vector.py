@@ -89,7 +89,7 @@ def test_spaces_and_metadata_match_the_single_env():
         {"autoreset_mode": "EveryStep"},
         {"render_mode": "human"},
         {"render_envs": 0},
-        {"not_a_setting": 1.0},
+        {"config": {"not_a_setting": 1.0}},
         {"torque_limit": 1.0},  # cannot hold the nominal posture
     ],
 )
@@ -97,6 +97,11 @@ def test_bad_arguments_raise(kwargs):
     kwargs = {"num_envs": 2, **kwargs}
     with pytest.raises(ValueError):
         PlanarLegStanceVectorEnv(**kwargs)
+
+
+def test_unknown_keyword_argument_is_a_type_error():
+    with pytest.raises(TypeError, match="unexpected keyword argument 'not_a_setting'"):
+        PlanarLegStanceVectorEnv(2, not_a_setting=1.0)
 
 
 # ------------------------------------------------------------------ parity

@@ -57,8 +57,13 @@ def parser_for(cls: type, positional: tuple[str, ...] = (), **parser_kwargs) -> 
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         tp = _base_type(hints[f.name])
-        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
-        kwargs: dict = {"help": docs.get(f.name, ""), "default": default}
+        kwargs: dict = {"help": docs.get(f.name, "")}
+        if f.default is not dataclasses.MISSING:
+            kwargs["default"] = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            kwargs["default"] = f.default_factory()
+        elif f.name not in positional:
+            kwargs["required"] = True  # no default: a required option (a positional one is required anyway)
         if tp is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         elif typing.get_origin(tp) is list:

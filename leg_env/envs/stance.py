@@ -144,8 +144,9 @@ class PlanarLegStanceEnv(gym.Env):
 
     ## Arguments
     ``gymnasium.make("leg_env/PlanarLegStance-v0", **kwargs)`` or ``PlanarLegStanceEnv(**kwargs)``.
-    Every ``StanceConfig`` field is a keyword argument (it overrides ``config``); unknown names and
-    out-of-range values raise ``ValueError``, as does a ``torque_limit`` that cannot hold the nominal
+    Every ``StanceConfig`` field is a keyword argument (it overrides ``config``). An unknown keyword
+    raises ``TypeError`` ("got an unexpected keyword argument ...", as Python does); out-of-range values
+    raise ``ValueError`` naming the field, as does a ``torque_limit`` that cannot hold the nominal
     posture or termination limits that the nominal posture itself violates.
 
     | Parameter                   | Type              | Default        | Description                                              |

@@ -123,12 +123,14 @@ class PlanarLegStanceVectorEnv(VectorEnv):
 
     ## Rendering
     ``render_mode="rgb_array"``: ``render()`` returns a tuple of ``(height, width, 3)`` uint8 frames,
-    one for each of the first ``render_envs`` sub-envs.
+    one per sub-env, as Gymnasium's vector wrappers (``RecordVideo``, ``HumanRendering``) expect;
+    ``render_envs=k`` draws only the first ``k`` (cheaper for a large batch, but those wrappers then
+    refuse the frames). ``metadata["render_fps"]`` is the real rate, ``1 / dt``.
 
     ## Arguments
     ``num_envs`` (int >= 1), ``max_episode_steps`` (int >= 1 or None, default 1000),
     ``autoreset_mode`` (``AutoresetMode`` or its value string, default ``NEXT_STEP``),
-    ``render_envs`` (frames per ``render()``, default 4), ``num_threads`` (default 1: one thread, the
+    ``render_envs`` (frames per ``render()``, default None: every sub-env), ``num_threads`` (default 1: one thread, the
     right choice next to a training process; ``k > 1`` splits the batch over ``k`` of numba's threads,
     bitwise the same results, ``k <= NUMBA_NUM_THREADS``) and every argument of the single env:
     ``render_mode`` (None or ``"rgb_array"``), ``params``, ``config``, ``width``, ``height`` and the
@@ -150,7 +152,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         width: int = 480,
         height: int = 480,
-        render_envs: int = 4,
+        render_envs: int | None = None,
         num_threads: int = 1,
         **config_overrides: Any,
     ):
@@ -166,8 +168,8 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError as e:
             raise ValueError(f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, got {autoreset_mode!r}") from e
-        if isinstance(render_envs, bool) or not isinstance(render_envs, (int, np.integer)) or render_envs < 1:
-            raise ValueError(f"render_envs must be a positive integer, got {render_envs!r}")
+        if render_envs is not None and (isinstance(render_envs, bool) or not isinstance(render_envs, (int, np.integer)) or render_envs < 1):
+            raise ValueError(f"render_envs must be a positive integer or None (every sub-env), got {render_envs!r}")
         if isinstance(num_threads, bool) or not isinstance(num_threads, (int, np.integer)) or num_threads < 1:
             raise ValueError(f"num_threads must be a positive integer, got {num_threads!r}")
         if num_threads > numba.config.NUMBA_NUM_THREADS:
@@ -182,7 +184,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         self.render_mode = render_mode
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
         self.autoreset_mode = autoreset_mode
-        self.render_envs = int(render_envs)
+        self.render_envs = None if render_envs is None else int(render_envs)
         self.num_threads = int(num_threads)
         self.width, self.height = single.width, single.height
         self.unilateral = single.unilateral
@@ -262,7 +264,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         return t.obs, t.reward, t.terminated, t.truncated, info
 
     def render(self):
-        """Frames of the first ``render_envs`` sub-envs (``rgb_array`` mode), else None with a warning."""
+        """One frame per sub-env, or of the first ``render_envs`` (``rgb_array`` mode); else None with a warning."""
         if self.render_mode is None:
             from gymnasium import logger
 
@@ -271,7 +273,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         from .. import render
 
         frames = []
-        for i in range(min(self.render_envs, self.num_envs)):
+        for i in range(self.num_envs if self.render_envs is None else min(self.render_envs, self.num_envs)):
             violated = bool(self._flags[i, _FLAG["unilateral_violation"]] or self._flags[i, _FLAG["friction_violation"]])
             mode, impulse = contact_marks(self._state, self._out, i, self.unilateral)
             frames.append(

@@ -49,6 +49,13 @@ class PlanarLegStanceEnv(gym.Env):
     constant torques (about 0 N m at the hip and -24.1 N m at the knee with the default parameters;
     ``lam = [0, m g] = [0, 147.15] N``). The equilibrium is unstable: with zero torques the robot falls.
 
+    **Unilateral contact** (``contact="unilateral"``). The ground is instead the line ``y = 0`` of
+    the world, which can only push, with Coulomb friction (``mu`` = 0.5 by default, below the Painleve
+    bound everywhere in the joint box): the foot sticks, slips, lifts off, flies and lands with a
+    plastic impact, each transition located inside the control step (``leg_env.hybrid``; the modes,
+    impact map and the Painleve and Zeno rules are documented there and in ``leg_env.contact``). The
+    contact mode is part of the state; the observation and ``info`` describe it (below).
+
     **Time stepping.** One ``step`` is a control period ``dt`` = 0.01 s (100 Hz) with the torques held
     constant, integrated by at least ``substeps`` = 2 RK4 steps, more when the motion is fast so that no
     link or joint turns by more than ``max_angle`` = 0.02 rad per RK4 step (balancing never triggers
@@ -96,6 +103,19 @@ class PlanarLegStanceEnv(gym.Env):
     | 10  | tangential contact force `lam_x / (m g)`         | -Inf | Inf  | 1     |
     | 11  | normal contact force `lam_y / (m g)`             | -Inf | Inf  | 1     |
 
+    With ``contact="unilateral"`` the observation has 18 entries: entries 0-1 are the base position
+    relative to the ground point below the foot (the stick contact point in stick), entry 1 (the base
+    height) is unbounded, the force in 10-11 is the mean over the step without impact impulses, and:
+
+    | Num | Observation (unilateral only)                    | Min  | Max  | Unit  |
+    |-----|--------------------------------------------------|------|------|-------|
+    | 12  | foot height `y_f`                                | -Inf | Inf  | m     |
+    | 13  | foot velocity `x_f'`                             | -Inf | Inf  | m/s   |
+    | 14  | foot velocity `y_f'`                             | -Inf | Inf  | m/s   |
+    | 15  | in contact (1: stick or slip, 0: flight)         | 0    | 1    | 1     |
+    | 16  | slip direction (+1, -1; 0 unless slipping)       | -1   | 1    | 1     |
+    | 17  | impact impulse of the step `P_y / (m g dt)`      | -Inf | Inf  | 1     |
+
     ## Rewards
     ``reward = reward_alive + reward_drift + reward_unilateral + reward_friction + reward_ctrl``, each
     term in ``info`` under that name (they sum to the reward exactly, in this order):
@@ -108,6 +128,17 @@ class PlanarLegStanceEnv(gym.Env):
     - ``reward_friction = -friction_weight max(0, |lam_x| - mu lam_y) / (m g)``: the force must lie in
       the friction cone.
     - ``reward_ctrl = -ctrl_cost_weight |a|^2`` with ``a`` the clipped action.
+
+    With ``contact="unilateral"`` the ground cannot pull or leave the cone, so the two contact terms
+    charge what asking for it does instead: ``reward_unilateral = -unilateral_weight flight_time / dt``
+    (the share of the step spent off the ground) and ``reward_friction = -friction_weight
+    slip_distance / dt`` (the mean slip speed over the step, m/s). ``info`` then also has
+    ``leg_env.task.UNILATERAL_KEYS`` (``leg_env.task.unilateral_info`` documents them): ``contact_mode``
+    (``"stick"``, ``"slip"``, ``"flight"`` at the end of the step), ``foot_height``, ``impulse``, the time in
+    each mode, ``slip_distance``, ``work_actuators``, ``dissipation_slip``, ``dissipation_impacts``,
+    ``energy`` and the counts ``contact_events``, ``painleve_fallbacks``, ``zeno_settles``;
+    ``unilateral_violation`` / ``friction_violation`` can then only come from a Zeno settle or a
+    Painleve jam.
 
     ``info`` also has ``contact_force`` (``lam`` [N], shape (2,)), ``normal_force`` (``lam_y`` [N]),
     ``unilateral_violation`` (``lam_y < 0``), ``friction_violation`` (``|lam_x| > mu lam_y``),
@@ -124,7 +155,11 @@ class PlanarLegStanceEnv(gym.Env):
     ``reset(options={"qpos": q, "qvel": qd})`` starts from an explicit state instead (either key may be
     left out: ``qpos`` defaults to the nominal posture, ``qvel`` to zero; no noise is added). The contact
     point is where that foot is, and the base velocity is projected onto the contact as above. Shapes
-    must be ``(5,)`` and values finite, else ``ValueError``.
+    must be ``(5,)`` and values finite, else ``ValueError``. With ``contact="unilateral"`` the state is
+    taken in world coordinates and is not projected: a foot above the ground starts in flight, a foot
+    within 1e-9 m of it is put on it in the consistent contact mode (one moving into it gets the impact
+    map first), and a foot below it raises ``ValueError``; ``env.unwrapped.state`` is the world
+    ``(q, qd, anchor)`` with ``anchor = (x, 0)`` the contact point (the foot's ``x`` when not sticking).
 
     ## Episode End
     ### Termination
@@ -134,7 +169,8 @@ class PlanarLegStanceEnv(gym.Env):
        the knee, or ``|th_b| > max_torso_angle`` (1 rad);
     2. a joint leaves its range: ``q1`` outside ``hip_range`` (-3, -0.9) rad or ``q2`` outside
        ``knee_range`` (0.05, 2.5) rad;
-    3. if ``terminate_on_contact_loss``: ``lam_y < contact_loss_threshold`` (0 N);
+    3. if ``terminate_on_contact_loss``: ``lam_y < contact_loss_threshold`` (0 N), and with
+       ``contact="unilateral"`` also any time in flight;
     4. a numerical failure: a non-finite state or force, or a rate above ``max_rate``. The state is
        restored to the last good one, the observation is the last (finite) one, every reward term is
        0 and ``info["numerical_failure"]`` is True.
@@ -167,7 +203,8 @@ class PlanarLegStanceEnv(gym.Env):
     | `unilateral_weight`         | float             | 10.0           | per weight of pulling force                              |
     | `friction_weight`           | float             | 10.0           | per weight of force outside the friction cone            |
     | `ctrl_cost_weight`          | float             | 0.01           | per unit of squared action                               |
-    | `mu`                        | float             | 0.8            | friction coefficient of the cone check                   |
+    | `mu`                        | float or None     | None           | friction coefficient; None: 0.8 pinned (the cone check), 0.5 unilateral |
+    | `contact`                   | str               | "pinned"       | `"pinned"` (bilateral pin) or `"unilateral"` (exact unilateral ground) |
     | `min_base_height`           | float             | 0.5            | fall: torso height above the contact point [m]           |
     | `max_torso_angle`           | float             | 1.0            | fall: torso tilt [rad]                                   |
     | `hip_range`, `knee_range`   | pair              | (-3, -0.9), (0.05, 2.5) | allowed joint angles [rad]                      |
@@ -180,7 +217,8 @@ class PlanarLegStanceEnv(gym.Env):
     included, so a copy continues the same trajectory; an open window is not copied.
 
     ## Version History
-    * v0: Initial release.
+    * v0: Initial release. The ``contact`` argument (default ``"pinned"``: the release's behaviour, bit
+      for bit) adds the unilateral ground as an opt-in model.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 100}

@@ -342,30 +342,37 @@ def _book(mode, h, X0, X1, lx, ly, power, p, acc):
         acc[ACC_SLIP_DISSIPATION] += h * power
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _hybrid_from(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, s1, co1, s2, co2, acc, log_t, log_k):
     """One hybrid control step of one robot, in place; returns the mode at its end.
 
     ``q, qd`` (5,) world state, ``anchor`` (2,) the stick contact point (``anchor[1]`` is the ground's
     height; ``anchor[0]`` is rewritten: the contact point in stick, else the foot's ``x``), ``s1 ... co2``
     the sines/cosines of ``q``'s link angles. ``acc`` (``ACC_DIM``,) and ``log_t``, ``log_k``
-    (``LOG_SIZE``,) are overwritten: the step's accumulators and its events (time since the step
-    start and kind; NaN / -1 after the last).
+    (``LOG_SIZE``,): ``acc`` is overwritten with the step's accumulators, and the first
+    ``acc[ACC_EVENTS]`` entries of the log with its events (time since the step start, and kind).
     """
     t_hip, t_knee = tau[0], tau[1]
     for j in range(acc.shape[0]):
         acc[j] = 0.0
-    for j in range(log_t.shape[0]):
-        log_t[j] = np.nan
-        log_k[j] = -1
     X = (q[0], q[1], q[2], q[3], q[4], qd[0], qd[1], qd[2], qd[3], qd[4], s1, co1, s2, co2)
     settled = False
     events = 0
-    mode, X = _choose_mode(mode, X, anchor, t_hip, t_knee, mu, p, -1, settled, acc)
+    # the mode under this step's torques: a stick that stays consistent, or a foot in the air, keeps its
+    # mode without the full choice (the common cases); anything else goes through _choose_mode
+    k = _derivative(mode, mu, X, t_hip, t_knee, p)
+    keep = False
+    if mode == STICK:
+        keep = k[6] >= 0.0 and mu * k[6] - abs(k[5]) >= 0.0
+    elif mode == FLIGHT:
+        _, y_f, _, vfy = _foot(X, p)
+        keep = y_f - anchor[1] > GROUND_TOL or vfy > REST_SPEED
+    if not keep:
+        mode, X = _choose_mode(mode, X, anchor, t_hip, t_knee, mu, p, -1, settled, acc)
+        k = _derivative(mode, mu, X, t_hip, t_knee, p)
     t = 0.0
     t_left = dt
     n_left = _substeps_for_rates(X[7], X[8], X[9], dt, substeps, max_angle)
-    k = _derivative(mode, mu, X, t_hip, t_knee, p)
     while n_left > 0:
         h = t_left / n_left
         X1, lx, ly, power = _rk4_substep(mode, mu, anchor, X, k, h, t_hip, t_knee, p, 0.0, 0.0)
@@ -493,8 +500,8 @@ def hybrid_step(
     anchor = np.zeros((n, 2))
     anchor[:, 0] = foot[:, 0] if anchor_x is None else np.broadcast_to(np.asarray(anchor_x, dtype=np.float64), lead).reshape(-1)
     acc = np.empty((n, ACC_DIM))
-    log_t = np.empty((n, LOG_SIZE))
-    log_k = np.empty((n, LOG_SIZE), dtype=np.int64)
+    log_t = np.full((n, LOG_SIZE), np.nan)
+    log_k = np.full((n, LOG_SIZE), -1, dtype=np.int64)
     _hybrid_batch(qf, qdf, tf, params_array(p), mu_f, modes, anchor, dt, substeps, max_angle, acc, log_t, log_k)
 
     def r(x, tail=()):

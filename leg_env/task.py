@@ -722,11 +722,12 @@ def unilateral_info(out: list, mode: float) -> dict:
 
 def unilateral_columns(out: np.ndarray, modes: np.ndarray) -> dict:
     """``unilateral_info`` of many robots at once: one fresh array per key over the rows of ``out``."""
-    acc = out[:, _ACC0:].T.copy()
+    acc = out[:, _ACC0:].T.copy()  # one copy serves every key
+    counts = acc[[ACC_EVENTS, ACC_PAINLEVE, ACC_SETTLES]].astype(np.int64)
     return {
-        "contact_mode": np.array(MODE_NAMES)[modes.astype(np.int64)],
+        "contact_mode": np.take(_MODE_NAME_ARRAY, modes.astype(np.intp)),
         "foot_height": acc[ACC_DIM + 1],
-        "impulse": out[:, _ACC0 + ACC_KICK_X:_ACC0 + ACC_KICK_Y + 1].copy(),
+        "impulse": acc[ACC_KICK_X:ACC_KICK_Y + 1].T,
         "stick_time": acc[ACC_STICK_TIME],
         "slip_time": acc[ACC_SLIP_TIME],
         "flight_time": acc[ACC_FLIGHT_TIME],
@@ -735,7 +736,10 @@ def unilateral_columns(out: np.ndarray, modes: np.ndarray) -> dict:
         "dissipation_slip": acc[ACC_SLIP_DISSIPATION],
         "dissipation_impacts": acc[ACC_IMPACT_DISSIPATION],
         "energy": acc[ACC_DIM],
-        "contact_events": acc[ACC_EVENTS].astype(np.int64),
-        "painleve_fallbacks": acc[ACC_PAINLEVE].astype(np.int64),
-        "zeno_settles": acc[ACC_SETTLES].astype(np.int64),
+        "contact_events": counts[0],
+        "painleve_fallbacks": counts[1],
+        "zeno_settles": counts[2],
     }
+
+
+_MODE_NAME_ARRAY = np.array(MODE_NAMES)

@@ -276,7 +276,8 @@ def _locate(mode, mu, X, k, h, X1, k1, lx1, ly1, pw1, t_hip, t_knee, anchor, p, 
     """Earliest crossing of the watched witnesses inside the substep ``X -> X1`` of length ``h``.
 
     Illinois regula falsi on the substep length ``s`` (one RK4 step from ``X`` with the same stage-1
-    derivative ``k``). Returns ``(s, X_s, k_s, lx, ly, power, kind)`` at the bracket's end past the root.
+    derivative ``k``); for a touchdown, Newton steps on the foot height with its velocity as the
+    derivative, kept inside the bracket (the notes' recipe: 2-3 steps instead of about 10). Returns ``(s, X_s, k_s, lx, ly, power, kind)`` at the bracket's end past the root.
     """
     wa, wb = _witnesses(mode, mu, X, k, anchor, p)
     fa = min(wa if watch_a else np.inf, wb if watch_b else np.inf)
@@ -285,10 +286,11 @@ def _locate(mode, mu, X, k, h, X1, k1, lx1, ly1, pw1, t_hip, t_knee, anchor, p, 
     a, b = 0.0, h
     Xb, kb, lxb, lyb, pwb = X1, k1, lx1, ly1, pw1
     side = 0
+    s_next = -1.0  # a Newton proposal for the touchdown witness, whose derivative is the foot's y velocity
     for _ in range(_ROOT_ITERATIONS):
         if b - a <= ROOT_TIME:
             break
-        s = b - fb * (b - a) / (fb - fa)
+        s = s_next if a < s_next < b else b - fb * (b - a) / (fb - fa)
         if not (a < s < b):
             s = 0.5 * (a + b)
         Xs, lxs, lys, pws = _rk4_substep(mode, mu, anchor, X, k, s, t_hip, t_knee, p, 0.0, 0.0)
@@ -305,6 +307,11 @@ def _locate(mode, mu, X, k, h, X1, k1, lx1, ly1, pw1, t_hip, t_knee, anchor, p, 
             if side == 1:
                 fb *= 0.5
             side = 1
+        s_next = -1.0
+        if mode == FLIGHT:
+            vfy = _foot(Xs, p)[3]
+            if vfy < 0.0:  # Newton, nudged past the root so that the bracket closes
+                s_next = s - fs / vfy + (0.25 * ROOT_TIME if fs >= 0.0 else -0.25 * ROOT_TIME)
     wa, wb = _witnesses(mode, mu, Xb, kb, anchor, p)
     kind_a, kind_b = _event_kinds(mode)
     if watch_b and (not watch_a or wb < wa):

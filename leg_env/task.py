@@ -701,22 +701,21 @@ def unilateral_info(out: list, mode: float) -> dict:
     of the first minus the other two) and ``energy`` (kinetic + potential, [J]); ``contact_events``,
     ``painleve_fallbacks``, ``zeno_settles`` (ints) count what ``leg_env.hybrid`` describes.
     """
-    acc = out[_ACC0:]
     return {
         "contact_mode": MODE_NAMES[int(mode)],
-        "foot_height": acc[ACC_DIM + 1],
-        "impulse": np.array(acc[ACC_KICK_X:ACC_KICK_Y + 1]),
-        "stick_time": acc[ACC_STICK_TIME],
-        "slip_time": acc[ACC_SLIP_TIME],
-        "flight_time": acc[ACC_FLIGHT_TIME],
-        "slip_distance": acc[ACC_SLIP_DISTANCE],
-        "work_actuators": acc[ACC_WORK],
-        "dissipation_slip": acc[ACC_SLIP_DISSIPATION],
-        "dissipation_impacts": acc[ACC_IMPACT_DISSIPATION],
-        "energy": acc[ACC_DIM],
-        "contact_events": int(acc[ACC_EVENTS]),
-        "painleve_fallbacks": int(acc[ACC_PAINLEVE]),
-        "zeno_settles": int(acc[ACC_SETTLES]),
+        "foot_height": out[_HYB0 + 1],
+        "impulse": np.array((out[_ACC0 + ACC_KICK_X], out[_ACC0 + ACC_KICK_Y])),
+        "stick_time": out[_ACC0 + ACC_STICK_TIME],
+        "slip_time": out[_ACC0 + ACC_SLIP_TIME],
+        "flight_time": out[_ACC0 + ACC_FLIGHT_TIME],
+        "slip_distance": out[_ACC0 + ACC_SLIP_DISTANCE],
+        "work_actuators": out[_ACC0 + ACC_WORK],
+        "dissipation_slip": out[_ACC0 + ACC_SLIP_DISSIPATION],
+        "dissipation_impacts": out[_ACC0 + ACC_IMPACT_DISSIPATION],
+        "energy": out[_HYB0],
+        "contact_events": int(out[_ACC0 + ACC_EVENTS]),
+        "painleve_fallbacks": int(out[_ACC0 + ACC_PAINLEVE]),
+        "zeno_settles": int(out[_ACC0 + ACC_SETTLES]),
     }
 
 

@@ -44,22 +44,10 @@ import math
 import numpy as np
 from numba import njit
 
-from .dynamics import NQ, NU, _batched, _flight_core, _stance_core, _vec, params_array
+from .dynamics import _CONTACT_NAMES, NQ, NU, _batched, _flight_inertia, _stance_core, _vec, params_array
 from .params import LegParams
 
-__all__ = [
-    "STICK",
-    "SLIP_FORWARD",
-    "SLIP_BACKWARD",
-    "FLIGHT",
-    "MODE_NAMES",
-    "REST_SPEED",
-    "slip_dynamics",
-    "impact_map",
-    "contact_mode",
-    "mu_critical",
-    "free_foot_acceleration",
-]
+__all__ = list(_CONTACT_NAMES)  # leg_env.dynamics re-exports these names
 
 STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT = 0, 1, 2, 3
 MODE_NAMES = ("stick", "slip", "slip", "flight")
@@ -80,14 +68,8 @@ def _foot_response(s1, co1, s2, co2, p):
     Returns ``(Lxx, Lxy, Lyy, B1x, B1y, B2x, B2y, K11, K12, K22, inv_det)``; the last four let
     ``_free_terms`` solve ``K u = r`` with the same factorisation.
     """
-    m_b, m1, m2, I1, I2 = p[0], p[1], p[2], p[4], p[5]
-    l1, l2, c1, c2 = p[6], p[7], p[8], p[9]
-    m = m_b + m1 + m2
-    a = m1 * c1 + m2 * l1
-    b = m2 * c2
-    kf = m2 * l1 * c2 - a * b / m
-    K11 = I1 + m1 * c1 * c1 + m2 * l1 * l1 - a * a / m
-    K22 = I2 + m2 * c2 * c2 - b * b / m
+    l1, l2 = p[6], p[7]
+    m, a, b, kf, K11, K22 = _flight_inertia(p)
     K12 = kf * (co1 * co2 + s1 * s2)
     inv_det = 1.0 / (K11 * K22 - K12 * K12)
     al1 = l1 - a / m
@@ -107,12 +89,8 @@ def _foot_response(s1, co1, s2, co2, p):
 @njit(cache=True, inline="always")
 def _free_terms(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, K11, K12, K22, inv_det, p):
     """Free leg accelerations ``u = K^-1 r`` and the free foot acceleration ``a0``; returns ``(u1, u2, a0x, a0y)``."""
-    m_b, m1, m2 = p[0], p[1], p[2]
-    l1, l2, c1, c2, g = p[6], p[7], p[8], p[9], p[10]
-    m = m_b + m1 + m2
-    a = m1 * c1 + m2 * l1
-    b = m2 * c2
-    kf = m2 * l1 * c2 - a * b / m
+    l1, l2, g = p[6], p[7], p[10]
+    m, a, b, kf, _, _ = _flight_inertia(p)
     al1 = l1 - a / m
     al2 = l2 - b / m
     s12 = s1 * co2 - co1 * s2

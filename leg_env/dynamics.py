@@ -154,6 +154,25 @@ def _stance_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
 
 
 @njit(cache=True, inline="always")
+def _flight_inertia(p):
+    """Constants of the leg's motion about the whole-body COM: ``(m, a, b, kf, K11, K22)``.
+
+    ``m`` total mass, ``a = m1 c1 + m2 l1`` and ``b = m2 c2`` the first moments of the leg about the hip
+    and of the shank about the knee, and the flight inertia ``K = [[K11, kf c12], [kf c12, K22]]`` of the
+    absolute leg angles (``_flight_core``).
+    """
+    m_b, m1, m2, I1, I2 = p[0], p[1], p[2], p[4], p[5]
+    l1, c1, c2 = p[6], p[8], p[9]
+    m = m_b + m1 + m2
+    a = m1 * c1 + m2 * l1
+    b = m2 * c2
+    kf = m2 * l1 * c2 - a * b / m
+    K11 = I1 + m1 * c1 * c1 + m2 * l1 * l1 - a * a / m
+    K22 = I2 + m2 * c2 * c2 - b * b / m
+    return m, a, b, kf, K11, K22
+
+
+@njit(cache=True, inline="always")
 def _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     """Unconstrained (flight) forward dynamics from the same inputs as ``_stance_core``; returns ``qdd[0..4]``.
 
@@ -166,14 +185,8 @@ def _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     with ``a = m1 c1 + m2 l1``, ``b = m2 c2``, ``kf = m2 l1 c2 - a b / m``,
     ``D11 = I1 + m1 c1^2 + m2 l1^2`` and ``D22 = I2 + m2 c2^2``.
     """
-    m_b, m1, m2, I_b, I1, I2 = p[0], p[1], p[2], p[3], p[4], p[5]
-    l1, c1, c2, g = p[6], p[8], p[9], p[10]
-    m = m_b + m1 + m2
-    a = m1 * c1 + m2 * l1
-    b = m2 * c2
-    kf = m2 * l1 * c2 - a * b / m
-    K11 = I1 + m1 * c1 * c1 + m2 * l1 * l1 - a * a / m
-    K22 = I2 + m2 * c2 * c2 - b * b / m
+    I_b, g = p[3], p[10]
+    m, a, b, kf, K11, K22 = _flight_inertia(p)
     c12 = co1 * co2 + s1 * s2  # cos(th1 - th2)
     s12 = s1 * co2 - co1 * s2  # sin(th1 - th2)
     K12 = kf * c12
@@ -198,14 +211,8 @@ def _energy_core(s1, co1, s2, co2, y_b, vx, vy, w_b, w1, w2, p):
     By Koenig's theorem ``T = m |v_com|^2 / 2 + I_b th_b'^2 / 2 + theta'^T K theta' / 2``, ``K`` the flight
     inertia of the leg angles ``theta = (th1, th2)`` about the COM (``_flight_core``); ``V = m g y_com``.
     """
-    m_b, m1, m2, I_b, I1, I2 = p[0], p[1], p[2], p[3], p[4], p[5]
-    l1, c1, c2, g = p[6], p[8], p[9], p[10]
-    m = m_b + m1 + m2
-    a = m1 * c1 + m2 * l1
-    b = m2 * c2
-    kf = m2 * l1 * c2 - a * b / m
-    K11 = I1 + m1 * c1 * c1 + m2 * l1 * l1 - a * a / m
-    K22 = I2 + m2 * c2 * c2 - b * b / m
+    I_b, g = p[3], p[10]
+    m, a, b, kf, K11, K22 = _flight_inertia(p)
     K12 = kf * (co1 * co2 + s1 * s2)
     vcx = vx - (a * s1 * w1 + b * s2 * w2) / m
     vcy = vy + (a * co1 * w1 + b * co2 * w2) / m
@@ -612,7 +619,7 @@ def static_equilibrium(p: LegParams, knee: float = 0.8) -> tuple[np.ndarray, np.
 
 # The unilateral contact (modes, slip, impact map, Painleve bound) lives in leg_env.contact and is
 # re-exported here, the one place users look for the dynamics (lazily: leg_env.contact imports this module).
-_CONTACT_NAMES = (
+_CONTACT_NAMES = (  # leg_env.contact.__all__
     "STICK",
     "SLIP_FORWARD",
     "SLIP_BACKWARD",

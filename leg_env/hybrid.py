@@ -350,6 +350,29 @@ def _book(mode, h, X0, X1, lx, ly, power, p, acc):
 
 
 @njit(cache=True, inline="always")
+def _steady(mode, mu, anchor, X, k, t, t_left, n_left, t_hip, t_knee, p, acc):
+    """Substeps in ``mode`` while no witness of it is negative at a substep's end.
+
+    A substep that ends with one negative is not taken: the general loop of ``_hybrid_from`` redoes it
+    from the same state, with the same arithmetic, and locates the event. Called with ``mode`` a
+    constant, so that the compiler specialises the RK4 stages to that mode's dynamics.
+    """
+    while n_left > 0:
+        h = t_left / n_left
+        X1, lx, ly, power = _rk4_substep(mode, mu, anchor, X, k, h, t_hip, t_knee, p, 0.0, 0.0)
+        k1 = _derivative(mode, mu, X1, t_hip, t_knee, p)
+        w1a, w1b = _witnesses(mode, mu, X1, k1, anchor, p)
+        if w1a < 0.0 or w1b < 0.0:
+            break
+        _book(mode, h, X, X1, lx, ly, power, p, acc)
+        X, k = X1, k1
+        t += h
+        t_left -= h
+        n_left -= 1
+    return X, k, t, t_left, n_left
+
+
+@njit(cache=True, inline="always")
 def _hybrid_from(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, s1, co1, s2, co2, acc, log_t, log_k):
     """One hybrid control step of one robot, in place; returns the mode at its end.
 
@@ -380,18 +403,24 @@ def _hybrid_from(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, s1, c
     t = 0.0
     t_left = dt
     n_left = _substeps_for_rates(X[7], X[8], X[9], dt, substeps, max_angle)
+    # the common cases (a stick while balancing, a flight) with the mode a constant, which the compiler
+    # specialises; the general loop below goes on from where they stop
+    if mode == STICK:
+        X, k, t, t_left, n_left = _steady(STICK, mu, anchor, X, k, t, t_left, n_left, t_hip, t_knee, p, acc)
+    elif mode == FLIGHT:
+        X, k, t, t_left, n_left = _steady(FLIGHT, mu, anchor, X, k, t, t_left, n_left, t_hip, t_knee, p, acc)
+    kind_a, kind_b = _event_kinds(mode)
+    w0a, w0b = _witnesses(mode, mu, X, k, anchor, p)  # carried from substep to substep
     while n_left > 0:
         h = t_left / n_left
         X1, lx, ly, power = _rk4_substep(mode, mu, anchor, X, k, h, t_hip, t_knee, p, 0.0, 0.0)
         k1 = _derivative(mode, mu, X1, t_hip, t_knee, p)
-        kind_a, kind_b = _event_kinds(mode)
-        w0a, w0b = _witnesses(mode, mu, X, k, anchor, p)
         w1a, w1b = _witnesses(mode, mu, X1, k1, anchor, p)
         watch_a = _watched(kind_a, settled, events) and w0a >= 0.0
         watch_b = _watched(kind_b, settled, events) and w0b >= 0.0
         if not ((watch_a and w1a < 0.0) or (watch_b and w1b < 0.0)):
             _book(mode, h, X, X1, lx, ly, power, p, acc)
-            X, k = X1, k1
+            X, k, w0a, w0b = X1, k1, w1a, w1b
             t += h
             t_left -= h
             n_left -= 1
@@ -413,6 +442,8 @@ def _hybrid_from(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, s1, c
         # the rest of the step in the new mode, by the step rule at the post-event rates
         n_left = max(n_left, _substeps_for_rates(X[7], X[8], X[9], t_left, 1, max_angle))
         k = _derivative(mode, mu, X, t_hip, t_knee, p)
+        kind_a, kind_b = _event_kinds(mode)
+        w0a, w0b = _witnesses(mode, mu, X, k, anchor, p)
     if mode != STICK:
         anchor[0] = _foot(X, p)[0]
     acc[ACC_EVENTS] = events

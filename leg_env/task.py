@@ -67,6 +67,8 @@ __all__ = [
     "DEFAULT_MU",
     "UNILATERAL_KEYS",
     "unilateral_info",
+    "row_info",
+    "compiled_entry",
     "unilateral_columns",
 ]
 
@@ -107,6 +109,7 @@ STATE_Q, STATE_QD, STATE_ANCHOR, STATE_ACTION = slice(0, _QD0), slice(_QD0, _ANC
 STATE_MODE = _MODE0
 OUT_LAM, OUT_TERMS, OUT_EXTRA = slice(0, _TERMS0), slice(_TERMS0, _EXTRA0), slice(_EXTRA0, _ACC0)
 OUT_ACC, OUT_HYBRID = slice(_ACC0, _HYB0), slice(_HYB0, OUT_DIM)
+OUT_KICK = slice(_ACC0 + ACC_KICK_X, _ACC0 + ACC_KICK_Y + 1)  # the step's impact impulses (unilateral model)
 _NP, _NC = 11, 23  # lengths of LegParams.array and StanceConfig.array()
 _NOM0, _TAU0 = _NP + _NC, _NP + _NC + 5  # first entries of q_nom and tau_nom in consts
 CONSTS_DIM = _TAU0 + 2
@@ -551,6 +554,24 @@ def start_batch(state, consts, out, obs, flags):
             terms[i, k] = 0.0
 
 
+def compiled_entry(kernel, args: tuple):
+    """The machine code of ``kernel`` for the types of ``args``, callable as ``kernel`` is.
+
+    A numba dispatcher types every argument at every call (about 0.25 us for the five arrays of a
+    task kernel, a twentieth of a single env's ``step``). The arrays of an env never change type, so
+    the env compiles its kernels once for exactly their types and calls the compiled entry point,
+    which skips that typing. It must then only ever be called with arrays of those types. Where numba
+    does not expose ``overloads[signature].entry_point`` the dispatcher itself is returned: the same
+    machine code behind a little more overhead.
+    """
+    signature = tuple(numba.typeof(a) for a in args)
+    try:
+        kernel.compile(signature)
+        return kernel.overloads[signature].entry_point
+    except (AttributeError, KeyError, TypeError):
+        return kernel
+
+
 @njit(cache=True)
 def _start_unilateral(q, qd, anchor, mode, i, tau, mu, p, lam, hyb):
     """Mode, ground contact and instantaneous force of a unilateral start state (``start_batch``)."""
@@ -691,6 +712,64 @@ def _perturbed_starts(noise, s, q_nom, p):
     return q, qd, anchor
 
 
+# ``row_info`` unpacks a whole output row at once: it relies on this layout of ``out``
+assert (_TERMS0, _EXTRA0, _ACC0, OUT_DIM) == (2, 7, 10, 26) and (ACC_KICK_X, ACC_STICK_TIME, ACC_EVENTS) == (2, 4, 11)
+
+
+def row_info(out: list, flags: list, force: np.ndarray, impulse: np.ndarray | None = None, mode: float = 0.0) -> dict:
+    """``info`` of one robot from its output row and flags (each as a list).
+
+    ``force`` and ``impulse`` are the row's ``OUT_LAM`` and ``OUT_KICK`` columns (views, copied here:
+    Gymnasium asks for new info data on every call).
+    The keys are ``contact_force`` (shape (2,)), ``normal_force``, the three violation / failure flags,
+    ``base_drift`` and ``foot_error``; with an ``impulse`` (the unilateral model) also the
+    ``UNILATERAL_KEYS`` of ``unilateral_info``, ``mode`` giving ``contact_mode``. One dict display,
+    because this runs at every ``env.step``.
+    """
+    (
+        _, _, _, _, _, _, _, base_drift, foot_error, normal_force,
+        _, _, _, _, stick_time, slip_time, flight_time, slip_distance, work, d_slip, d_impacts,
+        events, painleve, settles, energy, foot_height,
+    ) = out  # fmt: skip
+    _, unilateral_violation, friction_violation, failure = flags
+    if impulse is None:
+        return {
+            "contact_force": force.copy(),
+            "normal_force": normal_force,
+            "unilateral_violation": unilateral_violation,
+            "friction_violation": friction_violation,
+            "numerical_failure": failure,
+            "base_drift": base_drift,
+            "foot_error": foot_error,
+        }
+    return {
+        "contact_force": force.copy(),
+        "normal_force": normal_force,
+        "unilateral_violation": unilateral_violation,
+        "friction_violation": friction_violation,
+        "numerical_failure": failure,
+        "base_drift": base_drift,
+        "foot_error": foot_error,
+        "contact_mode": _MODE_NAME_OF[mode],
+        "foot_height": foot_height,
+        "impulse": impulse.copy(),
+        "stick_time": stick_time,
+        "slip_time": slip_time,
+        "flight_time": flight_time,
+        "slip_distance": slip_distance,
+        "work_actuators": work,
+        "dissipation_slip": d_slip,
+        "dissipation_impacts": d_impacts,
+        "energy": energy,
+        "contact_events": int(events) if events else 0,
+        "painleve_fallbacks": int(painleve) if painleve else 0,
+        "zeno_settles": int(settles) if settles else 0,
+    }
+
+
+_MODE_NAME_OF = {float(mode): name for mode, name in enumerate(MODE_NAMES)}  # the mode column's value -> name
+
+
 def unilateral_info(out: list, mode: float) -> dict:
     """The ``UNILATERAL_KEYS`` of one robot from its output row (as a list) and its mode.
 
@@ -701,22 +780,9 @@ def unilateral_info(out: list, mode: float) -> dict:
     of the first minus the other two) and ``energy`` (kinetic + potential, [J]); ``contact_events``,
     ``painleve_fallbacks``, ``zeno_settles`` (ints) count what ``leg_env.hybrid`` describes.
     """
-    return {
-        "contact_mode": MODE_NAMES[int(mode)],
-        "foot_height": out[_HYB0 + 1],
-        "impulse": np.array((out[_ACC0 + ACC_KICK_X], out[_ACC0 + ACC_KICK_Y])),
-        "stick_time": out[_ACC0 + ACC_STICK_TIME],
-        "slip_time": out[_ACC0 + ACC_SLIP_TIME],
-        "flight_time": out[_ACC0 + ACC_FLIGHT_TIME],
-        "slip_distance": out[_ACC0 + ACC_SLIP_DISTANCE],
-        "work_actuators": out[_ACC0 + ACC_WORK],
-        "dissipation_slip": out[_ACC0 + ACC_SLIP_DISSIPATION],
-        "dissipation_impacts": out[_ACC0 + ACC_IMPACT_DISSIPATION],
-        "energy": out[_HYB0],
-        "contact_events": int(out[_ACC0 + ACC_EVENTS]),
-        "painleve_fallbacks": int(out[_ACC0 + ACC_PAINLEVE]),
-        "zeno_settles": int(out[_ACC0 + ACC_SETTLES]),
-    }
+    row = np.asarray(out, dtype=np.float64)
+    info = row_info(out, [False] * len(FLAG_NAMES), row[OUT_LAM], row[OUT_KICK], mode)
+    return {key: info[key] for key in UNILATERAL_KEYS}
 
 
 def unilateral_columns(out: np.ndarray, modes: np.ndarray) -> dict:

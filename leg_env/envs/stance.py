@@ -11,18 +11,19 @@ from gymnasium import spaces
 
 from ..dynamics import foot_position
 from ..params import LegParams
-from ..hybrid import ACC_KICK_X, ACC_KICK_Y, GROUND_TOL
+from ..hybrid import GROUND_TOL
 from ..task import (
-    FLAG_NAMES, OBS_DIM, OBS_DIM_UNILATERAL, OUT_ACC, OUT_DIM, OUT_EXTRA, OUT_LAM, OUT_TERMS, STATE_ACTION, STATE_ANCHOR,
-    STATE_DIM, STATE_MODE, STATE_Q, STATE_QD, StanceConfig, nominal_state, reset_state, start_batch, step_batch,
-    task_constants, unilateral_info,
+    FLAG_NAMES, OBS_DIM, OBS_DIM_UNILATERAL, OUT_DIM, OUT_EXTRA, OUT_KICK, OUT_LAM, OUT_TERMS, STATE_ACTION,
+    STATE_ANCHOR, STATE_DIM, STATE_MODE, STATE_Q, STATE_QD, StanceConfig, compiled_entry, nominal_state, reset_state,
+    row_info, start_batch, step_batch, task_constants,
 )  # fmt: skip
 
 __all__ = ["PlanarLegStanceEnv"]
 
 _RESET_OPTIONS = ("qpos", "qvel")
 # attributes that are views of the buffers (rebuilt by _bind, never pickled)
-_VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_action_row", "_out_row", "_flag_row", "_obs_row", "_kernel_args")
+_VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_action_row", "_out_row", "_flag_row", "_obs_row", "_kernel_args", "_force_row", "_kick_row",
+          "_step_kernel", "_start_kernel")  # fmt: skip
 
 
 class PlanarLegStanceEnv(gym.Env):
@@ -290,7 +291,7 @@ class PlanarLegStanceEnv(gym.Env):
         a0, a1 = _checked_action(action)
         self._action_row[0] = a0
         self._action_row[1] = a1
-        step_batch(*self._kernel_args)
+        self._step_kernel(*self._kernel_args)
         out, flags = self._out_row.tolist(), self._flag_row.tolist()  # one conversion each serves every key
         alive, drift, unilateral, friction, ctrl = out[OUT_TERMS]
         info = self._info(out, flags)
@@ -348,32 +349,23 @@ class PlanarLegStanceEnv(gym.Env):
         self._q, self._qd, self._anchor, self._action = state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR], state[:, STATE_ACTION]
         self._lam, self._terms, self._extra = out[:, OUT_LAM], out[:, OUT_TERMS], out[:, OUT_EXTRA]
         self._action_row, self._out_row, self._flag_row, self._obs_row = self._action[0], out[0], self._flags[0], self._obs[0]
+        self._force_row, self._kick_row = out[0, OUT_LAM], out[0, OUT_KICK]
         self._kernel_args = (state, self._consts, out, self._obs, self._flags)
+        self._step_kernel = compiled_entry(step_batch, self._kernel_args)
+        self._start_kernel = compiled_entry(start_batch, self._kernel_args)
 
     def _start(self, q, qd, anchor) -> None:
         """Put the robot at ``(q, qd)`` with its foot on ``anchor`` and evaluate it without stepping."""
         self._q[0] = q
         self._qd[0] = qd
         self._anchor[0] = anchor
-        start_batch(*self._kernel_args)
+        self._start_kernel(*self._kernel_args)
 
     def _info(self, out: list, flags: list) -> dict:
         """The state keys of ``info`` from the output row and the flags, each as one ``tolist()``."""
-        _, unilateral, friction, failure = flags
-        lam_x, lam_y = out[OUT_LAM]
-        base_drift, foot_error, normal_force = out[OUT_EXTRA]
-        info = {
-            "contact_force": np.array((lam_x, lam_y)),
-            "normal_force": normal_force,
-            "unilateral_violation": unilateral,
-            "friction_violation": friction,
-            "numerical_failure": failure,
-            "base_drift": base_drift,
-            "foot_error": foot_error,
-        }
         if self.unilateral:
-            info.update(unilateral_info(out, self._state[0, STATE_MODE]))
-        return info
+            return row_info(out, flags, self._force_row, self._kick_row, self._state[0, STATE_MODE])
+        return row_info(out, flags, self._force_row)
 
     def _explicit_state(self, options: dict) -> tuple[np.ndarray, np.ndarray]:
         unknown = set(options) - set(_RESET_OPTIONS)
@@ -435,7 +427,7 @@ def contact_marks(state: np.ndarray, out: np.ndarray, i: int, unilateral: bool):
     """``(mode, impulse)`` of row ``i`` for the renderer: ``(None, None)`` in the pinned model."""
     if not unilateral:
         return None, None
-    return int(state[i, STATE_MODE]), out[i, OUT_ACC][ACC_KICK_X:ACC_KICK_Y + 1]
+    return int(state[i, STATE_MODE]), out[i, OUT_KICK]
 
 
 def start_anchor(q: np.ndarray, params: LegParams, unilateral: bool) -> np.ndarray:

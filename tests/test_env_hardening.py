@@ -332,40 +332,45 @@ def test_human_mode_whose_window_cannot_open_raises_before_the_state_changes():
 def test_a_read_only_package_without_a_writable_home_compiles_without_a_cache():
     """numba's "cannot cache function ...: no locator available" became a warning naming NUMBA_CACHE_DIR.
 
-    The package is copied to a directory the child process cannot write (run as ``nobody`` when the
-    tests run as root, who can write anywhere) and HOME is not writable either.
+    The package is copied to a directory the child process cannot write, and HOME is not writable
+    either: read-only modes, or for root (who writes anywhere) the immutable attribute (``chattr +i``).
     """
     top = Path(tempfile.mkdtemp(prefix="leg_env_ro_"))
+    shutil.copytree(ROOT / "leg_env", top / "leg_env", ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
+    (top / "home").mkdir()
+    locked = [top / "leg_env", top / "leg_env" / "envs", top / "home"]
+    root = os.geteuid() == 0
     try:
-        shutil.copytree(ROOT / "leg_env", top / "leg_env", ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
-        home = top / "home"
-        home.mkdir()
-        for path in [top, *top.rglob("*")]:
-            path.chmod(0o555 if path.is_dir() else 0o444)
-        environ = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_CACHE_DIR", "XDG_CACHE_HOME"))}
-        environ.update(HOME=str(home), PYTHONPATH=str(top), PYTHONDONTWRITEBYTECODE="1")
+        for path in locked:
+            if root:
+                if subprocess.run(["chattr", "+i", str(path)], capture_output=True).returncode != 0:
+                    pytest.skip("cannot make a directory read-only for root on this file system (chattr +i)")
+            else:
+                path.chmod(0o555)
+        environ = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME")}
+        environ.update(HOME=str(top / "home"), PYTHONPATH=str(top), PYTHONDONTWRITEBYTECODE="1")
         code = textwrap.dedent(
             """
             import warnings
             warnings.simplefilter("always")
-            import leg_env.dynamics as d
-            import leg_env
+            import leg_env, leg_env.dynamics as d
             p = leg_env.LegParams()
             print("foot at origin", bool(abs(d.foot_position(d.static_equilibrium(p)[0], p)).max() < 1e-12))
             print(leg_env.__file__)
             """
         )
-        as_nobody = dict(user=65534, group=65534, extra_groups=[]) if os.geteuid() == 0 else {}
-        done = subprocess.run(
-            [sys.executable, "-c", code], capture_output=True, text=True, env=environ, cwd=top, timeout=600, **as_nobody
-        )
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=environ, cwd=top, timeout=600)
         assert done.returncode == 0, done.stderr
         assert str(top / "leg_env") in done.stdout
         assert "foot at origin True" in done.stdout
         assert "NUMBA_CACHE_DIR" in done.stderr
+        assert not list((top / "leg_env").rglob("*.nbi")) and not list((top / "home").iterdir())
     finally:
-        for path in [top, *top.rglob("*")]:
-            path.chmod(0o755)
+        for path in locked:
+            if root:
+                subprocess.run(["chattr", "-i", str(path)], capture_output=True)
+            else:
+                path.chmod(0o755)
         shutil.rmtree(top)
 
 

@@ -44,6 +44,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ._jit import CACHE
 from .dynamics import _CONTACT_NAMES, NQ, NU, _batched, _flight_inertia, _stance_core, _vec, params_array
 from .params import LegParams
 
@@ -61,7 +62,7 @@ _TIE = 1e-9
 IMPACT_NONE, IMPACT_STICK, IMPACT_SLIDE, IMPACT_PAINLEVE = 0, 1, 2, 3
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _foot_response(s1, co1, s2, co2, p):
     """The foot's response to a foot force: ``Lambda`` and ``B = K^-1 G^T`` (rows th1, th2; columns x, y).
 
@@ -86,7 +87,7 @@ def _foot_response(s1, co1, s2, co2, p):
     return Lxx, Lxy, Lyy, B1x, B1y, B2x, B2y, K11, K12, K22, inv_det
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _free_terms(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, K11, K12, K22, inv_det, p):
     """Free leg accelerations ``u = K^-1 r`` and the free foot acceleration ``a0``; returns ``(u1, u2, a0x, a0y)``."""
     l1, l2, g = p[6], p[7], p[10]
@@ -105,7 +106,7 @@ def _free_terms(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, K11, K12, K22, inv_
     return u1, u2, a0x, a0y
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _forced_accel(s1, co1, s2, co2, w1, w2, u1, u2, B1x, B1y, B2x, B2y, Fx, Fy, tau_hip, p):
     """``qdd[0..4]`` under the foot force ``F`` from the free leg accelerations ``u`` and ``B``."""
     m_b, m1, m2, I_b = p[0], p[1], p[2], p[3]
@@ -122,7 +123,7 @@ def _forced_accel(s1, co1, s2, co2, w1, w2, u1, u2, B1x, B1y, B2x, B2y, Fx, Fy, 
     return xdd, ydd, thbdd, dd1 - thbdd, dd2 - dd1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _slip_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, mu, sigma, p):
     """Slip dynamics in direction ``sigma``: ``(qdd[0..4], lam_x, lam_y)``, the inputs of ``_stance_core``.
 
@@ -137,14 +138,14 @@ def _slip_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, mu, sigma, p):
     return xdd, ydd, thbdd, q1dd, q2dd, lam_x, lam_y
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _foot_velocity(s1, co1, s2, co2, vx, vy, w1, w2, p):
     """``v_f = J qd`` from the base velocity and the link rates."""
     l1, l2 = p[6], p[7]
     return vx - l1 * s1 * w1 - l2 * s2 * w2, vy + l1 * co1 * w1 + l2 * co2 * w2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _impulse_velocity(s1, co1, s2, co2, B1x, B1y, B2x, B2y, Px, Py, p):
     """Velocity jump ``M^-1 J^T P`` of a foot impulse ``P``: ``(d x_b', d y_b', d th_b', d q1', d q2')``."""
     m_b, m1, m2, l1, c1, c2 = p[0], p[1], p[2], p[6], p[8], p[9]
@@ -157,7 +158,7 @@ def _impulse_velocity(s1, co1, s2, co2, B1x, B1y, B2x, B2y, Px, Py, p):
     return (Px + a * s1 * dw1 + b * s2 * dw2) / m, (Py - a * co1 * dw1 - b * co2 * dw2) / m, 0.0, dw1, dw2 - dw1
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _impact_core(vfx, vfy, mu, Lxx, Lxy, Lyy):
     """Plastic (``e = 0``) foot impulse ``(Px, Py, status)`` for the foot velocity ``v_f-``.
 
@@ -196,7 +197,7 @@ def _impact_core(vfx, vfy, mu, Lxx, Lxy, Lyy):
     return -sigma * mu * p1 - s2 * mu * p2, p1 + p2, IMPACT_SLIDE
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _mode_at_rest(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, mu, p, exclude):
     """The consistent mode of a foot at rest on the ground, by enumeration; returns ``(mode, painleve)``.
 
@@ -229,7 +230,7 @@ def _mode_at_rest(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, mu, p, exclude):
     return STICK, True
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _mode_sliding(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, mu, sigma, p):
     """Mode of a foot sliding on the ground in direction ``sigma``: ``(mode, painleve)``.
 
@@ -247,7 +248,7 @@ def _mode_sliding(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, mu, sigma, p):
     return FLIGHT, False
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _trig(q):
     """``sin th1, cos th1, sin th2, cos th2`` of one configuration."""
     th1 = q[2] + q[3]
@@ -255,7 +256,7 @@ def _trig(q):
     return np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _slip_batch(q, qd, tau, mu, sigma, p, qdd, lam):
     for i in range(q.shape[0]):
         s1, co1, s2, co2 = _trig(q[i])
@@ -266,7 +267,7 @@ def _slip_batch(q, qd, tau, mu, sigma, p, qdd, lam):
         )
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _impact_batch(q, qd, mu, p, qd_plus, impulse, status):
     for i in range(q.shape[0]):
         s1, co1, s2, co2 = _trig(q[i])
@@ -282,7 +283,7 @@ def _impact_batch(q, qd, mu, p, qd_plus, impulse, status):
         impulse[i, 1] = Py
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _mode_batch(q, qd, tau, mu, p, out):
     for i in range(q.shape[0]):
         s1, co1, s2, co2 = _trig(q[i])
@@ -296,7 +297,7 @@ def _mode_batch(q, qd, tau, mu, p, out):
             out[i] = FLIGHT if mode < 0 else mode
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _response_batch(q, qd, tau, p, Lam, a0):
     for i in range(q.shape[0]):
         s1, co1, s2, co2 = _trig(q[i])

@@ -42,6 +42,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ._jit import CACHE
 from .params import LegParams
 
 __all__ = [
@@ -86,7 +87,7 @@ _T = np.array(
 # ----------------------------------------------------------------------------
 
 
-@njit(cache=True, fastmath=False, inline="always")
+@njit(cache=CACHE, fastmath=False, inline="always")
 def _leg_terms(q, qd, p):
     """Shared trigonometry, angular rates and inertial constants of one robot."""
     m_b, m1, m2 = p[0], p[1], p[2]
@@ -101,7 +102,7 @@ def _leg_terms(q, qd, p):
     return np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), th1, th2, w1, w2, m, a, b
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _stance_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     """Stance KKT solve from the link angles' sines/cosines and rates ``w1 = th1'``, ``w2 = th2'``.
 
@@ -153,7 +154,7 @@ def _stance_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     return xdd, ydd, thbdd, dd1 - thbdd, dd2 - dd1, lam_x, lam_y
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _flight_inertia(p):
     """Constants of the leg's motion about the whole-body COM: ``(m, a, b, kf, K11, K22)``.
 
@@ -172,7 +173,7 @@ def _flight_inertia(p):
     return m, a, b, kf, K11, K22
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     """Unconstrained (flight) forward dynamics from the same inputs as ``_stance_core``; returns ``qdd[0..4]``.
 
@@ -204,7 +205,7 @@ def _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     return xdd, ydd, thbdd, dd1 - thbdd, dd2 - dd1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _energy_core(s1, co1, s2, co2, y_b, vx, vy, w_b, w1, w2, p):
     """Mechanical energy ``T + V`` [J] from the link trigonometry, base height and velocity, and rates.
 
@@ -220,7 +221,7 @@ def _energy_core(s1, co1, s2, co2, y_b, vx, vy, w_b, w1, w2, p):
     return T + g * (m * y_b + a * s1 + b * s2)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _stance_one(q, qd, tau, p, qdd, lam):
     """Stance KKT solve for one robot; writes ``qdd`` (5,) and ``lam`` (2,)."""
     th1 = q[2] + q[3]
@@ -232,7 +233,7 @@ def _stance_one(q, qd, tau, p, qdd, lam):
     )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _flight_one(q, qd, tau, p, qdd):
     """Unconstrained (flight) forward dynamics for one robot; writes ``qdd`` (5,)."""
     th1 = q[2] + q[3]
@@ -244,7 +245,7 @@ def _flight_one(q, qd, tau, p, qdd):
     )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _mass_matrix_one(q, p, M):
     m_b, m1, m2, I_b, I1, I2 = p[0], p[1], p[2], p[3], p[4], p[5]
     l1, c1, c2 = p[6], p[8], p[9]
@@ -282,7 +283,7 @@ def _mass_matrix_one(q, p, M):
             M[i, j] = M[j, i]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _bias_one(q, qd, p, h, gravity_only):
     m1, m2, l1, c2, g = p[1], p[2], p[6], p[9], p[10]
     s1, co1, s2, co2, th1, th2, w1, w2, m, a, b = _leg_terms(q, qd, p)
@@ -302,7 +303,7 @@ def _bias_one(q, qd, p, h, gravity_only):
     h[4] = h2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _foot_one(q, p, out):
     l1, l2 = p[6], p[7]
     th1 = q[2] + q[3]
@@ -311,7 +312,7 @@ def _foot_one(q, p, out):
     out[1] = q[1] + l1 * np.sin(th1) + l2 * np.sin(th2)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _jacobian_one(q, p, Jc):
     l1, l2 = p[6], p[7]
     th1 = q[2] + q[3]
@@ -330,7 +331,7 @@ def _jacobian_one(q, p, Jc):
     Jc[1, 4] = J2y
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _jdot_qd_one(q, qd, p, out):
     l1, l2 = p[6], p[7]
     th1 = q[2] + q[3]
@@ -341,7 +342,7 @@ def _jdot_qd_one(q, qd, p, out):
     out[1] = -l1 * np.sin(th1) * w1 * w1 - l2 * np.sin(th2) * w2 * w2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _com_one(q, p, out):
     m_b, m1, m2, l1, c1, c2 = p[0], p[1], p[2], p[6], p[8], p[9]
     th1 = q[2] + q[3]
@@ -358,54 +359,54 @@ def _com_one(q, p, out):
 # ----------------------------------------------------------------------------
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _stance_batch(q, qd, tau, p, qdd, lam):
     for i in range(q.shape[0]):
         _stance_one(q[i], qd[i], tau[i], p, qdd[i], lam[i])
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _flight_batch(q, qd, tau, p, qdd):
     for i in range(q.shape[0]):
         _flight_one(q[i], qd[i], tau[i], p, qdd[i])
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _stance_single(q, qd, tau, p, qdd, lam):
     _stance_one(q, qd, tau, p, qdd, lam)
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _mass_matrix_batch(q, p, M):
     for i in range(q.shape[0]):
         _mass_matrix_one(q[i], p, M[i])
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _bias_batch(q, qd, p, h, gravity_only):
     for i in range(q.shape[0]):
         _bias_one(q[i], qd[i], p, h[i], gravity_only)
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _foot_batch(q, p, out):
     for i in range(q.shape[0]):
         _foot_one(q[i], p, out[i])
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _jacobian_batch(q, p, Jc):
     for i in range(q.shape[0]):
         _jacobian_one(q[i], p, Jc[i])
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _jdot_qd_batch(q, qd, p, out):
     for i in range(q.shape[0]):
         _jdot_qd_one(q[i], qd[i], p, out[i])
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _com_batch(q, p, out):
     for i in range(q.shape[0]):
         _com_one(q[i], p, out[i])

@@ -55,6 +55,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ._jit import CACHE
 from .contact import (
     FLIGHT,
     IMPACT_PAINLEVE,
@@ -110,17 +111,17 @@ _ROOT_ITERATIONS = 100
 ) = range(15)  # fmt: skip
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _is_slip(mode):
     return mode == SLIP_FORWARD or mode == SLIP_BACKWARD
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _sigma(mode):
     return 1.0 if mode == SLIP_FORWARD else -1.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _foot(X, p):
     """Foot position and velocity ``(x_f, y_f, x_f', y_f')`` of the packed state ``X``."""
     l1, l2 = p[6], p[7]
@@ -131,12 +132,12 @@ def _foot(X, p):
     return X[0] + l1 * co1 + l2 * co2, X[1] + l1 * s1 + l2 * s2, vfx, vfy
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _rates(X):
     return X[7] + X[8], X[7] + X[8] + X[9]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _derivative(mode, mu, X, t_hip, t_knee, p):
     w1, w2 = _rates(X)
     return _accel(mode, mu, X[10], X[11], X[12], X[13], w1, w2, t_hip, t_knee, p)
@@ -145,31 +146,31 @@ def _derivative(mode, mu, X, t_hip, t_knee, p):
 # ---------------------------------------------------------------- witnesses (one per transition)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _liftoff_witness(lam_y):
     """Normal force: compressive (``> 0``) to tensile; Drake's ``NormalForceWitness``."""
     return lam_y
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _slip_onset_witness(lam_x, lam_y, mu):
     """Sticking slack ``mu lam_y - |lam_x|``: the stick force leaves the friction cone."""
     return mu * lam_y - abs(lam_x)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _sliding_stop_witness(vfx, sigma):
     """Sliding velocity ``sigma x_f'``: the slip comes to rest."""
     return sigma * vfx
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _touchdown_witness(y_f, ground):
     """Foot height above the ground: reaching it moving down."""
     return y_f - ground
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _witnesses(mode, mu, X, k, anchor, p):
     """The mode's two witnesses at ``X`` (``k``: its derivative and force there); ``inf`` fills a missing one.
 
@@ -182,7 +183,7 @@ def _witnesses(mode, mu, X, k, anchor, p):
     return _liftoff_witness(k[6]), _sliding_stop_witness(_foot(X, p)[2], _sigma(mode))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _event_kinds(mode):
     if mode == FLIGHT:
         return TOUCHDOWN, -1
@@ -191,7 +192,7 @@ def _event_kinds(mode):
     return LIFTOFF, SLIDING_STOP
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _watched(kind, settled, events):
     """Whether a transition is watched: leaving contact is off once settled, everything past the hard cap."""
     if kind < 0 or events >= 2 * MAX_EVENTS:
@@ -202,7 +203,7 @@ def _watched(kind, settled, events):
 # ---------------------------------------------------------------- reset maps and mode choice
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _kick(X, Px, Py, p, acc):
     """Apply the foot impulse ``P`` to ``X``'s velocity; book it and the kinetic energy it removes."""
     s1, co1, s2, co2 = X[10], X[11], X[12], X[13]
@@ -217,7 +218,7 @@ def _kick(X, Px, Py, p, acc):
     return X
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _stop_foot(X, p, acc):
     """The sticking impulse ``-Lambda^-1 v_f``: the foot at rest."""
     Lxx, Lxy, Lyy, _, _, _, _, _, _, _, _ = _foot_response(X[10], X[11], X[12], X[13], p)
@@ -226,7 +227,7 @@ def _stop_foot(X, p, acc):
     return _kick(X, Px, Py, p, acc)
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _choose_mode(mode, X, anchor, t_hip, t_knee, mu, p, exclude, settled, acc):
     """The consistent mode at ``X`` (module docstring); applies the impulses it needs.
 
@@ -271,7 +272,7 @@ def _choose_mode(mode, X, anchor, t_hip, t_knee, mu, p, exclude, settled, acc):
     return new, X
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _locate(mode, mu, X, k, h, X1, k1, lx1, ly1, pw1, t_hip, t_knee, anchor, p, watch_a, watch_b):
     """Earliest crossing of the watched witnesses inside the substep ``X -> X1`` of length ``h``.
 
@@ -319,7 +320,7 @@ def _locate(mode, mu, X, k, h, X1, k1, lx1, ly1, pw1, t_hip, t_knee, anchor, p, 
     return b, Xb, kb, lxb, lyb, pwb, kind_a
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _transition(kind, mode, X, anchor, t_hip, t_knee, mu, p, settled, acc):
     """The reset map of event ``kind`` at ``X`` (just past it), then the mode choice; returns ``(mode, X, settled)``."""
     if kind == TOUCHDOWN:
@@ -334,7 +335,7 @@ def _transition(kind, mode, X, anchor, t_hip, t_knee, mu, p, settled, acc):
     return new, X, settled
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _book(mode, h, X0, X1, lx, ly, power, p, acc):
     """Add a substep of length ``h`` in ``mode`` from ``X0`` to ``X1`` to the accumulators."""
     acc[ACC_IMPULSE_X] += h * lx
@@ -349,7 +350,7 @@ def _book(mode, h, X0, X1, lx, ly, power, p, acc):
         acc[ACC_SLIP_DISSIPATION] += h * power
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _steady(mode, mu, anchor, X, k, t, t_left, n_left, t_hip, t_knee, p, acc):
     """Substeps in ``mode`` while no witness of it is negative at a substep's end.
 
@@ -372,7 +373,7 @@ def _steady(mode, mu, anchor, X, k, t, t_left, n_left, t_hip, t_knee, p, acc):
     return X, k, t, t_left, n_left
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _hybrid_from(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, s1, co1, s2, co2, acc, log_t, log_k):
     """One hybrid control step of one robot, in place; returns the mode at its end.
 
@@ -454,7 +455,7 @@ def _hybrid_from(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, s1, c
     return mode
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _hybrid_batch(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, acc, log_t, log_k):
     for i in range(q.shape[0]):
         th1 = q[i, 2] + q[i, 3]

@@ -30,9 +30,16 @@ import math
 import numpy as np
 from numba import njit
 
+from ._jit import CACHE
 from .contact import FLIGHT, SLIP_BACKWARD, SLIP_FORWARD, STICK, _slip_core
 from .dynamics import _F64, NQ, NU, _batched, _flight_core, _single_robot, _stance_core, _vec, params_array
+from . import checks
 from .params import LegParams
+
+DT = 0.01  # default control period [s]
+SUBSTEPS = 2  # default least number of RK4 steps per control period
+MAX_ANGLE = 0.02  # default largest link rotation per RK4 step [rad]
+MAX_SUBSTEPS = 4096  # most RK4 steps per control period: the step rule's cap, and the largest accepted ``substeps``
 
 __all__ = ["stance_step", "flight_step", "project_stance", "project_velocity", "step_inplace"]
 
@@ -40,7 +47,7 @@ _RK4_C = np.array([0.0, 0.5, 0.5, 1.0])
 _RK4_W = np.array([1.0, 2.0, 2.0, 1.0]) / 6.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _project_core(s1, co1, s2, co2, w1, w2, anchor, p):
     """Base position and velocity that put the foot on ``anchor`` with ``Jc qd = 0``."""
     l1, l2 = p[6], p[7]
@@ -51,7 +58,7 @@ def _project_core(s1, co1, s2, co2, w1, w2, anchor, p):
     return x, y, vx, vy
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _project_one(q, qd, p, anchor):
     """Put the foot exactly on ``anchor`` and make ``Jc qd = 0`` by moving only the base."""
     th1 = q[2] + q[3]
@@ -61,26 +68,26 @@ def _project_one(q, qd, p, anchor):
     q[0], q[1], qd[0], qd[1] = _project_core(np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), w1, w2, anchor, p)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _substeps_for_rates(va, vb, vc, dt, substeps, max_angle):
     """RK4 steps for a control step of length ``dt``: at least ``substeps``, and enough that no link
     turns, and no joint moves, by more than ``max_angle`` per RK4 step at the rates ``th_b', q1', q2'``."""
     w = max(abs(va), abs(vb), abs(vc), abs(va + vb), abs(va + vb + vc))
     need = w * dt / max_angle
     if need > substeps:
-        if need > 4096.0:  # infinite or absurd rates: cap the work, the caller flags the state
-            return 4096
+        if need > MAX_SUBSTEPS:  # infinite or absurd rates: cap the work, the caller flags the state
+            return MAX_SUBSTEPS
         return int(np.ceil(need))
     return substeps  # also for NaN rates: the state is already lost, the caller flags it
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _substeps_for(qd, dt, substeps, max_angle):
     """``_substeps_for_rates`` at the velocity ``qd``."""
     return _substeps_for_rates(qd[2], qd[3], qd[4], dt, substeps, max_angle)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _accel(mode, mu, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     """``(qdd[0..4], lam_x, lam_y)`` of the contact mode ``mode`` (``leg_env.contact``'s constants)."""
     if mode == STICK:
@@ -98,7 +105,7 @@ _C2, _C4, _C6, _C8, _C10 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 /
 _TURN_MAX = 0.1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _turn(s, c, d):
     """``(sin(th + d), cos(th + d))`` from ``s = sin th``, ``c = cos th`` by angle addition.
 
@@ -117,7 +124,7 @@ def _turn(s, c, d):
     return s + (s * cm + c * sd), c + (c * cm - s * sd)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _rk4_substep(mode, mu, anchor, X, k1, h, t_hip, t_knee, p, lx, ly):
     """One classical RK4 step of length ``h`` in contact mode ``mode``, then the mode's projection.
 
@@ -187,7 +194,7 @@ def _rk4_substep(mode, mu, anchor, X, k1, h, t_hip, t_knee, p, lx, ly):
     return (x, y, a, b, c, vx, vy, va, vb, vc, s1, co1, s2, co2), lx, ly, power
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
     """One control step of RK4 on one robot, in place (``_rk4_from`` at the state's own trigonometry)."""
     th1 = q[2] + q[3]
@@ -195,7 +202,7 @@ def _rk4_one(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
     _rk4_from(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean, np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _rk4_from(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean, s1, co1, s2, co2):
     """One control step of RK4 on one robot, in place, given ``sin``/``cos`` of ``th1 = q[2] + q[3]``
     and ``th2 = th1 + q[4]`` (the caller may have them already: the task kernel keeps them).
@@ -224,7 +231,7 @@ def _rk4_from(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean, 
     lam_mean[1] = ly / n
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def step_inplace(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
     """Advance a batch by one control step in place.
 
@@ -243,30 +250,19 @@ def step_inplace(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mea
         _rk4_one(q[i], qd[i], tau[i], p, anchor[i], dt, substeps, max_angle, stance, lam_mean[i])
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _project_batch(q, qd, p, anchor):
     for i in range(q.shape[0]):
         _project_one(q[i], qd[i], p, anchor[i])
 
 
-DT = 0.01  # default control period [s]
-SUBSTEPS = 2  # default least number of RK4 steps per control period
-MAX_ANGLE = 0.02  # default largest link rotation per RK4 step [rad]
-
 
 def _checked_steps(dt: float, substeps: int, max_angle: float) -> tuple[float, int, float]:
-    for name, value in (("dt", dt), ("max_angle", max_angle), ("substeps", substeps)):
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-            raise ValueError(f"{name} must be a number, got {value!r}")
-    max_angle = float(max_angle)
-    if not max_angle > 0.0:
-        raise ValueError(f"max_angle must be > 0 radians (np.inf for fixed steps), got {max_angle!r}")
-    dt = float(dt)
-    if not math.isfinite(dt) or dt <= 0.0:
-        raise ValueError(f"dt must be a positive finite number of seconds, got {dt!r}")
-    if int(substeps) != substeps or substeps < 1:
-        raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
-    return dt, int(substeps), max_angle
+    return (
+        checks.real("dt", dt, 0.0, math.inf, lo_open=True, hi_open=True, unit="s"),
+        checks.integer("substeps", substeps, 1, MAX_SUBSTEPS, floats=True),
+        checks.real("max_angle", max_angle, 0.0, math.inf, lo_open=True, unit="rad (inf for fixed steps)"),
+    )
 
 
 def stance_step(

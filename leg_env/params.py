@@ -6,13 +6,23 @@ properties, never defaults computed from other defaults.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from functools import cached_property
 
 import numpy as np
 
-__all__ = ["LegParams", "PARAM_NAMES"]
+from . import checks
+
+__all__ = ["LegParams", "PARAM_NAMES", "PARAM_RANGE", "G_MIN"]
+
+PARAM_RANGE = (1.0e-6, 1.0e6)
+"""Accepted range of every mass [kg], inertia [kg m^2] and length [m], and of a non-zero ``g`` [m/s^2].
+
+Wide enough for any robot, narrow enough that no product in the dynamics overflows or underflows
+and that the contact force over the weight, ``lam / (m g)``, fits the float32 observation."""
+G_MIN = PARAM_RANGE[0]
+"""The least non-zero gravity [m/s^2]. ``g = 0`` is accepted (no gravity); a ``g`` between 0 and this
+would make ``lam / (m g)`` overflow the float32 observation (``g = 1e-300``)."""
 
 
 @dataclass(frozen=True)
@@ -20,11 +30,16 @@ class LegParams:
     """Masses, inertias, lengths and gravity of the torso + thigh + shank model.
 
     The hip sits at the torso's centre of mass; ``c1`` and ``c2`` are the
-    distances from the hip to the thigh's COM and from the knee to the shank's COM.
+    distances from the hip to the thigh's COM and from the knee to the shank's COM. ``g = 0`` is
+    allowed; the task's observation then gives the contact force in newtons instead of in units of
+    the weight ``m g`` (there is no weight to divide by).
 
     Raises:
-        ValueError: a field is not a finite number, a mass, inertia or length is
-            not positive, or ``g`` is negative. The message names the field.
+        ValueError: a field is NaN, too large for a float, or out of range: every mass, inertia
+            and length must be in ``PARAM_RANGE`` = [1e-6, 1e6] (SI units), and ``g`` must be 0 or in
+            that range. The message names the field and the range.
+        ArgumentTypeError: a field is not a real number (a string, a bool, a complex number);
+            it is also a ``ValueError``.
     """
 
     m_b: float = 10.0  # torso mass [kg]
@@ -37,21 +52,18 @@ class LegParams:
     l2: float = 0.5  # shank length, knee to foot [m]
     c1: float = 0.25  # hip to thigh COM [m]
     c2: float = 0.25  # knee to shank COM [m]
-    g: float = 9.81  # gravitational acceleration, acting along -y [m/s^2]
+    g: float = 9.81  # gravitational acceleration, acting along -y [m/s^2]; 0: no gravity (observed forces in N)
 
     def __post_init__(self) -> None:
+        lo, hi = PARAM_RANGE
         for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-                raise ValueError(f"LegParams.{f.name} must be a real number, got {value!r}")
-            value = float(value)
-            if not math.isfinite(value):
-                raise ValueError(f"LegParams.{f.name} must be finite, got {value!r}")
+            name, value = f"LegParams.{f.name}", getattr(self, f.name)
             if f.name == "g":
-                if value < 0.0:
-                    raise ValueError(f"LegParams.g must be >= 0 (gravity acts along -y), got {value!r}")
-            elif value <= 0.0:
-                raise ValueError(f"LegParams.{f.name} must be > 0, got {value!r}")
+                value = checks.real(name, value, 0.0, hi, unit="m/s^2")
+                if 0.0 < value < G_MIN:
+                    raise ValueError(f"{name} must be 0 or in [{G_MIN:g}, {hi:g}] m/s^2, got {value!r}")
+            else:
+                value = checks.real(name, value, lo, hi)
             object.__setattr__(self, f.name, value)
 
     @classmethod
@@ -66,7 +78,7 @@ class LegParams:
             if unknown:
                 raise ValueError(f"unknown LegParams field(s): {sorted(unknown)}; valid: {list(PARAM_NAMES)}")
             return cls(**params)
-        raise ValueError(f"params must be LegParams, a dict or None, got {type(params).__name__}")
+        raise checks.ArgumentTypeError(f"params must be LegParams, a dict or None, got {checks.shown(params)} of type {type(params).__name__}")
 
     @property
     def total_mass(self) -> float:

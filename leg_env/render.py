@@ -220,14 +220,43 @@ def draw(
     return np.ascontiguousarray(np.transpose(pygame.surfarray.array3d(surface), (1, 0, 2)))
 
 
+OFFSCREEN_DRIVERS = ("offscreen", "dummy")
+"""SDL video drivers that show nothing: SDL falls back to them when there is no display."""
+
+
 class Viewer:
-    """A window that shows frames at ``fps`` (the env's ``human`` render mode)."""
+    """A window that shows frames at ``fps`` (the env's ``human`` render mode).
+
+    Raises:
+        RuntimeError: SDL cannot open a window (a failing video driver); the message names the driver.
+
+    Warns (``UserWarning``) when SDL runs an off-screen driver (``offscreen``, ``dummy``) that the user
+    did not ask for through ``SDL_VIDEODRIVER``, as it does without a display: no window shows, and the
+    frames are still paced to ``fps``.
+    """
 
     def __init__(self, width: int, height: int, fps: float, title: str = "leg_env/PlanarLegStance-v0"):
         self._pygame = pygame = _pygame()
-        pygame.display.init()
-        pygame.display.set_caption(title)
-        self.screen = pygame.display.set_mode((int(width), int(height)))
+        try:
+            pygame.display.init()
+            pygame.display.set_caption(title)
+            self.screen = pygame.display.set_mode((int(width), int(height)))
+        except pygame.error as e:
+            driver = os.environ.get("SDL_VIDEODRIVER", "SDL's default")
+            pygame.display.quit()
+            raise RuntimeError(
+                f'render_mode="human" could not open a window ({e}; video driver: {driver}); '
+                'use render_mode="rgb_array" without a display'
+            ) from e
+        driver = pygame.display.get_driver()
+        if driver in OFFSCREEN_DRIVERS and os.environ.get("SDL_VIDEODRIVER") != driver:
+            import warnings
+
+            warnings.warn(
+                f'render_mode="human": SDL has no display and fell back to its {driver!r} video driver, so no window '
+                'will show (set DISPLAY or WAYLAND_DISPLAY, or use render_mode="rgb_array" for frames)',
+                stacklevel=2,
+            )
         self.clock = pygame.time.Clock()
         self.fps = fps
 

@@ -24,6 +24,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
+from . import checks
 from .envs.vector import REWARD_KEYS, STATE_KEYS, PlanarLegStanceVectorEnv
 from .task import STATE_MODE, UNILATERAL_KEYS
 
@@ -53,7 +54,9 @@ class LegStanceVecEnv(VecEnv):
 
     ``seed(s)`` seeds sub-env ``i`` with ``s + i`` at the next ``reset``, exactly like
     ``gymnasium.make("leg_env/PlanarLegStance-v0")`` reset with that seed, and ``set_options``
-    passes ``qpos`` / ``qvel`` (the same keys for every sub-env) to it.
+    passes ``qpos`` / ``qvel`` (the same keys for every sub-env) to it. A rejected ``reset`` (bad seeds
+    or options) changes nothing and keeps the pending seeds and options; ``step`` before the first
+    ``reset`` raises ``gymnasium.error.ResetNeeded`` before anything changes.
 
     The sub-envs share one batched env, so attributes and methods are that env's:
     ``get_attr(name)`` returns its attribute for each requested index (``observation_space`` and
@@ -171,7 +174,7 @@ class LegStanceVecEnv(VecEnv):
         keys = set(self._options[0])
         if any(set(o) != keys for o in self._options):
             raise ValueError("set_options: every sub-env needs the same option keys (the batch resets together)")
-        return {key: np.stack([np.asarray(o[key], dtype=np.float64) for o in self._options]) for key in keys}
+        return {key: np.stack([checks.real_array(f"set_options {key!r}", o[key], "real numbers") for o in self._options]) for key in keys}
 
 
 _ARRAY_KEYS = ("contact_force", "impulse")  # per-env values that stay arrays

@@ -15,11 +15,12 @@ index meaning                                  unit
 3     hip angle q1                              rad
 4     knee angle q2                             rad
 5-9   qd = [x_b', y_b', th_b', q1', q2']        m/s, rad/s
-10    lam_x / (m_total g)                       1
-11    lam_y / (m_total g)                       1
+10    lam_x / (m_total g)                       1 (N if g = 0)
+11    lam_y / (m_total g)                       1 (N if g = 0)
 ===== ======================================== ======
 
-The contact force is the mean over the last control step (the contact impulse / dt).
+The contact force is the mean over the last control step (the contact impulse / dt). With ``g = 0``
+there is no weight to divide by: the kernels divide by 1, so entries 10-11 are in newtons.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import numba
 import numpy as np
 from numba import njit
 
+from ._jit import CACHE
 from .contact import FLIGHT, MODE_NAMES, SLIP_BACKWARD, SLIP_FORWARD, STICK, _foot_velocity
 from .dynamics import _energy_core, _stance_one, static_equilibrium
 from .hybrid import (
@@ -40,11 +42,13 @@ from .hybrid import (
     LOG_SIZE,
     _choose_mode, _derivative, _hybrid_from,
 )  # fmt: skip
-from .integrate import MAX_ANGLE, SUBSTEPS, DT, _project_one, _rk4_from
+from . import checks
+from .integrate import MAX_ANGLE, MAX_SUBSTEPS, SUBSTEPS, DT, _project_one, _rk4_from
 from .params import LegParams
 
 __all__ = [
     "StanceConfig",
+    "FIELD_RANGES",
     "OBS_DIM",
     "REWARD_TERMS",
     "FLAG_NAMES",
@@ -110,17 +114,55 @@ STATE_MODE = _MODE0
 OUT_LAM, OUT_TERMS, OUT_EXTRA = slice(0, _TERMS0), slice(_TERMS0, _EXTRA0), slice(_EXTRA0, _ACC0)
 OUT_ACC, OUT_HYBRID = slice(_ACC0, _HYB0), slice(_HYB0, OUT_DIM)
 OUT_KICK = slice(_ACC0 + ACC_KICK_X, _ACC0 + ACC_KICK_Y + 1)  # the step's impact impulses (unilateral model)
+_INF = math.inf
+_BIG = 1.0e6  # bound of lengths, angles, torques, rates and reward weights: far beyond any use, far below overflow
+FIELD_RANGES = {
+    # name: (low, high, low open, high open, unit)
+    "dt": (0.0, 1.0, True, False, "s"),
+    "substeps": (1, MAX_SUBSTEPS, False, False, ""),
+    "max_angle": (0.0, _INF, True, False, "rad"),
+    "torque_limit": (0.0, _BIG, True, False, "N m"),
+    "nominal_knee": (0.0, math.pi, True, True, "rad"),
+    "alive_bonus": (0.0, _BIG, False, False, ""),
+    "drift_position_weight": (0.0, _BIG, False, False, ""),
+    "drift_angle_weight": (0.0, _BIG, False, False, ""),
+    "drift_velocity_weight": (0.0, _BIG, False, False, ""),
+    "unilateral_weight": (0.0, _BIG, False, False, ""),
+    "friction_weight": (0.0, _BIG, False, False, ""),
+    "ctrl_cost_weight": (0.0, _BIG, False, False, ""),
+    "mu": (0.0, _BIG, False, False, ""),
+    "min_base_height": (0.0, _BIG, True, False, "m"),
+    "max_torso_angle": (0.0, _BIG, True, False, "rad"),
+    "hip_range": (-_BIG, _BIG, False, False, "rad"),
+    "knee_range": (-_BIG, _BIG, False, False, "rad"),
+    "contact_loss_threshold": (-1.0e12, 1.0e12, False, False, "N"),
+    "max_rate": (0.0, _BIG, True, False, "m/s, rad/s"),
+    "reset_noise_scale": (0.0, math.pi, False, False, "rad, rad/s"),
+}
+"""The accepted range of every numeric ``StanceConfig`` field: ``(low, high, low_open, high_open, unit)``.
+
+``substeps`` is at most ``MAX_SUBSTEPS`` (4096, the most RK4 steps the step rule ever takes);
+``reset_noise_scale`` at most pi (a wider noise wraps the angles); ``max_angle`` may be ``inf`` (fixed
+steps). The other bounds only keep products and the float32 observation from overflowing."""
+
 _NP, _NC = 11, 23  # lengths of LegParams.array and StanceConfig.array()
 _NOM0, _TAU0 = _NP + _NC, _NP + _NC + 5  # first entries of q_nom and tau_nom in consts
 CONSTS_DIM = _TAU0 + 2
+_KEPT = 4 + OBS_DIM_UNILATERAL  # scratch kept by a control step to undo itself: trig and the observation
 
 
 @dataclass(frozen=True)
 class StanceConfig:
     """Settings of the balance task (everything that is not physics).
 
+    Every numeric field has the range in ``FIELD_RANGES`` (``(low, high, low_open, high_open, unit)``),
+    checked by ``leg_env.checks`` like every other argument.
+
     Raises:
-        ValueError: a value is out of its documented range; the message names it.
+        ValueError: a value is NaN, too large for a float or out of its range; the message names the
+            field and the range.
+        ArgumentTypeError: a value of the wrong type (a string, a bool for a number, a complex number);
+            it is also a ``ValueError``.
     """
 
     dt: float = DT  # control period [s]
@@ -151,66 +193,28 @@ class StanceConfig:
     contact: str = "pinned"  # "pinned": the foot is a bilateral pin (v0); "unilateral": exact unilateral contact
 
     def __post_init__(self) -> None:
-        def bad(name, why):
-            raise ValueError(f"StanceConfig.{name} {why}, got {getattr(self, name)!r}")
-
+        if not isinstance(self.contact, str):
+            raise checks.ArgumentTypeError(f"StanceConfig.contact must be one of {list(CONTACT_MODELS)}, got {checks.shown(self.contact)}")
         if self.contact not in CONTACT_MODELS:
-            bad("contact", f"must be one of {list(CONTACT_MODELS)}")
+            raise ValueError(f"StanceConfig.contact must be one of {list(CONTACT_MODELS)}, got {self.contact!r}")
         if self.mu is None:
             object.__setattr__(self, "mu", DEFAULT_MU[self.contact])
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "contact":
-                continue
-            if f.name in ("torque_limit", "hip_range", "knee_range"):
-                if f.name == "torque_limit" and isinstance(v, (int, float, np.floating, np.integer)):
-                    v = (v, v)  # one limit for both joints
-                try:
-                    v = tuple(float(x) for x in v)
-                except (TypeError, ValueError):
-                    bad(f.name, "must be a pair of numbers")
-                if len(v) != 2 or not all(math.isfinite(x) for x in v):
-                    bad(f.name, "must be a pair of finite numbers")
-                object.__setattr__(self, f.name, v)
-            elif f.name == "terminate_on_contact_loss":
-                if not isinstance(v, (bool, np.bool_)):
-                    bad(f.name, "must be a bool")
-                object.__setattr__(self, f.name, bool(v))
-            elif f.name == "substeps":
-                if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or int(v) != v or v < 1:
-                    bad(f.name, "must be a positive integer")
-                object.__setattr__(self, f.name, int(v))
+        for name, (lo, hi, lo_open, hi_open, unit) in FIELD_RANGES.items():
+            value = getattr(self, name)
+            if name == "substeps":
+                value = checks.integer(f"StanceConfig.{name}", value, int(lo), int(hi), floats=True)
+            elif name in ("torque_limit", "hip_range", "knee_range"):
+                if name == "torque_limit" and checks.is_real(value):
+                    value = (value, value)  # one limit for both joints
+                value = checks.pair(f"StanceConfig.{name}", value, lo, hi, lo_open=lo_open, unit=unit)
             else:
-                if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)):
-                    bad(f.name, "must be a real number")
-                v = float(v)
-                if math.isnan(v) or (math.isinf(v) and f.name != "max_angle"):
-                    bad(f.name, "must be finite")
-                object.__setattr__(self, f.name, v)
-        for name in ("dt", "max_angle", "max_rate", "min_base_height", "max_torso_angle"):
-            if getattr(self, name) <= 0.0:
-                bad(name, "must be > 0")
-        if min(self.torque_limit) <= 0.0:
-            bad("torque_limit", "must be > 0 for both joints")
-        for name in (
-            "alive_bonus",
-            "drift_position_weight",
-            "drift_angle_weight",
-            "drift_velocity_weight",
-            "unilateral_weight",
-            "friction_weight",
-            "ctrl_cost_weight",
-            "mu",
-            "reset_noise_scale",
-        ):
-            if getattr(self, name) < 0.0:
-                bad(name, "must be >= 0")
+                value = checks.real(f"StanceConfig.{name}", value, lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "terminate_on_contact_loss", checks.boolean("StanceConfig.terminate_on_contact_loss", self.terminate_on_contact_loss))
         for name in ("hip_range", "knee_range"):
             lo, hi = getattr(self, name)
             if not lo < hi:
-                bad(name, "must be (low, high) with low < high")
-        if not 0.0 < self.nominal_knee < math.pi:
-            bad("nominal_knee", "must be in (0, pi)")
+                raise ValueError(f"StanceConfig.{name} must be (low, high) with low < high, got {getattr(self, name)!r}")
 
     @classmethod
     def from_kwargs(cls, config: "StanceConfig | dict | None" = None, **overrides) -> "StanceConfig":
@@ -226,6 +230,10 @@ class StanceConfig:
             listed = ", ".join(repr(name) for name in unknown)
             what = f"an unexpected keyword argument {listed}" if len(unknown) == 1 else f"unexpected keyword arguments {listed}"
             raise TypeError(f"got {what}: not an argument of the env nor a StanceConfig field")
+        if config is not None and not isinstance(config, (StanceConfig, dict)):
+            raise checks.ArgumentTypeError(
+                f"config must be a StanceConfig, a dict of its fields or None, got {checks.shown(config)} of type {type(config).__name__}"
+            )
         base = {} if config is None else (asdict(config) if isinstance(config, StanceConfig) else dict(config))
         unknown = sorted(set(base) - names)
         if unknown:
@@ -234,6 +242,7 @@ class StanceConfig:
         return cls(**base)
 
     def replace(self, **changes) -> "StanceConfig":
+        """A copy with ``changes`` (checked as at construction)."""
         return replace(self, **changes)
 
     def array(self) -> np.ndarray:
@@ -267,6 +276,9 @@ class StanceConfig:
             dtype=np.float64,
         )
 
+
+if set(FIELD_RANGES) | {"terminate_on_contact_loss", "contact"} != {f.name for f in fields(StanceConfig)}:
+    raise RuntimeError("FIELD_RANGES must list every numeric StanceConfig field")  # a developer error
 
 (
     _C_DT,
@@ -329,7 +341,7 @@ def task_constants(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.n
     return out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _unpack(state, consts, out):
     """Named views of the packed kernel arrays."""
     return (
@@ -339,7 +351,7 @@ def _unpack(state, consts, out):
     )  # fmt: skip
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb):
     """Reward terms, flags, extras and observation of robot ``i`` at its (finite) state and force.
 
@@ -426,13 +438,22 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
         hyb[i, ACC_DIM + 1] = fy
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
 def _step_one(i, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, scratch, log_k):
-    """One control step and task evaluation of robot ``i``; ``scratch`` and ``log_k`` are scratch space."""
-    q_prev, qd_prev, tau, a, log_t = scratch[0:5], scratch[5:10], scratch[10:12], scratch[12:14], scratch[14:]
+    """One control step and task evaluation of robot ``i``; ``scratch`` and ``log_k`` are scratch space.
+
+    A numerical failure (a non-finite state or force, a rate above ``max_rate``, or an observation
+    that does not fit float32) restores the state before the step and is flagged (``_fail``).
+    """
+    q_prev, qd_prev, tau, a = scratch[0:5], scratch[5:10], scratch[10:12], scratch[12:14]
+    kept, log_t = scratch[14:14 + _KEPT], scratch[14 + _KEPT:]
     for j in range(5):
         q_prev[j] = q[i, j]
         qd_prev[j] = qd[i, j]
+    for j in range(4):
+        kept[j] = trig[i, j]
+    for j in range(obs.shape[1]):
+        kept[4 + j] = obs[i, j]
     a[0] = min(1.0, max(-1.0, action[i, 0]))
     a[1] = min(1.0, max(-1.0, action[i, 1]))
     tau[0] = a[0] * c[_C_TAU_HIP]
@@ -456,47 +477,64 @@ def _step_one(i, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, ob
         if not (np.isfinite(q[i, j]) and abs(qd[i, j]) <= c[_C_MAX_RATE]):
             finite = False
     if not finite:
-        # blow-up: restore the last good state, end the episode, pay nothing
-        for j in range(5):
-            q[i, j] = q_prev[j]
-            qd[i, j] = qd_prev[j]
-        mode[i] = mode_prev
-        anchor[i, 0] = anchor_prev
-        lam[i, 0] = 0.0
-        lam[i, 1] = 0.0
-        for k in range(terms.shape[1]):
-            terms[i, k] = 0.0
-        for k in range(hyb.shape[1]):
-            hyb[i, k] = 0.0
-        flags[i, 0] = True
-        flags[i, 1] = False
-        flags[i, 2] = False
-        flags[i, 3] = True
-        extra[i, 0] = np.sqrt((q[i, 0] - anchor[i, 0] - q_nom[0]) ** 2 + (q[i, 1] - anchor[i, 1] - q_nom[1]) ** 2)
-        extra[i, 1] = 0.0
-        extra[i, 2] = 0.0
+        _fail(i, q, qd, anchor, mode, lam, terms, flags, extra, hyb, q_nom, q_prev, qd_prev, mode_prev, anchor_prev)
         return
     _assess(i, q, qd, anchor, lam, a[0], a[1], p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
+    total = 0.0  # float64: finite for any finite float32 entries, inf or NaN if one of them is
+    for j in range(obs.shape[1]):
+        total += obs[i, j]
+    if not np.isfinite(total):  # the state is finite, but the observation overflowed float32
+        for j in range(4):
+            trig[i, j] = kept[j]
+        for j in range(obs.shape[1]):
+            obs[i, j] = kept[4 + j]
+        _fail(i, q, qd, anchor, mode, lam, terms, flags, extra, hyb, q_nom, q_prev, qd_prev, mode_prev, anchor_prev)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=CACHE, inline="always")
+def _fail(i, q, qd, anchor, mode, lam, terms, flags, extra, hyb, q_nom, q_prev, qd_prev, mode_prev, anchor_prev):
+    """A numerical failure of robot ``i``: restore the last good state, end the episode, pay nothing.
+
+    The observation is left at the last good one; ``flags`` say terminated and ``numerical_failure``.
+    """
+    for j in range(5):
+        q[i, j] = q_prev[j]
+        qd[i, j] = qd_prev[j]
+    mode[i] = mode_prev
+    anchor[i, 0] = anchor_prev
+    lam[i, 0] = 0.0
+    lam[i, 1] = 0.0
+    for k in range(terms.shape[1]):
+        terms[i, k] = 0.0
+    for k in range(hyb.shape[1]):
+        hyb[i, k] = 0.0
+    flags[i, 0] = True
+    flags[i, 1] = False
+    flags[i, 2] = False
+    flags[i, 3] = True
+    extra[i, 0] = np.sqrt((q[i, 0] - anchor[i, 0] - q_nom[0]) ** 2 + (q[i, 1] - anchor[i, 1] - q_nom[1]) ** 2)
+    extra[i, 1] = 0.0
+    extra[i, 2] = 0.0
+
+
+@njit(cache=CACHE, inline="always")
 def _weight(p):
     weight = (p[0] + p[1] + p[2]) * p[10]
     return weight if weight > 0.0 else 1.0
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _step_range(lo, hi, state, consts, out, obs, flags):
     q, qd, anchor, action, trig, p, c, q_nom, _, lam, terms, extra = _unpack(state, consts, out)
     mode, hyb = state[:, _MODE0], out[:, _ACC0:]
     weight = _weight(p)
-    scratch = np.empty(14 + LOG_SIZE)
+    scratch = np.empty(14 + _KEPT + LOG_SIZE)
     log_k = np.empty(LOG_SIZE, dtype=np.int64)
     for i in range(lo, hi):
         _step_one(i, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, scratch, log_k)
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def step_batch(state, consts, out, obs, flags):
     """Advance every robot one control step and evaluate the task, in place (one thread).
 
@@ -525,7 +563,7 @@ def step_batch_threaded(state, consts, out, obs, flags):
         _step_range(k * n // chunks, (k + 1) * n // chunks, state, consts, out, obs, flags)
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def start_batch(state, consts, out, obs, flags):
     """Put freshly reset robots on their contact and evaluate them without stepping.
 
@@ -572,7 +610,7 @@ def compiled_entry(kernel, args: tuple):
         return kernel
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _start_unilateral(q, qd, anchor, mode, i, tau, mu, p, lam, hyb):
     """Mode, ground contact and instantaneous force of a unilateral start state (``start_batch``)."""
     l1, l2 = p[6], p[7]
@@ -685,7 +723,7 @@ def _fn_address(fn) -> int:
     return ctypes.cast(fn, ctypes.c_void_p).value
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _draw_rows(next_double, states, rows, out):
     for k in range(rows.shape[0]):
         state = states[rows[k]]
@@ -693,7 +731,7 @@ def _draw_rows(next_double, states, rows, out):
             out[k, j] = next_double(state)
 
 
-@njit(cache=True)
+@njit(cache=CACHE)
 def _perturbed_starts(noise, s, q_nom, p):
     """Nominal posture + ``uniform(-s, s)`` noise (from ``noise`` in [0, 1)) on (th_b, q1, q2) and their rates, projected."""
     k = noise.shape[0]

@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from .. import checks
 from ..dynamics import foot_position
 from ..params import LegParams
 from ..hybrid import GROUND_TOL
@@ -21,6 +22,9 @@ from ..task import (
 __all__ = ["PlanarLegStanceEnv"]
 
 _RESET_OPTIONS = ("qpos", "qvel")
+QPOS_BOUND = 1.0e6
+"""Largest magnitude of a reset ``qpos`` entry [m, rad]; ``qvel`` entries are bounded by ``max_rate``."""
+MAX_PIXELS = 16384  # largest frame width or height
 # attributes that are views of the buffers (rebuilt by _bind, never pickled)
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_action_row", "_out_row", "_flag_row", "_obs_row", "_kernel_args", "_force_row", "_kick_row",
           "_step_kernel", "_start_kernel")  # fmt: skip
@@ -71,8 +75,8 @@ class PlanarLegStanceEnv(gym.Env):
     ## Action Space
     ``Box(-1, 1, (2,), float32)``, scaled by ``torque_limit`` (default 50 N m for both joints, twice the
     24.1 N m the knee needs to hold the nominal posture). Out-of-range actions are clipped to ``[-1, 1]``.
-    A NaN or infinite action, or one whose shape is not ``(2,)``, raises ``ValueError`` and leaves the
-    environment untouched.
+    A NaN or infinite action, one whose shape is not ``(2,)``, or one that is not real numbers (strings,
+    complex numbers, bools: nothing is converted) raises ``ValueError`` and leaves the environment untouched.
 
     | Num | Action              | Min | Max | Unit                   |
     |-----|---------------------|-----|-----|------------------------|
@@ -87,7 +91,8 @@ class PlanarLegStanceEnv(gym.Env):
     ``max_rate``: a faster state is treated as a numerical failure. The contact force is the mean over
     the last control step (the contact impulse over ``dt``), divided by the weight ``m g``; after
     ``reset`` it is the instantaneous force under the nominal holding torques (exactly ``[0, 1]`` at the
-    nominal posture).
+    nominal posture). With ``g = 0`` there is no weight: entries 10-11 are then the force in newtons
+    (divided by 1), and entry 17 is ``P_y / dt`` in newtons.
 
     | Num | Observation                                      | Min  | Max  | Unit  |
     |-----|--------------------------------------------------|------|------|-------|
@@ -101,8 +106,8 @@ class PlanarLegStanceEnv(gym.Env):
     | 7   | torso angular velocity `th_b'`                   | -Inf | Inf  | rad/s |
     | 8   | hip angular velocity `q1'`                       | -Inf | Inf  | rad/s |
     | 9   | knee angular velocity `q2'`                      | -Inf | Inf  | rad/s |
-    | 10  | tangential contact force `lam_x / (m g)`         | -Inf | Inf  | 1     |
-    | 11  | normal contact force `lam_y / (m g)`             | -Inf | Inf  | 1     |
+    | 10  | tangential contact force `lam_x / (m g)`         | -Inf | Inf  | 1 (N if g = 0) |
+    | 11  | normal contact force `lam_y / (m g)`             | -Inf | Inf  | 1 (N if g = 0) |
 
     With ``contact="unilateral"`` the observation has 18 entries: entries 0-1 are the base position
     relative to the ground point below the foot (the stick contact point in stick), entry 1 (the base
@@ -156,7 +161,14 @@ class PlanarLegStanceEnv(gym.Env):
     ``reset(options={"qpos": q, "qvel": qd})`` starts from an explicit state instead (either key may be
     left out: ``qpos`` defaults to the nominal posture, ``qvel`` to zero; no noise is added). The contact
     point is where that foot is, and the base velocity is projected onto the contact as above. Shapes
-    must be ``(5,)`` and values finite, else ``ValueError``. With ``contact="unilateral"`` the state is
+    must be ``(5,)``, values real and finite, ``qpos`` entries within ``QPOS_BOUND`` (1e6 m or rad) and
+    ``qvel`` entries within ``max_rate``, else ``ValueError`` naming the option.
+
+    A rejected ``reset`` changes nothing: the seed, the options and (in ``human`` mode) the window are
+    checked before the generator is seeded or the state is touched. Through ``gymnasium.make`` one thing
+    is outside the env's reach: Gymnasium's ``TimeLimit`` wrapper zeroes its step counter before it
+    calls the env's ``reset``, so a rejected reset still restarts that count (the vector env and the
+    SB3 adapter keep their own counters and leave them untouched). With ``contact="unilateral"`` the state is
     taken in world coordinates and is not projected: a foot above the ground starts in flight, a foot
     within 1e-9 m of it is put on it in the consistent contact mode (one moving into it gets the impact
     map first), and a foot below it raises ``ValueError``; ``env.unwrapped.state`` is the world
@@ -172,9 +184,9 @@ class PlanarLegStanceEnv(gym.Env):
        ``knee_range`` (0.05, 2.5) rad;
     3. if ``terminate_on_contact_loss``: ``lam_y < contact_loss_threshold`` (0 N), and with
        ``contact="unilateral"`` also any time in flight;
-    4. a numerical failure: a non-finite state or force, or a rate above ``max_rate``. The state is
-       restored to the last good one, the observation is the last (finite) one, every reward term is
-       0 and ``info["numerical_failure"]`` is True.
+    4. a numerical failure: a non-finite state or force, a rate above ``max_rate``, or an observation
+       that would overflow float32. The state is restored to the last good one, the observation is the
+       last (finite) one, every reward term is 0 and ``info["numerical_failure"]`` is True.
 
     ### Truncation
     Only through the time limit: 1000 steps (10 s) when made with ``gymnasium.make``.
@@ -183,17 +195,20 @@ class PlanarLegStanceEnv(gym.Env):
     ``gymnasium.make("leg_env/PlanarLegStance-v0", **kwargs)`` or ``PlanarLegStanceEnv(**kwargs)``.
     Every ``StanceConfig`` field is a keyword argument (it overrides ``config``). An unknown keyword
     raises ``TypeError`` ("got an unexpected keyword argument ...", as Python does); out-of-range values
-    raise ``ValueError`` naming the field, as does a ``torque_limit`` that cannot hold the nominal
-    posture or termination limits that the nominal posture itself violates.
+    (NaN, ``10**400``, beyond the bounds of ``leg_env.task.FIELD_RANGES`` and ``leg_env.params.PARAM_RANGE``)
+    raise ``ValueError`` naming the field and its range, as does a ``torque_limit`` that cannot hold the
+    nominal posture or termination limits that the nominal posture itself violates. A value of the wrong
+    type (``torque_limit="99"``, ``(True, 60)``, ``config=5``) raises ``leg_env.checks.ArgumentTypeError``,
+    both a ``TypeError`` and a ``ValueError``. Every argument goes through ``leg_env.checks``.
 
     | Parameter                   | Type              | Default        | Description                                              |
     |-----------------------------|-------------------|----------------|----------------------------------------------------------|
-    | `render_mode`               | str or None       | None           | `"rgb_array"` (headless frames) or `"human"` (a window)  |
+    | `render_mode`               | str or None       | None           | `"rgb_array"` (headless frames) or `"human"` (a window, see below) |
     | `params`                    | LegParams or dict | lesson's       | masses, inertias, lengths, gravity                       |
     | `config`                    | StanceConfig or dict | defaults    | all task settings below at once                          |
     | `width`, `height`           | int               | 480, 480       | frame size in pixels                                     |
-    | `dt`                        | float             | 0.01           | control period [s]; `metadata["render_fps"] = 1 / dt`   |
-    | `substeps`                  | int               | 2              | least RK4 steps per control period                       |
+    | `dt`                        | float             | 0.01           | control period [s], at most 1; `metadata["render_fps"] = 1 / dt` |
+    | `substeps`                  | int               | 2              | least RK4 steps per control period, 1 to 4096            |
     | `max_angle`                 | float             | 0.02           | largest link rotation per RK4 step [rad] (`inf`: fixed)  |
     | `torque_limit`              | float or pair     | (50, 50)       | torque at action 1 for hip, knee [N m]                   |
     | `nominal_knee`              | float             | 0.8            | knee angle of the nominal posture [rad]                  |
@@ -212,7 +227,12 @@ class PlanarLegStanceEnv(gym.Env):
     | `terminate_on_contact_loss` | bool              | False          | end the episode when `lam_y < contact_loss_threshold`    |
     | `contact_loss_threshold`    | float             | 0.0            | [N]                                                      |
     | `max_rate`                  | float             | 1000           | a faster state is a numerical failure [m/s, rad/s]       |
-    | `reset_noise_scale`         | float             | 0.01           | half-width of the reset noise [rad, rad/s]               |
+    | `reset_noise_scale`         | float             | 0.01           | half-width of the reset noise [rad, rad/s], at most pi   |
+
+    ``render_mode="human"`` opens its window at the first ``reset`` or ``step``, before the state
+    changes: a window that cannot open raises ``RuntimeError`` naming SDL's video driver, and the env
+    is untouched. Without a display SDL falls back to an off-screen driver that shows nothing; a
+    ``UserWarning`` says so (unless ``SDL_VIDEODRIVER`` asked for that driver).
 
     Pickling (and ``copy.deepcopy``) keeps every argument and the full state, random generator
     included, so a copy continues the same trajectory; an open window is not copied.
@@ -235,11 +255,8 @@ class PlanarLegStanceEnv(gym.Env):
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        for name, value in (("width", width), ("height", height)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(f"{name} must be a positive integer number of pixels, got {value!r}")
         self.render_mode = render_mode
-        self.width, self.height = int(width), int(height)
+        self.width, self.height = checks.integer("width", width, 1, MAX_PIXELS), checks.integer("height", height, 1, MAX_PIXELS)
         self.params = LegParams.from_any(params)
         self.config = StanceConfig.from_kwargs(config, **config_overrides)
         self.nominal = nominal_state(self.params, self.config)
@@ -273,14 +290,17 @@ class PlanarLegStanceEnv(gym.Env):
     # ---------------------------------------------------------------- API
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        # every check first (seed, options, the window): a rejected reset changes nothing
+        seed = checks.seed("seed", seed)
+        start = self._explicit_state(options)
+        if self.render_mode == "human":
+            self._open_window()
         super().reset(seed=seed)
-        if options and any(k in options for k in _RESET_OPTIONS):
-            q, qd = self._explicit_state(options)
-            anchor = start_anchor(q, self.params, self.unilateral)
-        else:
-            if options:
-                raise ValueError(f"unknown reset option(s) {sorted(options)}; valid: {list(_RESET_OPTIONS)}")
+        if start is None:
             q, qd, anchor = reset_state(self.np_random, self.params, self.config, self.nominal)
+        else:
+            q, qd = start
+            anchor = start_anchor(q, self.params, self.unilateral)
         self._start(q, qd, anchor)
         info = self._info(self._out_row.tolist(), self._flag_row.tolist())
         if self.render_mode == "human":
@@ -289,6 +309,8 @@ class PlanarLegStanceEnv(gym.Env):
 
     def step(self, action):
         a0, a1 = _checked_action(action)
+        if self.render_mode == "human" and self._viewer is None:
+            self._open_window()  # before the state changes
         self._action_row[0] = a0
         self._action_row[1] = a1
         self._step_kernel(*self._kernel_args)
@@ -319,10 +341,16 @@ class PlanarLegStanceEnv(gym.Env):
             return render.draw(
                 self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.width, self.height, self.config.mu, mode, impulse
             )
-        if self._viewer is None:
-            self._viewer = render.Viewer(self.width, self.height, self.metadata["render_fps"])
+        self._open_window()
         self._viewer.show(self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.config.mu, mode, impulse)
         return None
+
+    def _open_window(self) -> None:
+        """Open the ``human`` window unless it is open (``leg_env.render.Viewer`` raises or warns)."""
+        if self._viewer is None:
+            from .. import render
+
+            self._viewer = render.Viewer(self.width, self.height, self.metadata["render_fps"])
 
     def close(self):
         if self._viewer is not None:
@@ -367,11 +395,20 @@ class PlanarLegStanceEnv(gym.Env):
             return row_info(out, flags, self._force_row, self._kick_row, self._state[0, STATE_MODE])
         return row_info(out, flags, self._force_row)
 
-    def _explicit_state(self, options: dict) -> tuple[np.ndarray, np.ndarray]:
+    def _explicit_state(self, options: dict | None) -> tuple[np.ndarray, np.ndarray] | None:
+        """The checked ``(q, qd)`` of the ``qpos`` / ``qvel`` reset options, or None without them."""
+        if options is None:
+            return None
+        if not isinstance(options, dict):
+            raise checks.ArgumentTypeError(f"reset options must be a dict or None, got {checks.shown(options)}")
         unknown = set(options) - set(_RESET_OPTIONS)
         if unknown:
             raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: {list(_RESET_OPTIONS)}")
-        return explicit_start(options, self.nominal.q)
+        if not options:
+            return None
+        q, qd = explicit_start(options, self.nominal.q, self.config.max_rate)
+        start_anchor(q, self.params, self.unilateral)  # raises for a foot below the unilateral ground
+        return q, qd
 
     def __getstate__(self) -> dict:
         state = {k: v for k, v in self.__dict__.items() if k not in _VIEWS}
@@ -383,25 +420,18 @@ class PlanarLegStanceEnv(gym.Env):
         self._bind()
 
 
-def explicit_start(options: dict, q_nominal: np.ndarray, rows: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def explicit_start(options: dict, q_nominal: np.ndarray, max_rate: float, rows: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(q, qd)`` from the reset options ``qpos`` / ``qvel`` (defaults: the nominal posture, rest).
 
     With ``rows=None`` each must have shape ``(5,)``; with ``rows=k`` shape ``(5,)`` (for every row)
-    or ``(k, 5)``, and the result has ``k`` rows. Values must be finite, else ``ValueError``.
+    or ``(k, 5)``, and the result has ``k`` rows. Entries must be real numbers, ``qpos`` within
+    ``QPOS_BOUND`` (1e6 m or rad) and ``qvel`` within ``max_rate`` (a faster state is a numerical
+    failure), else ``ValueError`` naming the option.
     """
     shapes = ((5,),) if rows is None else ((5,), (rows, 5))
-    wanted = " or ".join(str(s) for s in shapes)
     out = []
-    for key, default in (("qpos", q_nominal), ("qvel", np.zeros(5))):
-        value = options.get(key, default)
-        try:
-            value = np.array(value, dtype=np.float64)
-        except (TypeError, ValueError) as e:
-            raise ValueError(f"reset option {key!r} must be numbers of shape {wanted}, got {options[key]!r}") from e
-        if value.shape not in shapes:
-            raise ValueError(f"reset option {key!r} must have shape {wanted}, got {value.shape}")
-        if not np.all(np.isfinite(value)):
-            raise ValueError(f"reset option {key!r} must be finite, got {value.tolist()}")
+    for key, default, bound, unit in (("qpos", q_nominal, QPOS_BOUND, "m, rad"), ("qvel", np.zeros(5), max_rate, "m/s, rad/s (max_rate)")):
+        value = checks.number_array(f"reset option {key!r}", options.get(key, default), bound, shapes, unit)
         out.append(value if rows is None else np.array(np.broadcast_to(value, (rows, 5))))
     return out[0], out[1]
 
@@ -451,20 +481,14 @@ def start_anchor(q: np.ndarray, params: LegParams, unilateral: bool) -> np.ndarr
 
 
 def _checked_action(action) -> tuple[float, float]:
-    """The action as two Python floats; ``ValueError`` unless it is 2 finite numbers of shape (2,)."""
+    """The action as two Python floats; ``ValueError`` unless it is 2 finite real numbers of shape (2,).
+
+    Strings, complex numbers and bools are refused (``ArgumentTypeError``, also a ``ValueError``),
+    not converted.
+    """
     if type(action) is np.ndarray and action.shape == (2,) and action.dtype.kind == "f":
         a0, a1 = action.tolist()  # the common case, without a conversion
         if math.isfinite(a0) and math.isfinite(a1):
             return a0, a1
-    try:
-        a = np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"action must be 2 numbers [hip, knee], got {action!r}") from e
-    if a.shape != (2,):
-        raise ValueError(f"action must have shape (2,) [hip, knee], got shape {a.shape}")
-    a0, a1 = a.tolist()
-    if not (math.isfinite(a0) and math.isfinite(a1)):
-        bad = [name for name, v in (("hip", a0), ("knee", a1)) if not math.isfinite(v)]
-        raise ValueError(f"action must be finite; non-finite entries: {bad} in {[a0, a1]}")
-    return a0, a1
-
+    a = checks.number_array("action [hip, knee]", action, math.inf, ((2,),), entries=("hip", "knee"))
+    return tuple(a.tolist())

@@ -15,14 +15,17 @@ drops them, so ``info["reward_alive"]`` never raises ``KeyError``.
 
 from __future__ import annotations
 
+import os
 from typing import Any, NamedTuple
 
 import numba
 import numpy as np
+from gymnasium.error import ResetNeeded
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from .. import checks
 from ..dynamics import foot_position
 from ..params import LegParams
 from ..task import (
@@ -70,6 +73,7 @@ STATE_KEYS = (
 _FLAG = {name: k for k, name in enumerate(FLAG_NAMES)}
 _EXTRA = {name: k for k, name in enumerate(INFO_NAMES)}
 _RESET_OPTIONS = ("qpos", "qvel", "reset_mask")
+MAX_ENVS = 2**31 - 1  # bound of num_envs, render_envs and num_threads
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_kernel_args")  # rebuilt by _bind, never pickled
 
 
@@ -88,8 +92,10 @@ class PlanarLegStanceVectorEnv(VectorEnv):
     ## Step
     ``step(actions)`` takes ``(num_envs, 2)`` actions (clipped to ``[-1, 1]``) and returns
     ``(obs, reward, terminated, truncated, info)`` with shapes ``(num_envs, 12)`` float32,
-    ``(num_envs,)`` float64, bool and bool. A NaN or infinite action or a wrong shape raises
-    ``ValueError`` naming the sub-envs, and leaves every sub-env untouched.
+    ``(num_envs,)`` float64, bool and bool. A NaN or infinite action, a wrong shape, or actions that are
+    not real numbers raise ``ValueError`` naming the sub-envs, and leave every sub-env untouched.
+    Stepping before the first ``reset`` (or while a ``reset_mask`` reset has left some sub-env never
+    reset) raises ``gymnasium.error.ResetNeeded`` before anything changes.
 
     ``info`` is Gymnasium's vector form: one array per key over the sub-envs, and a boolean mask
     ``info["_key"]`` telling which sub-envs report it. The keys are the single env's:
@@ -119,7 +125,9 @@ class PlanarLegStanceVectorEnv(VectorEnv):
     ints or ``None``); ``seed=None`` continues each sub-env's generator (fresh entropy the first
     time), as ``SyncVectorEnv`` does. ``options``: ``reset_mask`` (``(num_envs,)`` bool) resets only
     those sub-envs; ``qpos`` / ``qvel`` give explicit states, ``(5,)`` for all reset sub-envs or one
-    row per reset sub-env (semantics of the single env's options).
+    row per reset sub-env (semantics and bounds of the single env's options). A rejected reset (a bad
+    seed such as ``1.5``, a bad option) raises before anything changes: generators, states and the
+    time limit's counters stay as they were.
 
     ## Rendering
     ``render_mode="rgb_array"``: ``render()`` returns a tuple of ``(height, width, 3)`` uint8 frames,
@@ -132,7 +140,8 @@ class PlanarLegStanceVectorEnv(VectorEnv):
     ``autoreset_mode`` (``AutoresetMode`` or its value string, default ``NEXT_STEP``),
     ``render_envs`` (frames per ``render()``, default None: every sub-env), ``num_threads`` (default 1: one thread, the
     right choice next to a training process; ``k > 1`` splits the batch over ``k`` of numba's threads,
-    bitwise the same results, ``k <= NUMBA_NUM_THREADS``) and every argument of the single env:
+    bitwise the same results, ``k <= NUMBA_NUM_THREADS``; in a child process forked after its parent
+    stepped with ``k > 1`` under GNU OpenMP, ``k > 1`` raises ``RuntimeError``: use ``spawn``) and every argument of the single env:
     ``render_mode`` (None or ``"rgb_array"``), ``params``, ``config``, ``width``, ``height`` and the
     ``StanceConfig`` fields as keywords. Pickling keeps every argument and the full state.
 
@@ -156,22 +165,18 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         num_threads: int = 1,
         **config_overrides: Any,
     ):
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        num_envs = checks.integer("num_envs", num_envs, 1, MAX_ENVS)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        if max_episode_steps is not None and (
-            isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1
-        ):
-            raise ValueError(f"max_episode_steps must be a positive integer or None, got {max_episode_steps!r}")
+        if max_episode_steps is not None:
+            max_episode_steps = checks.integer("max_episode_steps", max_episode_steps, 1, np.iinfo(np.int64).max)
         try:
             autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError as e:
             raise ValueError(f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, got {autoreset_mode!r}") from e
-        if render_envs is not None and (isinstance(render_envs, bool) or not isinstance(render_envs, (int, np.integer)) or render_envs < 1):
-            raise ValueError(f"render_envs must be a positive integer or None (every sub-env), got {render_envs!r}")
-        if isinstance(num_threads, bool) or not isinstance(num_threads, (int, np.integer)) or num_threads < 1:
-            raise ValueError(f"num_threads must be a positive integer, got {num_threads!r}")
+        if render_envs is not None:
+            render_envs = checks.integer("render_envs", render_envs, 1, MAX_ENVS)
+        num_threads = checks.integer("num_threads", num_threads, 1, MAX_ENVS)
         if num_threads > numba.config.NUMBA_NUM_THREADS:
             raise ValueError(
                 f"num_threads={num_threads} exceeds numba's thread pool of {numba.config.NUMBA_NUM_THREADS} "
@@ -207,12 +212,15 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         self._elapsed = np.zeros(n, dtype=np.int64)
         self._ended = np.zeros(n, dtype=np.bool_)  # ended on the last step and not reset since
         self._rngs = BitGeneratorRows(n)  # sub-env i's generator, drawn from in compiled code
+        self._needs_reset = True  # step() refuses to run before the first reset()
 
     # ---------------------------------------------------------------- API
 
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
         """Reset all sub-envs (or those in ``options["reset_mask"]``); see the class docstring."""
         n = self.num_envs
+        if options is not None and not isinstance(options, dict):
+            raise checks.ArgumentTypeError(f"reset options must be a dict or None, got {checks.shown(options)}")
         options = dict(options or {})
         unknown = set(options) - set(_RESET_OPTIONS)
         if unknown:
@@ -232,6 +240,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             self._start(rows, *(explicit or self._draw_starts(rows)))
         self._elapsed[rows] = 0
         self._ended[rows] = False
+        self._needs_reset = any(rng is None for rng in self._rngs.generators)  # a reset_mask may leave some never reset
         info = {}
         if rows.size == n:
             self._add_state_info(info, self._out, self._flags, self._state[:, STATE_MODE])
@@ -311,6 +320,11 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         the rows that end in this step, after keeping their last observation, flags, extras and
         force in ``final``. The returned ``terms`` are the step's; the buffers hold the reset rows' start.
         """
+        if getattr(self, "_needs_reset", False):
+            never = [i for i, rng in enumerate(self._rngs.generators) if rng is None]
+            raise ResetNeeded(
+                f"call reset() before step(): sub-env(s) {_some(np.array(never))} were never reset (no episode, no random generator)"
+            )
         self._action[:] = self._checked_actions(actions)
         mode = self.autoreset_mode
         restarted = None
@@ -327,6 +341,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         if self.num_threads == 1:
             step_batch(*self._kernel_args)
         else:
+            _check_fork_after_threads()
             threads = numba.get_num_threads()
             numba.set_num_threads(self.num_threads)
             try:
@@ -359,11 +374,14 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         return _Transition(self._obs.copy(), reward, terminated, truncated, restarted, final, terms)
 
     def _checked_actions(self, actions) -> np.ndarray:
-        """``actions`` as a C-contiguous float64 ``(num_envs, 2)`` array; ``ValueError`` if malformed or non-finite."""
-        try:
-            a = np.ascontiguousarray(actions, dtype=np.float64)
-        except (TypeError, ValueError) as e:
-            raise ValueError(f"actions must be a ({self.num_envs}, 2) array of numbers [hip, knee], got {actions!r}") from e
+        """``actions`` as a C-contiguous float64 ``(num_envs, 2)`` array; ``ValueError`` if malformed or non-finite.
+
+        Strings, complex numbers and bools are refused (``leg_env.checks.real_array``), not converted.
+        """
+        if type(actions) is np.ndarray and actions.dtype.kind == "f":
+            a = np.ascontiguousarray(actions, dtype=np.float64)  # the common case
+        else:
+            a = checks.real_array("actions", actions, f"a ({self.num_envs}, 2) array of numbers [hip, knee]")
         if a.shape != (self.num_envs, 2):
             raise ValueError(f"actions must have shape ({self.num_envs}, 2) [hip, knee], got shape {a.shape}")
         finite = np.isfinite(a)
@@ -424,24 +442,22 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         return np.flatnonzero(reset_mask)
 
     def _seeds(self, seed) -> list[int | None]:
+        """Each sub-env's seed: ``seed + i`` for an int, the entries of a list, all None for None."""
         n = self.num_envs
-        if seed is None:
-            return [None] * n
-        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-            if seed < 0:
-                raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-            return [int(seed) + i for i in range(n)]
-        seeds = list(seed)
-        if len(seeds) != n:
-            raise ValueError(f"a list of seeds must have num_envs={n} entries, got {len(seeds)}")
-        for s in seeds:
-            if s is not None and (isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0):
-                raise ValueError(f"seeds must be non-negative integers or None, got {s!r}")
-        return [None if s is None else int(s) for s in seeds]
+        if seed is None or isinstance(seed, (int, np.integer, bool, np.bool_)):
+            seed = checks.seed("seed", seed)
+            return [None] * n if seed is None else [seed + i for i in range(n)]
+        if not isinstance(seed, (list, tuple, np.ndarray)):
+            raise checks.ArgumentTypeError(
+                f"seed must be a non-negative integer, a list of {n} such integers or None, got {checks.shown(seed)} of type {type(seed).__name__}"
+            )
+        if len(seed) != n:
+            raise ValueError(f"a list of seeds must have num_envs={n} entries, got {len(seed)}")
+        return [checks.seed(f"seed[{i}]", s) for i, s in enumerate(seed)]
 
     def _explicit_states(self, options: dict, k: int):
         """``(q, qd, anchor)`` for ``k`` rows from the ``qpos`` / ``qvel`` options (single env semantics)."""
-        q, qd = explicit_start(options, self.nominal.q, rows=k)
+        q, qd = explicit_start(options, self.nominal.q, self.config.max_rate, rows=k)
         return q, qd, start_anchor(q, self.params, self.unilateral)
 
     def _step_info_columns(self, t: "_Transition") -> dict:
@@ -526,6 +542,40 @@ class _Transition(NamedTuple):
     restarted: np.ndarray | None
     final: _Final | None
     terms: np.ndarray
+
+
+_threads_pid: int | None = None  # the process that last ran numba's threads (inherited by a forked child)
+
+
+def _check_fork_after_threads() -> None:
+    """Refuse threads in a child forked after its parent ran them under GNU OpenMP, which would kill it.
+
+    GNU's OpenMP runtime cannot run in a child forked after the parent ran an OpenMP parallel region
+    (libgomp aborts with "fork() called from a process already using GNU OpenMP, this is unsafe").
+    Children made by ``spawn`` or ``forkserver`` start fresh and are not affected; neither are numba's
+    ``tbb`` and ``workqueue`` threading layers (``NUMBA_THREADING_LAYER=forksafe``).
+    """
+    global _threads_pid
+    pid = os.getpid()
+    if _threads_pid is not None and _threads_pid != pid and _gnu_openmp():
+        raise RuntimeError(
+            f"num_threads > 1 in a process forked (pid {pid}) after its parent (pid {_threads_pid}) ran numba's threads "
+            "with GNU OpenMP, which would abort this process; start the child with multiprocessing's 'spawn' or "
+            "'forkserver' method, use num_threads=1 in it, or set NUMBA_THREADING_LAYER=forksafe before Python starts"
+        )
+    _threads_pid = pid
+
+
+def _gnu_openmp() -> bool:
+    """True when numba's threading layer is OpenMP from GNU's runtime (libgomp)."""
+    try:
+        if numba.threading_layer() != "omp":
+            return False
+        from numba.np.ufunc import omppool
+
+        return getattr(omppool, "openmp_vendor", "GNU") == "GNU"
+    except (ValueError, ImportError):  # no threading layer started yet, or no OpenMP pool
+        return False
 
 
 def _some(rows: np.ndarray, limit: int = 10) -> str:

@@ -1,0 +1,106 @@
+"""Soak: millions of env-steps of abuse through ``gymnasium.make_vec``, counting what went wrong.
+
+For each contact model (``pinned``, ``unilateral``) of ``leg_env/PlanarLegStance-v0`` and each action
+kind (``random``: uniform in [-1, 1]; ``bang_bang``: every joint at -1 or +1, each flipping with
+probability 0.1 per step), at ten times the default torque limit (``torque_limit=500``), this steps
+``num_envs`` robots with autoreset and counts, over every env-step:
+
+* ``non_finite``: non-finite values in the observation, the reward or any numeric ``info`` value;
+* ``exceptions``: exceptions raised by ``step`` (a run stops at its first);
+* ``unflagged``: env-steps whose state after the step is non-finite or faster than ``max_rate``, or whose
+  observation leaves the observation space's bounds, without ``info["numerical_failure"]``;
+* ``failures``: flagged numerical failures (each ends its episode; they are allowed), and the
+  terminations and truncations.
+
+Not a CI test (``tests/test_soak.py`` runs the same ``soak`` for 10^5 env-steps). Usage::
+
+    python benchmarks/soak.py                 # 10^7 env-steps per contact model and action kind, N = 4096
+    python benchmarks/soak.py --steps 1e6 --num-envs 1024 --json soak.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import leg_env
+
+CONTACTS = ("pinned", "unilateral")
+ACTIONS = ("random", "bang_bang")
+TORQUE_LIMIT = 500.0  # ten times the default 50 N m
+FLIP = 0.1  # bang-bang: probability that a joint's sign flips in a step
+
+
+def soak(contact: str, actions: str, steps: int, num_envs: int = 4096, seed: int = 0) -> dict:
+    """Step ``gym.make_vec(..., num_envs)`` for at least ``steps`` env-steps; return the counts (module docstring)."""
+    envs = gym.make_vec(leg_env.ENV_ID, num_envs=num_envs, contact=contact, torque_limit=TORQUE_LIMIT)
+    space = envs.single_observation_space
+    max_rate = envs.config.max_rate
+    rng = np.random.default_rng(seed)
+    counts = dict(contact=contact, actions=actions, num_envs=num_envs, steps=0, seconds=0.0, non_finite=0, exceptions=0,
+                  unflagged=0, failures=0, terminated=0, truncated=0)  # fmt: skip
+    envs.reset(seed=seed)
+    signs = np.where(rng.random((num_envs, 2)) < 0.5, -1.0, 1.0)
+    start = time.perf_counter()
+    while counts["steps"] < steps:
+        if actions == "random":
+            a = rng.uniform(-1.0, 1.0, (num_envs, 2))
+        else:
+            signs[rng.random((num_envs, 2)) < FLIP] *= -1.0
+            a = signs
+        try:
+            obs, reward, terminated, truncated, info = envs.step(a)
+        except Exception as e:  # noqa: BLE001 - counting them is the point
+            counts["exceptions"] += 1
+            counts["exception"] = repr(e)
+            break
+        counts["steps"] += num_envs
+        failed = info["numerical_failure"]
+        bad = ~np.isfinite(obs).all(axis=1) | ~np.isfinite(reward)
+        counts["non_finite"] += int((~np.isfinite(obs)).sum() + (~np.isfinite(reward)).sum())
+        for key, value in info.items():
+            if not key.startswith("_") and isinstance(value, np.ndarray) and value.dtype.kind == "f":
+                finite = np.isfinite(value)
+                counts["non_finite"] += int((~finite).sum())
+                bad |= ~finite.reshape(num_envs, -1).all(axis=1)
+        q, qd, anchor = envs.unwrapped.state
+        bad |= ~np.isfinite(q).all(axis=1) | ~np.isfinite(qd).all(axis=1) | (np.abs(qd) > max_rate).any(axis=1)
+        bad |= ((obs < space.low) | (obs > space.high)).any(axis=1)
+        counts["unflagged"] += int((bad & ~failed).sum())
+        counts["failures"] += int(failed.sum())
+        counts["terminated"] += int(terminated.sum())
+        counts["truncated"] += int(truncated.sum())
+    counts["seconds"] = round(time.perf_counter() - start, 2)
+    counts["steps_per_second"] = round(counts["steps"] / max(counts["seconds"], 1e-9))
+    envs.close()
+    return counts
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--steps", type=float, default=1e7, help="env-steps per contact model and action kind")
+    parser.add_argument("--num-envs", type=int, default=4096)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", help="also write the results to this file")
+    args = parser.parse_args()
+    results = []
+    for contact in CONTACTS:
+        for actions in ACTIONS:
+            r = soak(contact, actions, int(args.steps), args.num_envs, args.seed)
+            results.append(r)
+            print(json.dumps(r), flush=True)
+    ok = all(r["non_finite"] == 0 and r["exceptions"] == 0 and r["unflagged"] == 0 for r in results)
+    print(f"total env-steps {sum(r['steps'] for r in results):,}, {sum(r['seconds'] for r in results):.1f} s: "
+          f"{'0 non-finite, 0 exceptions, 0 unflagged failures' if ok else 'PROBLEMS, see above'}")  # fmt: skip
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(results, f, indent=1)
+    raise SystemExit(0 if ok else 1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,436 @@
+"""Issue 13, the env side: a rejected call changes nothing, every bad input names itself.
+
+Each test turns one reproducer of the issue (items 5-9, 12-14, 16) into a check that failed on the
+code before the fix.
+"""
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import textwrap
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.error import ResetNeeded
+from gymnasium.vector import AutoresetMode
+
+from leg_env import ENV_ID, LegParams
+from leg_env.checks import ArgumentTypeError
+from leg_env.envs.stance import PlanarLegStanceEnv
+from leg_env.envs.vector import PlanarLegStanceVectorEnv
+from leg_env.integrate import stance_step
+from leg_env.params import PARAM_NAMES
+from leg_env.task import FIELD_RANGES, FLAG_NAMES, OUT_DIM, STATE_ACTION, STATE_DIM, start_batch, step_batch, task_constants
+
+ROOT = Path(__file__).resolve().parents[1]
+CONTACTS = ("pinned", "unilateral")
+HUGE = 10**400  # an int too large for a float
+NAN_QPOS = {"qpos": [np.nan] * 5}
+# reset options that were accepted, or converted, before: each must now be refused with nothing changed
+BAD_OPTIONS = [
+    NAN_QPOS,
+    {"qpos": [0.0, 0.0, 1e39, -2.0, 0.8]},  # th_b overflows the float32 observation
+    {"qvel": [0.0, 0.0, 1e39, 0.0, 0.0]},
+    {"qvel": [0.0, 0.0, 2e3, 0.0, 0.0]},  # faster than max_rate (1e3)
+    {"qpos": ["0", "0", "0", "-2", "0.8"]},  # strings are not numbers
+    {"qpos": [0.0, 0.0, 0.0, -2.0, True]},
+    {"flying": True},
+]
+BAD_SEEDS = [-1, 1.5, "12", True]
+
+
+def generator_state(env) -> dict:
+    return env.unwrapped.np_random.bit_generator.state
+
+
+def assert_same_state(a, b):
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x, y)
+
+
+# ---------------------------------------------------------------- item 5: transactional reset
+
+
+@pytest.mark.parametrize("options", BAD_OPTIONS, ids=repr)
+def test_rejected_reset_changes_nothing_in_the_single_env(options):
+    env = gym.make(ENV_ID)
+    env.reset(seed=0)
+    for _ in range(5):
+        env.step(np.array([0.0, -0.48], dtype=np.float32))
+    state, rng = env.unwrapped.state, generator_state(env)
+    with pytest.raises(ValueError, match="option"):
+        env.reset(seed=99, options=options)
+    assert generator_state(env) == rng, "the generator was re-seeded by a rejected reset"
+    assert_same_state(env.unwrapped.state, state)
+    # the next reset continues the generator as if the rejected one had never been made
+    twin = gym.make(ENV_ID)
+    twin.reset(seed=0)
+    np.testing.assert_array_equal(env.reset()[0], twin.reset()[0])
+
+
+@pytest.mark.parametrize("seed", BAD_SEEDS, ids=repr)
+def test_rejected_seed_changes_nothing_in_the_single_env(seed):
+    env = PlanarLegStanceEnv()
+    env.reset(seed=0)
+    env.step(np.zeros(2))
+    state, rng = env.state, generator_state(env)
+    with pytest.raises((ValueError, TypeError, gym.error.Error), match="seed"):
+        env.reset(seed=seed)
+    assert generator_state(env) == rng
+    assert_same_state(env.state, state)
+
+
+@pytest.mark.parametrize("options", BAD_OPTIONS, ids=repr)
+def test_rejected_reset_changes_nothing_in_the_vector_env(options):
+    envs, twin = PlanarLegStanceVectorEnv(3), PlanarLegStanceVectorEnv(3)
+    for e in (envs, twin):
+        e.reset(seed=0)
+        for _ in range(4):
+            e.step(np.tile([0.0, -0.48], (3, 1)))
+    with pytest.raises(ValueError, match="option"):
+        envs.reset(seed=99, options=options)
+    assert envs.elapsed_steps.tolist() == [4, 4, 4], "the time limit's counters were zeroed"
+    assert_same_state(envs.state, twin.state)
+    for a, b in zip(envs._rngs.generators, twin._rngs.generators):
+        assert a.bit_generator.state == b.bit_generator.state
+    np.testing.assert_array_equal(envs.reset()[0], twin.reset()[0])
+
+
+@pytest.mark.parametrize("options", BAD_OPTIONS[:-1], ids=repr)
+def test_rejected_reset_changes_nothing_in_the_sb3_adapter(options):
+    from leg_env.sb3 import make_sb3_vec_env
+
+    venv, twin = make_sb3_vec_env(2, seed=0), make_sb3_vec_env(2, seed=0)
+    for v in (venv, twin):
+        v.reset()
+        v.step(np.tile([0.0, -0.48], (2, 1)))
+    venv.seed(99)
+    venv.set_options(options)
+    with pytest.raises(ValueError, match="option"):
+        venv.reset()
+    assert venv.env.elapsed_steps.tolist() == [1, 1]
+    assert_same_state(venv.env.state, twin.env.state)
+
+
+# ---------------------------------------------------------------- item 6: step before reset
+
+
+@pytest.mark.parametrize("mode", list(AutoresetMode), ids=str)
+def test_vector_step_before_reset_raises_and_changes_nothing(mode):
+    envs = PlanarLegStanceVectorEnv(3, autoreset_mode=mode, max_episode_steps=1)
+    state = envs.state
+    with pytest.raises(ResetNeeded, match="reset"):
+        envs.step(np.zeros((3, 2)))
+    assert_same_state(envs.state, state)
+    assert envs.elapsed_steps.tolist() == [0, 0, 0]
+    # a partial reset leaves the other sub-envs without an episode: still refused, naming them
+    envs.reset(seed=0, options={"reset_mask": np.array([True, False, True])})
+    with pytest.raises(ResetNeeded, match=r"\[1\]"):
+        envs.step(np.zeros((3, 2)))
+    envs.reset(seed=0)
+    for _ in range(3):  # every step ends an episode (max_episode_steps=1): autoresets draw from the generators
+        if mode == AutoresetMode.DISABLED:
+            envs.reset()
+        envs.step(np.zeros((3, 2)))
+
+
+def test_sb3_step_before_reset_raises_and_changes_nothing():
+    from leg_env.sb3 import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(2, max_episode_steps=1)
+    state = venv.env.state
+    with pytest.raises(ResetNeeded, match="reset"):
+        venv.step(np.zeros((2, 2)))
+    assert_same_state(venv.env.state, state)
+    venv.reset()
+    venv.step(np.zeros((2, 2)))
+
+
+# ---------------------------------------------------------------- item 7: one validation path, with bounds
+
+
+@pytest.mark.parametrize("field", sorted(FIELD_RANGES), ids=str)
+def test_every_config_field_refuses_a_number_too_large_for_a_float(field):
+    value = (HUGE, HUGE) if field in ("hip_range", "knee_range") else HUGE
+    with pytest.raises(ValueError, match=field):
+        PlanarLegStanceEnv(**{field: value})
+
+
+@pytest.mark.parametrize("field", PARAM_NAMES, ids=str)
+def test_every_param_refuses_a_number_too_large_for_a_float(field):
+    with pytest.raises(ValueError, match=f"LegParams.{field} "):
+        LegParams(**{field: HUGE})
+
+
+@pytest.mark.parametrize("value", [2**63, 4097, np.nan, np.inf, 2.5, 0], ids=repr)
+def test_substeps_has_a_documented_upper_bound(value):
+    with pytest.raises(ValueError, match=r"substeps must be .*\[1, 4096\]"):
+        PlanarLegStanceEnv(substeps=value)
+    with pytest.raises(ValueError, match="substeps"):
+        stance_step(np.zeros(5), np.zeros(5), np.zeros(2), LegParams(), substeps=value)
+
+
+def test_substeps_at_the_bound_and_unknown_keywords():
+    assert PlanarLegStanceEnv(substeps=4096).config.substeps == 4096
+    with pytest.raises(TypeError, match="unexpected keyword argument 'substep'"):
+        PlanarLegStanceEnv(substep=2)
+
+
+# ---------------------------------------------------------------- item 8: nothing overflows float32 silently
+
+
+@pytest.mark.parametrize("g", [1e-300, 1e-7, -1.0, np.nan, 1e7])
+def test_gravity_between_zero_and_its_bound_is_refused(g):
+    with pytest.raises(ValueError, match=r"LegParams\.g must be"):
+        LegParams(g=g)
+
+
+@pytest.mark.parametrize("contact", CONTACTS)
+@pytest.mark.parametrize("options", BAD_OPTIONS[1:4], ids=repr)
+def test_reset_states_that_overflow_the_observation_are_refused(contact, options):
+    with pytest.raises(ValueError, match="qpos|qvel"):
+        PlanarLegStanceEnv(contact=contact).reset(options=options)
+    with pytest.raises(ValueError, match="qpos|qvel"):
+        PlanarLegStanceVectorEnv(2, contact=contact).reset(options=options)
+
+
+def test_reset_noise_scale_is_bounded():
+    with pytest.raises(ValueError, match=r"reset_noise_scale must be in \[0, 3.14159\]"):
+        PlanarLegStanceEnv(reset_noise_scale=1e300)
+    PlanarLegStanceEnv(reset_noise_scale=np.pi).reset(seed=0)
+
+
+@pytest.mark.parametrize("contact", CONTACTS)
+def test_an_observation_that_overflows_float32_is_a_flagged_numerical_failure(contact):
+    """The kernel's last guard: a finite state whose observation overflows float32 (here through a
+    gravity below the accepted range, put into the kernel's constants directly) is a numerical
+    failure: flagged and terminated, the state and observation left at the last good ones."""
+    env = PlanarLegStanceEnv(contact=contact, reset_noise_scale=0.0)
+    consts = task_constants(env.params, env.config, env.nominal)
+    n = 2
+    state, out = np.zeros((n, STATE_DIM)), np.zeros((n, OUT_DIM))
+    obs = np.zeros((n, env.observation_space.shape[0]), dtype=np.float32)
+    flags = np.zeros((n, len(FLAG_NAMES)), dtype=np.bool_)
+    state[:, :5] = env.nominal.q
+    start_batch(state, consts, out, obs, flags)
+    assert np.isfinite(obs).all()
+    before_state, before_obs = state.copy(), obs.copy()
+    state[:, STATE_ACTION] = [[0.5, -0.2], [0.4, -0.25]]
+    tiny_g = consts.copy()
+    tiny_g[10] = 1e-300  # g: the weight m g becomes 1.5e-299 N, and lam / (m g) overflows float32
+    step_batch(state, tiny_g, out, obs, flags)
+    assert np.isfinite(obs).all(), obs
+    assert flags[:, FLAG_NAMES.index("numerical_failure")].all() and flags[:, 0].all()
+    np.testing.assert_array_equal(obs, before_obs)
+    np.testing.assert_array_equal(state[:, :12], before_state[:, :12])
+
+
+# ---------------------------------------------------------------- item 9: strict coercion
+
+
+BAD_TYPED_ACTIONS = [["0.5", "0.5"], np.array([0.5 + 1j, 0.5]), [0.5 + 0j, 0.5], [True, False], np.array([True, False])]
+
+
+@pytest.mark.parametrize("action", BAD_TYPED_ACTIONS, ids=repr)
+def test_actions_that_are_not_real_numbers_are_refused(action):
+    env = PlanarLegStanceEnv()
+    env.reset(seed=0)
+    state = env.state
+    with pytest.raises(ValueError, match="action"):
+        env.step(action)
+    assert_same_state(env.state, state)
+    envs = PlanarLegStanceVectorEnv(2)
+    envs.reset(seed=0)
+    with pytest.raises(ValueError, match="actions"):
+        envs.step([action, action])
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(torque_limit="99"), "torque_limit"),
+        (dict(torque_limit=(True, 60)), r"torque_limit\[0\]"),
+        (dict(torque_limit=(60, 1 + 2j)), r"torque_limit\[1\]"),
+        (dict(hip_range="ab"), "hip_range"),
+        (dict(alive_bonus="1"), "alive_bonus"),
+        (dict(substeps=True), "substeps"),
+        (dict(terminate_on_contact_loss=1), "terminate_on_contact_loss"),
+        (dict(contact=1), "contact"),
+        (dict(params={"m_b": "10"}), "m_b"),
+        (dict(params={"g": True}), r"LegParams\.g"),
+    ],
+    ids=repr,
+)
+def test_arguments_of_the_wrong_type_are_refused_naming_them(kwargs, match):
+    with pytest.raises(ArgumentTypeError, match=match) as error:
+        PlanarLegStanceEnv(**kwargs)
+    assert isinstance(error.value, TypeError) and isinstance(error.value, ValueError)
+
+
+@pytest.mark.parametrize("config", [5, "defaults", [("mu", 0.5)]], ids=repr)
+def test_config_of_the_wrong_type_is_a_type_error_naming_config(config):
+    for build in (PlanarLegStanceEnv, lambda **kw: PlanarLegStanceVectorEnv(2, **kw), lambda **kw: gym.make(ENV_ID, **kw)):
+        with pytest.raises(TypeError, match="config must be"):
+            build(config=config)
+
+
+@pytest.mark.parametrize("seed", BAD_SEEDS + [[0, 1.5], [0, 1, 2], "ab"], ids=repr)
+def test_vector_reset_refuses_bad_seeds_clearly_and_changes_nothing(seed):
+    envs = PlanarLegStanceVectorEnv(2)
+    envs.reset(seed=0)
+    state = envs.state
+    with pytest.raises(ValueError, match="seed"):
+        envs.reset(seed=seed)
+    assert_same_state(envs.state, state)
+
+
+# ---------------------------------------------------------------- item 12: human rendering without a display
+
+_HUMAN = """
+import warnings, numpy as np, gymnasium as gym, leg_env
+env = gym.make("leg_env/PlanarLegStance-v0", render_mode="human", width=64, height=64)
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    try:
+        env.reset(seed=5)
+        print("RESET OK")
+    except RuntimeError as e:
+        print("RAISED", e)
+        print("UNCHANGED", env.unwrapped._np_random is None and np.array_equal(env.unwrapped.state[0], env.unwrapped.nominal.q))
+print("WARNED", *[str(w.message) for w in caught if "no window" in str(w.message)])
+"""
+
+
+def _run_headless(driver: str | None) -> str:
+    environ = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER")}
+    if driver:
+        environ["SDL_VIDEODRIVER"] = driver
+    done = subprocess.run([sys.executable, "-c", _HUMAN], capture_output=True, text=True, env=environ, cwd=ROOT, timeout=600)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def test_human_mode_without_a_display_warns_that_no_window_shows():
+    out = _run_headless(None)
+    assert "RESET OK" in out
+    assert "fell back to its 'offscreen' video driver" in out, out
+
+
+def test_human_mode_whose_window_cannot_open_raises_before_the_state_changes():
+    out = _run_headless("x11")  # no X server: SDL cannot init the driver
+    assert "RAISED render_mode=\"human\" could not open a window" in out, out
+    assert "UNCHANGED True" in out, out
+
+
+# ---------------------------------------------------------------- item 13: read-only install, no writable home
+
+
+def test_a_read_only_package_without_a_writable_home_compiles_without_a_cache():
+    """numba's "cannot cache function ...: no locator available" became a warning naming NUMBA_CACHE_DIR.
+
+    The package is copied to a directory the child process cannot write, and HOME is not writable
+    either: read-only modes, or for root (who writes anywhere) the immutable attribute (``chattr +i``).
+    """
+    top = Path(tempfile.mkdtemp(prefix="leg_env_ro_"))
+    shutil.copytree(ROOT / "leg_env", top / "leg_env", ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
+    (top / "home").mkdir()
+    locked = [top / "leg_env", top / "leg_env" / "envs", top / "home"]
+    root = os.geteuid() == 0
+    try:
+        for path in locked:
+            if root:
+                if subprocess.run(["chattr", "+i", str(path)], capture_output=True).returncode != 0:
+                    pytest.skip("cannot make a directory read-only for root on this file system (chattr +i)")
+            else:
+                path.chmod(0o555)
+        environ = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME")}
+        environ.update(HOME=str(top / "home"), PYTHONPATH=str(top), PYTHONDONTWRITEBYTECODE="1")
+        code = textwrap.dedent(
+            """
+            import warnings
+            warnings.simplefilter("always")
+            import leg_env, leg_env.dynamics as d
+            p = leg_env.LegParams()
+            print("foot at origin", bool(abs(d.foot_position(d.static_equilibrium(p)[0], p)).max() < 1e-12))
+            print(leg_env.__file__)
+            """
+        )
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=environ, cwd=top, timeout=600)
+        assert done.returncode == 0, done.stderr
+        assert str(top / "leg_env") in done.stdout
+        assert "foot at origin True" in done.stdout
+        assert "NUMBA_CACHE_DIR" in done.stderr
+        assert not list((top / "leg_env").rglob("*.nbi")) and not list((top / "home").iterdir())
+    finally:
+        for path in locked:
+            if root:
+                subprocess.run(["chattr", "-i", str(path)], capture_output=True)
+            else:
+                path.chmod(0o755)
+        shutil.rmtree(top)
+
+
+# ---------------------------------------------------------------- item 14: fork after threads
+
+
+def test_threads_with_spawn_work_and_fork_after_threads_is_a_clear_error():
+    """GNU OpenMP cannot survive a fork once its threads ran: a forked child that steps with
+    ``num_threads > 1`` is refused with an error naming the cause; spawn works."""
+    code = textwrap.dedent(
+        """
+        import multiprocessing as mp, numpy as np
+        from leg_env.envs.vector import PlanarLegStanceVectorEnv
+
+        def step_once():
+            envs = PlanarLegStanceVectorEnv(8, num_threads=2)
+            envs.reset(seed=0)
+            return float(envs.step(np.zeros((8, 2)))[1].sum())
+
+        def child(conn):
+            try:
+                conn.send(step_once())
+            except RuntimeError as e:
+                conn.send(str(e))
+
+        if __name__ == "__main__":
+            print("parent", step_once())
+            for method in ("spawn", "fork"):
+                ctx = mp.get_context(method)
+                mine, theirs = ctx.Pipe()
+                p = ctx.Process(target=child, args=(theirs,))
+                p.start()
+                p.join(300)
+                print(method, mine.recv() if mine.poll() else f"died with exit code {p.exitcode}")
+        """
+    )
+    environ = {**os.environ, "NUMBA_NUM_THREADS": "2", "PYTHONPATH": str(ROOT)}
+    script = Path(tempfile.mkdtemp()) / "fork_after_threads.py"
+    script.write_text(code)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=environ, cwd=ROOT, timeout=900)
+    assert done.returncode == 0, done.stderr
+    lines = dict(line.split(" ", 1) for line in done.stdout.strip().splitlines())
+    assert lines["spawn"] == lines["parent"], done.stdout
+    assert lines["fork"].startswith("num_threads > 1 in a process forked"), done.stdout
+
+
+# ---------------------------------------------------------------- item 16: g = 0
+
+
+@pytest.mark.parametrize("contact", CONTACTS)
+def test_zero_gravity_reports_the_contact_force_in_newtons(contact):
+    """With ``g = 0`` there is no weight to divide by: obs[10:12] is the force in newtons (documented)."""
+    env = PlanarLegStanceEnv(params={"g": 0.0}, contact=contact, reset_noise_scale=0.0)
+    env.reset(seed=0)
+    obs, *_, info = env.step(np.array([0.3, -0.2]))
+    np.testing.assert_allclose(obs[10:12], info["contact_force"].astype(np.float32), rtol=1e-6)
+    assert np.abs(info["contact_force"]).max() > 0.1  # a force, not a rounding error
+    weighted = PlanarLegStanceEnv(contact=contact, reset_noise_scale=0.0)
+    weighted.reset(seed=0)
+    obs, *_, info = weighted.step(np.array([0.3, -0.2]))
+    np.testing.assert_allclose(obs[10:12], (info["contact_force"] / weighted.params.weight).astype(np.float32), rtol=1e-6)
+    doc = PlanarLegStanceEnv.__doc__
+    assert "g = 0" in doc and "newtons" in doc

@@ -73,7 +73,7 @@ import yaml
 from leg_env import ENV_ID
 from train.checkpoints import write_json_atomic, write_text_atomic
 from train.cli import parse_args
-from train.ppo import DEFAULT_HYPERPARAMS, _parse_override, load_hyperparams
+from train.ppo import DEFAULT_HYPERPARAMS, _display_path, _parse_override, load_hyperparams
 from train.runfolder import RunFolderError, RunLock
 
 __all__ = ["RLlibArgs", "train", "resolve_config", "rllib_config", "latest_checkpoint", "RLlibPolicy", "is_rllib_checkpoint", "is_rllib_run"]
@@ -224,7 +224,7 @@ def resolve_config(args: RLlibArgs) -> dict:
             "numba_threads": args.numba_threads,
         },
         "checkpoint_freq": int(args.checkpoint_freq),
-        "hyperparams_file": str(args.hyperparams),
+        "hyperparams_file": _display_path(args.hyperparams),
         "overrides": list(args.params),
     }
 

@@ -19,9 +19,12 @@ import argparse
 import os
 import platform
 import statistics
+import sys
 import time
+from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # train/, next to leg_env
 
 
 def build(runners: int, envs: int, total: int):

@@ -187,9 +187,15 @@ def test_zoo_trains_the_env_from_the_same_file(tmp_path):
     assert list(tmp_path.rglob("*.zip")), "the Zoo saved no model"
 
 
-def test_train_extra_declares_every_package_that_training_and_evaluation_import():
+RLLIB_FILES = ("leg_env/rllib.py", "train/rllib.py")
+"""The RLlib path, whose imports come from the ``rllib`` extra (``ray`` is in no other)."""
+
+
+@pytest.mark.parametrize("extra", ["train", "rllib"])
+def test_extras_declare_every_package_that_training_and_evaluation_import(extra):
     """``make train`` installs only the core and the ``train`` extra: every third-party module that
-    ``leg_env``, ``train/`` and ``policies/`` import must come from a distribution declared there."""
+    ``leg_env``, ``train/`` and ``policies/`` import must come from a distribution declared there;
+    the files of the RLlib path likewise from the core and the ``rllib`` extra."""
     import ast
     import re
     import tomllib
@@ -200,9 +206,9 @@ def test_train_extra_declares_every_package_that_training_and_evaluation_import(
 
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     extras = project["optional-dependencies"]
-    todo = ["train"]
+    todo = [extra]
     requirements = list(project["dependencies"])
-    while todo:  # the train extra and the extras it pulls in (leg-env[render], ...)
+    while todo:  # the extra and the extras it pulls in (leg-env[render], ...)
         for req in extras[todo.pop()]:
             self_ref = re.fullmatch(r"leg-env\[([\w,\s-]+)\]", req)
             if self_ref:
@@ -211,16 +217,21 @@ def test_train_extra_declares_every_package_that_training_and_evaluation_import(
                 requirements.append(req)
     declared = {norm(re.match(r"[A-Za-z0-9_.-]+", r).group(0)) for r in requirements}
 
+    if extra == "rllib":
+        paths = [ROOT / name for name in RLLIB_FILES]
+    else:
+        paths = [p for folder in ("leg_env", "train", "policies") for p in (ROOT / folder).rglob("*.py")]
+        paths = [p for p in paths if str(p.relative_to(ROOT)) not in RLLIB_FILES]
     modules = set()
-    for folder in ("leg_env", "train", "policies"):
-        for path in (ROOT / folder).rglob("*.py"):
-            for node in ast.walk(ast.parse(path.read_text())):
-                if isinstance(node, ast.Import):
-                    modules |= {alias.name.split(".")[0] for alias in node.names}
-                elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-                    modules.add(node.module.split(".")[0])
+    for path in paths:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                modules |= {alias.name.split(".")[0] for alias in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                modules.add(node.module.split(".")[0])
     third_party = modules - set(sys.stdlib_module_names) - {"leg_env", "train", "policies"}
-    assert {"numpy", "gymnasium", "stable_baselines3", "scipy", "yaml"} <= third_party  # the walk works
+    expected = {"ray", "torch", "yaml", "gymnasium"} if extra == "rllib" else {"numpy", "gymnasium", "stable_baselines3", "scipy", "yaml"}
+    assert expected <= third_party  # the walk works
     providers = packages_distributions()
     missing = sorted(m for m in third_party if not {norm(d) for d in providers.get(m, [m])} & declared)
-    assert not missing, f"imported but not declared in the core or train dependencies: {missing}"
+    assert not missing, f"imported but not declared in the core or {extra} dependencies: {missing}"

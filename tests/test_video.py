@@ -9,10 +9,8 @@ import gymnasium as gym
 import imageio_ffmpeg
 import numpy as np
 import pygame
-from stable_baselines3.common.vec_env import VecVideoRecorder
 
 import leg_env
-from leg_env.sb3 import make_sb3_vec_env
 
 ENV_ID = leg_env.ENV_ID
 NUM_ENVS = 8
@@ -71,6 +69,10 @@ def test_record_video_records_every_sub_env_at_the_real_rate(tmp_path):
 
 
 def test_vec_video_recorder_on_the_sb3_adapter(tmp_path):
+    from stable_baselines3.common.vec_env import VecVideoRecorder  # SB3 only here: the RLlib venv runs the rest
+
+    from leg_env.sb3 import make_sb3_vec_env
+
     venv = make_sb3_vec_env(seed=0, **ENV_KWARGS)
     assert venv.metadata["render_fps"] == 50
     venv = VecVideoRecorder(venv, str(tmp_path), record_video_trigger=lambda step: step == 0, video_length=10)

@@ -6,7 +6,8 @@
 
 ``policy`` is a run or policy folder (``model.zip``, ``vecnormalize.pkl``, optionally ``config.yaml``
 whose ``eval_env_kwargs`` the evaluation env uses: by default none, the registered task as is, even
-when training shaped the reward through ``env_kwargs``) or ``lqr``. Episode ``i`` is seeded ``seed + i``
+when training shaped the reward through ``env_kwargs``), a ``python -m train.rllib`` run folder (its
+newest checkpoint) or checkpoint, or ``lqr``. Episode ``i`` is seeded ``seed + i``
 (default 10_000 + i: training uses small seeds, in-training evaluation 20_000 + i) and runs in the
 single env from ``gymnasium.make`` with its 1000-step time limit. Results go to ``<policy>/eval/``
 (or ``--out``): one JSON per controller, ``table.md`` with the side-by-side table that is also
@@ -98,6 +99,9 @@ def _read_config(folder: Path) -> dict:
 def load_policy(path, env_kwargs: dict | None = None):
     """A policy with ``predict(obs)`` from a run/policy folder (or its ``model.zip``), or ``"lqr"``.
 
+    A folder written by ``python -m train.rllib``, or one of its checkpoints, loads as a
+    ``train.rllib.RLlibPolicy`` (needs the ``rllib`` extra).
+
     For ``"lqr"`` the controller is built for the env made with ``env_kwargs``. For a folder,
     ``env_kwargs`` (default: the run's ``eval_env_kwargs``) are kept as the policy's ``env_kwargs``,
     the evaluation env's arguments.
@@ -117,12 +121,25 @@ def load_policy(path, env_kwargs: dict | None = None):
         config = StanceConfig.from_kwargs(kwargs.pop("config", None), **{k: v for k, v in kwargs.items() if k not in ("render_mode", "width", "height")})
         return LQRController(LegParams.from_any(params), config)
 
+    from train.rllib import RLlibPolicy, is_rllib_checkpoint, is_rllib_run
+
+    path = Path(path)
+    if is_rllib_run(path) or is_rllib_checkpoint(path):  # python -m train.rllib's run folder or checkpoint
+        try:
+            policy = RLlibPolicy.load(path)
+        except FileNotFoundError as e:
+            raise PolicyNotFoundError(str(e)) from e
+        except ValueError as e:
+            raise PolicyLoadError(str(e)) from e
+        if env_kwargs is not None:
+            policy.env_kwargs = dict(env_kwargs)
+        return policy
+
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
     torch.set_num_threads(1)
-    path = Path(path)
     folder = path.parent if path.suffix == ".zip" else path
     model_file = path if path.suffix == ".zip" else folder / "model.zip"
     if not folder.is_dir():
@@ -307,7 +324,8 @@ class EvalArgs:
     """Evaluate a trained policy or the LQR baseline over deterministic episodes and write the results."""
 
     policy: str = "lqr"
-    """Run or policy folder (with model.zip and vecnormalize.pkl), or 'lqr' for the model-based controller."""
+    """Run or policy folder (with model.zip and vecnormalize.pkl), a train.rllib run folder or checkpoint, or
+    'lqr' for the model-based controller."""
     baseline: str | None = None
     """Also evaluate this controller ('lqr' or a folder) on the same seeds and print both side by side."""
     episodes: int = 20

@@ -39,7 +39,9 @@ $(RLLIB_VENV)/.installed: pyproject.toml constraints.txt | $(RLLIB_BIN)/python
 SB3_MODULES := test_sb3 test_train test_train_hardening test_export
 SB3_TESTS   := test_env.py::test_sb3_check_env test_unilateral.py::test_sb3_checker_passes \
                test_unilateral.py::test_sb3_adapter_carries_the_contact_keys \
-               test_video.py::test_vec_video_recorder_on_the_sb3_adapter
+               test_video.py::test_vec_video_recorder_on_the_sb3_adapter \
+               test_env_hardening.py::test_rejected_reset_changes_nothing_in_the_sb3_adapter \
+               test_env_hardening.py::test_sb3_step_before_reset_raises_and_changes_nothing
 RLLIB_TESTS := $(wildcard tests/rllib/test_*.py)
 
 # numba caches a compiled kernel under its own file's timestamp, not those of the kernels it inlines

@@ -60,7 +60,7 @@ __all__ = [
     "CONSTS_DIM",
     "task_constants",
     "step_batch",
-    "step_batch_threaded",
+    "step_range",
     "start_batch",
     "reset_state",
     "reset_states",
@@ -523,8 +523,12 @@ def _weight(p):
     return weight if weight > 0.0 else 1.0
 
 
-@njit(cache=CACHE)
-def _step_range(lo, hi, state, consts, out, obs, flags):
+@njit(cache=CACHE, nogil=True)
+def step_range(lo, hi, state, consts, out, obs, flags):
+    """``step_batch`` of the rows ``lo <= i < hi`` only; releases the GIL, so that threads can share a batch.
+
+    Robots are independent: the rows of a batch stepped in any split are bitwise those of ``step_batch``.
+    """
     q, qd, anchor, action, trig, p, c, q_nom, _, lam, terms, extra = _unpack(state, consts, out)
     mode, hyb = state[:, _MODE0], out[:, _ACC0:]
     weight = _weight(p)
@@ -548,19 +552,7 @@ def step_batch(state, consts, out, obs, flags):
         obs: ``(N, 12)`` float32 out (left at the previous observation on numerical failure).
         flags: ``(N, 4)`` bool out, in ``FLAG_NAMES`` order.
     """
-    _step_range(0, state.shape[0], state, consts, out, obs, flags)
-
-
-@njit(parallel=True)  # not cached: numba cannot cache parfor kernels with this structure (it warns)
-def step_batch_threaded(state, consts, out, obs, flags):
-    """``step_batch`` split into contiguous chunks over numba's threads (``numba.set_num_threads``).
-
-    Robots are independent, so the result is bitwise that of ``step_batch``.
-    """
-    n = state.shape[0]
-    chunks = numba.get_num_threads()
-    for k in numba.prange(chunks):
-        _step_range(k * n // chunks, (k + 1) * n // chunks, state, consts, out, obs, flags)
+    step_range(0, state.shape[0], state, consts, out, obs, flags)
 
 
 @njit(cache=CACHE)

@@ -16,9 +16,9 @@ drops them, so ``info["reward_alive"]`` never raises ``KeyError``.
 from __future__ import annotations
 
 import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
-import numba
 import numpy as np
 from gymnasium.error import ResetNeeded
 from gymnasium.utils import seeding
@@ -49,7 +49,7 @@ from ..task import (
     start_batch,
     starts_from_noise,
     step_batch,
-    step_batch_threaded,
+    step_range,
     task_constants,
 )
 from .stance import PlanarLegStanceEnv, contact_marks, explicit_start, start_anchor
@@ -73,8 +73,10 @@ STATE_KEYS = (
 _FLAG = {name: k for k, name in enumerate(FLAG_NAMES)}
 _EXTRA = {name: k for k, name in enumerate(INFO_NAMES)}
 _RESET_OPTIONS = ("qpos", "qvel", "reset_mask")
-MAX_ENVS = 2**31 - 1  # bound of num_envs, render_envs and num_threads
+MAX_ENVS = 2**31 - 1  # bound of num_envs and render_envs
+MAX_THREADS = 256  # bound of num_threads
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_kernel_args")  # rebuilt by _bind, never pickled
+_UNPICKLED = _VIEWS + ("_pool",)  # the thread pool is made anew where it is used
 
 
 class PlanarLegStanceVectorEnv(VectorEnv):
@@ -139,9 +141,9 @@ class PlanarLegStanceVectorEnv(VectorEnv):
     ``num_envs`` (int >= 1), ``max_episode_steps`` (int >= 1 or None, default 1000),
     ``autoreset_mode`` (``AutoresetMode`` or its value string, default ``NEXT_STEP``),
     ``render_envs`` (frames per ``render()``, default None: every sub-env), ``num_threads`` (default 1: one thread, the
-    right choice next to a training process; ``k > 1`` splits the batch over ``k`` of numba's threads,
-    bitwise the same results, ``k <= NUMBA_NUM_THREADS``; in a child process forked after its parent
-    stepped with ``k > 1`` under GNU OpenMP, ``k > 1`` raises ``RuntimeError``: use ``spawn``) and every argument of the single env:
+    right choice next to a training process; ``1 <= k <= 256`` splits the batch into ``k`` contiguous
+    chunks stepped by ``k`` Python threads, the compiled kernel releasing the GIL: bitwise the same
+    results; fork-safe, since no OpenMP runtime is involved) and every argument of the single env:
     ``render_mode`` (None or ``"rgb_array"``), ``params``, ``config``, ``width``, ``height`` and the
     ``StanceConfig`` fields as keywords. Pickling keeps every argument and the full state.
 
@@ -176,12 +178,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             raise ValueError(f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, got {autoreset_mode!r}") from e
         if render_envs is not None:
             render_envs = checks.integer("render_envs", render_envs, 1, MAX_ENVS)
-        num_threads = checks.integer("num_threads", num_threads, 1, MAX_ENVS)
-        if num_threads > numba.config.NUMBA_NUM_THREADS:
-            raise ValueError(
-                f"num_threads={num_threads} exceeds numba's thread pool of {numba.config.NUMBA_NUM_THREADS} "
-                "(set NUMBA_NUM_THREADS before Python starts)"
-            )
+        num_threads = checks.integer("num_threads", num_threads, 1, MAX_THREADS)
 
         # The single env checks the arguments and defines the spaces; the batch reuses both.
         single = PlanarLegStanceEnv(params=params, config=config, width=width, height=height, **config_overrides)
@@ -191,6 +188,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         self.autoreset_mode = autoreset_mode
         self.render_envs = None if render_envs is None else int(render_envs)
         self.num_threads = int(num_threads)
+        self._pool: tuple[int, ThreadPoolExecutor] | None = None  # (pid, pool), made at the first threaded step
         self.width, self.height = single.width, single.height
         self.unilateral = single.unilateral
         self.state_keys = STATE_KEYS + (UNILATERAL_KEYS if self.unilateral else ())
@@ -272,6 +270,12 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             info["_final_info"] = ended.copy()
         return t.obs, t.reward, t.terminated, t.truncated, info
 
+    def close_extras(self, **kwargs: Any) -> None:
+        """Stop the threads of ``num_threads > 1`` (a later step makes new ones)."""
+        if self._pool is not None and self._pool[0] == os.getpid():
+            self._pool[1].shutdown(wait=True)
+        self._pool = None
+
     def render(self):
         """One frame per sub-env, or of the first ``render_envs`` (``rgb_array`` mode); else None with a warning."""
         if self.render_mode is None:
@@ -341,13 +345,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         if self.num_threads == 1:
             step_batch(*self._kernel_args)
         else:
-            _check_fork_after_threads()
-            threads = numba.get_num_threads()
-            numba.set_num_threads(self.num_threads)
-            try:
-                step_batch_threaded(*self._kernel_args)
-            finally:
-                numba.set_num_threads(threads)
+            self._step_threaded()
         self._elapsed += 1
         if restarted is not None:
             self._start(restarted, *starts)  # zeroes their reward terms too
@@ -372,6 +370,21 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         else:
             self._ended = ended
         return _Transition(self._obs.copy(), reward, terminated, truncated, restarted, final, terms)
+
+    def _step_threaded(self) -> None:
+        """``step_batch`` split into ``num_threads`` contiguous chunks, each stepped by ``step_range`` in a thread.
+
+        The kernel releases the GIL, so the chunks run in parallel; robots are independent, so the result is
+        bitwise that of one thread. The pool is made in the process that uses it (a forked child, whose copy
+        of its parent's pool has no threads, makes its own).
+        """
+        pid = os.getpid()
+        if self._pool is None or self._pool[0] != pid:
+            self._pool = (pid, ThreadPoolExecutor(self.num_threads, thread_name_prefix="leg_env"))
+        n, k, args = self.num_envs, self.num_threads, self._kernel_args
+        chunks = [self._pool[1].submit(step_range, j * n // k, (j + 1) * n // k, *args) for j in range(k)]
+        for chunk in chunks:
+            chunk.result()
 
     def _checked_actions(self, actions) -> np.ndarray:
         """``actions`` as a C-contiguous float64 ``(num_envs, 2)`` array; ``ValueError`` if malformed or non-finite.
@@ -426,10 +439,11 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         self._kernel_args = (state, self._consts, out, self._obs, self._flags)
 
     def __getstate__(self) -> dict:
-        return {k: v for k, v in self.__dict__.items() if k not in _VIEWS}
+        return {k: v for k, v in self.__dict__.items() if k not in _UNPICKLED}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
+        self._pool = None
         self._bind()
 
     def _reset_rows(self, reset_mask) -> np.ndarray:
@@ -542,40 +556,6 @@ class _Transition(NamedTuple):
     restarted: np.ndarray | None
     final: _Final | None
     terms: np.ndarray
-
-
-_threads_pid: int | None = None  # the process that last ran numba's threads (inherited by a forked child)
-
-
-def _check_fork_after_threads() -> None:
-    """Refuse threads in a child forked after its parent ran them under GNU OpenMP, which would kill it.
-
-    GNU's OpenMP runtime cannot run in a child forked after the parent ran an OpenMP parallel region
-    (libgomp aborts with "fork() called from a process already using GNU OpenMP, this is unsafe").
-    Children made by ``spawn`` or ``forkserver`` start fresh and are not affected; neither are numba's
-    ``tbb`` and ``workqueue`` threading layers (``NUMBA_THREADING_LAYER=forksafe``).
-    """
-    global _threads_pid
-    pid = os.getpid()
-    if _threads_pid is not None and _threads_pid != pid and _gnu_openmp():
-        raise RuntimeError(
-            f"num_threads > 1 in a process forked (pid {pid}) after its parent (pid {_threads_pid}) ran numba's threads "
-            "with GNU OpenMP, which would abort this process; start the child with multiprocessing's 'spawn' or "
-            "'forkserver' method, use num_threads=1 in it, or set NUMBA_THREADING_LAYER=forksafe before Python starts"
-        )
-    _threads_pid = pid
-
-
-def _gnu_openmp() -> bool:
-    """True when numba's threading layer is OpenMP from GNU's runtime (libgomp)."""
-    try:
-        if numba.threading_layer() != "omp":
-            return False
-        from numba.np.ufunc import omppool
-
-        return getattr(omppool, "openmp_vendor", "GNU") == "GNU"
-    except (ValueError, ImportError):  # no threading layer started yet, or no OpenMP pool
-        return False
 
 
 def _some(rows: np.ndarray, limit: int = 10) -> str:

@@ -272,8 +272,9 @@ class PlanarLegStanceVectorEnv(VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         """Stop the threads of ``num_threads > 1`` (a later step makes new ones)."""
-        if self._pool is not None and self._pool[0] == os.getpid():
-            self._pool[1].shutdown(wait=True)
+        pool = getattr(self, "_pool", None)  # None too when __init__ refused its arguments
+        if pool is not None and pool[0] == os.getpid():
+            pool[1].shutdown(wait=True)
         self._pool = None
 
     def render(self):

@@ -72,6 +72,7 @@ __all__ = [
     "UNILATERAL_KEYS",
     "unilateral_info",
     "row_info",
+    "REWARD_INFO_KEYS",
     "compiled_entry",
     "unilateral_columns",
 ]
@@ -747,17 +748,18 @@ assert (_TERMS0, _EXTRA0, _ACC0, OUT_DIM) == (2, 7, 10, 26) and (ACC_KICK_X, ACC
 
 
 def row_info(out: list, flags: list, force: np.ndarray, impulse: np.ndarray | None = None, mode: float = 0.0) -> dict:
-    """``info`` of one robot from its output row and flags (each as a list).
+    """``info`` of one robot after a step, from its output row and flags (each as a list).
 
     ``force`` and ``impulse`` are the row's ``OUT_LAM`` and ``OUT_KICK`` columns (views, copied here:
-    Gymnasium asks for new info data on every call).
-    The keys are ``contact_force`` (shape (2,)), ``normal_force``, the three violation / failure flags,
-    ``base_drift`` and ``foot_error``; with an ``impulse`` (the unilateral model) also the
-    ``UNILATERAL_KEYS`` of ``unilateral_info``, ``mode`` giving ``contact_mode``. One dict display,
-    because this runs at every ``env.step``.
+    Gymnasium asks for new info data on every call). The keys are the reward terms
+    (``reward_<term>`` of ``REWARD_TERMS``), ``contact_force`` (shape (2,)), ``normal_force``, the three
+    violation / failure flags, ``base_drift`` and ``foot_error``; with an ``impulse`` (the unilateral
+    model) also the ``UNILATERAL_KEYS`` of ``unilateral_info``, ``mode`` giving ``contact_mode``. After a
+    reset the reward keys are left out (``REWARD_INFO_KEYS``). One dict display each, because this runs
+    at every ``env.step``.
     """
     (
-        _, _, _, _, _, _, _, base_drift, foot_error, normal_force,
+        _, _, alive, drift, unilateral, friction, ctrl, base_drift, foot_error, normal_force,
         _, _, _, _, stick_time, slip_time, flight_time, slip_distance, work, d_slip, d_impacts,
         events, painleve, settles, energy, foot_height,
     ) = out  # fmt: skip
@@ -771,33 +773,50 @@ def row_info(out: list, flags: list, force: np.ndarray, impulse: np.ndarray | No
             "numerical_failure": failure,
             "base_drift": base_drift,
             "foot_error": foot_error,
+            "reward_alive": alive,
+            "reward_drift": drift,
+            "reward_unilateral": unilateral,
+            "reward_friction": friction,
+            "reward_ctrl": ctrl,
         }
-    return {
-        "contact_force": force.copy(),
-        "normal_force": normal_force,
-        "unilateral_violation": unilateral_violation,
-        "friction_violation": friction_violation,
-        "numerical_failure": failure,
-        "base_drift": base_drift,
-        "foot_error": foot_error,
-        "contact_mode": _MODE_NAME_OF[mode],
-        "foot_height": foot_height,
-        "impulse": impulse.copy(),
-        "stick_time": stick_time,
-        "slip_time": slip_time,
-        "flight_time": flight_time,
-        "slip_distance": slip_distance,
-        "work_actuators": work,
-        "dissipation_slip": d_slip,
-        "dissipation_impacts": d_impacts,
-        "energy": energy,
-        "contact_events": int(events) if events else 0,
-        "painleve_fallbacks": int(painleve) if painleve else 0,
-        "zeno_settles": int(settles) if settles else 0,
-    }
+    # 26 keys: a dict display that large grows its table item by item, a copy of a template does not
+    info = _UNILATERAL_TEMPLATE.copy()
+    info["contact_force"] = force.copy()
+    info["normal_force"] = normal_force
+    info["unilateral_violation"] = unilateral_violation
+    info["friction_violation"] = friction_violation
+    info["numerical_failure"] = failure
+    info["base_drift"] = base_drift
+    info["foot_error"] = foot_error
+    info["contact_mode"] = _MODE_NAME_OF[mode]
+    info["foot_height"] = foot_height
+    info["impulse"] = impulse.copy()
+    info["stick_time"] = stick_time
+    info["slip_time"] = slip_time
+    info["flight_time"] = flight_time
+    info["slip_distance"] = slip_distance
+    info["work_actuators"] = work
+    info["dissipation_slip"] = d_slip
+    info["dissipation_impacts"] = d_impacts
+    info["energy"] = energy
+    info["contact_events"] = int(events) if events else 0
+    info["painleve_fallbacks"] = int(painleve) if painleve else 0
+    info["zeno_settles"] = int(settles) if settles else 0
+    info["reward_alive"] = alive
+    info["reward_drift"] = drift
+    info["reward_unilateral"] = unilateral
+    info["reward_friction"] = friction
+    info["reward_ctrl"] = ctrl
+    return info
 
 
-_MODE_NAME_OF = {float(mode): name for mode, name in enumerate(MODE_NAMES)}  # the mode column's value -> name
+REWARD_INFO_KEYS = tuple(f"reward_{name}" for name in REWARD_TERMS)
+"""``info`` keys of the reward terms, after a step only (they sum to the reward)."""
+assert REWARD_INFO_KEYS == ("reward_alive", "reward_drift", "reward_unilateral", "reward_friction", "reward_ctrl")
+_UNILATERAL_TEMPLATE = dict.fromkeys(
+    ("contact_force", "normal_force", "unilateral_violation", "friction_violation", "numerical_failure", "base_drift", "foot_error")
+    + UNILATERAL_KEYS + REWARD_INFO_KEYS
+)  # the keys of row_info's unilateral dict, in its order
 
 
 def unilateral_info(out: list, mode: float) -> dict:
@@ -813,6 +832,9 @@ def unilateral_info(out: list, mode: float) -> dict:
     row = np.asarray(out, dtype=np.float64)
     info = row_info(out, [False] * len(FLAG_NAMES), row[OUT_LAM], row[OUT_KICK], mode)
     return {key: info[key] for key in UNILATERAL_KEYS}
+
+
+_MODE_NAME_OF = {float(mode): name for mode, name in enumerate(MODE_NAMES)}  # the mode column's value -> name
 
 
 def unilateral_columns(out: np.ndarray, modes: np.ndarray) -> dict:

@@ -16,7 +16,7 @@ from ..hybrid import GROUND_TOL
 from ..task import (
     FLAG_NAMES, OBS_DIM, OBS_DIM_UNILATERAL, OUT_DIM, OUT_EXTRA, OUT_KICK, OUT_LAM, OUT_TERMS, STATE_ACTION,
     STATE_ANCHOR, STATE_DIM, STATE_MODE, STATE_Q, STATE_QD, StanceConfig, compiled_entry, nominal_state, reset_state,
-    row_info, start_batch, step_batch, task_constants,
+    REWARD_INFO_KEYS, row_info, start_batch, step_batch, task_constants,
 )  # fmt: skip
 
 __all__ = ["PlanarLegStanceEnv"]
@@ -315,15 +315,13 @@ class PlanarLegStanceEnv(gym.Env):
         self._action_row[1] = a1
         self._step_kernel(*self._kernel_args)
         out, flags = self._out_row.tolist(), self._flag_row.tolist()  # one conversion each serves every key
-        alive, drift, unilateral, friction, ctrl = out[OUT_TERMS]
-        info = self._info(out, flags)
-        info["reward_alive"] = alive
-        info["reward_drift"] = drift
-        info["reward_unilateral"] = unilateral
-        info["reward_friction"] = friction
-        info["reward_ctrl"] = ctrl
+        if self.unilateral:
+            info = row_info(out, flags, self._force_row, self._kick_row, self._state[0, STATE_MODE])
+        else:
+            info = row_info(out, flags, self._force_row)
         if self.render_mode == "human":
             self.render()
+        _, _, alive, drift, unilateral, friction, ctrl = out[:7]  # OUT_TERMS
         return self._obs_row.copy(), alive + drift + unilateral + friction + ctrl, flags[0], False, info
 
     def render(self):
@@ -390,10 +388,14 @@ class PlanarLegStanceEnv(gym.Env):
         self._start_kernel(*self._kernel_args)
 
     def _info(self, out: list, flags: list) -> dict:
-        """The state keys of ``info`` from the output row and the flags, each as one ``tolist()``."""
+        """The state keys of ``info`` (no reward terms: a reset's) from the output row and the flags, as lists."""
         if self.unilateral:
-            return row_info(out, flags, self._force_row, self._kick_row, self._state[0, STATE_MODE])
-        return row_info(out, flags, self._force_row)
+            info = row_info(out, flags, self._force_row, self._kick_row, self._state[0, STATE_MODE])
+        else:
+            info = row_info(out, flags, self._force_row)
+        for key in REWARD_INFO_KEYS:
+            del info[key]
+        return info
 
     def _explicit_state(self, options: dict | None) -> tuple[np.ndarray, np.ndarray] | None:
         """The checked ``(q, qd)`` of the ``qpos`` / ``qvel`` reset options, or None without them."""

@@ -1,7 +1,8 @@
 """leg-env: the planar floating-base leg as an exact, fast Gymnasium environment.
 
 Importing the package registers every task id of ``leg_env.tasks.REGISTRY`` (``gymnasium.make`` and
-``gymnasium.make_vec``): ``leg_env/PlanarLegStance-v0`` and ``leg_env/PlanarLegStance-v1``. It stays cheap: the environments, and the numba kernels behind them,
+``gymnasium.make_vec``): ``leg_env/PlanarLegStance-v0``, ``leg_env/PlanarLegStance-v1``,
+``leg_env/PlanarLegPush-v0`` and ``leg_env/PlanarLegHop-v0``. It stays cheap: the environments, and the numba kernels behind them,
 load on first use, and pygame only when a frame is drawn.
 """
 

@@ -15,6 +15,8 @@ REGISTRY = {
     # id: (task module, keyword arguments of the id)
     "leg_env/PlanarLegStance-v0": ("stance", {}),
     "leg_env/PlanarLegStance-v1": ("stance", {"contact": "unilateral", "reset_noise_scale": 0.05}),
+    "leg_env/PlanarLegPush-v0": ("push", {}),
+    "leg_env/PlanarLegHop-v0": ("hop", {}),
 }
 """Every registered id: ``(task module, kwargs)``; ``PlanarLegStance-v0`` keeps its own entry points."""
 

@@ -49,7 +49,6 @@ quadrature of ``-lam_x x_f'``) and the kinetic energy lost in impulses, so that
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np

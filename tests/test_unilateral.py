@@ -17,7 +17,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import leg_env
 from leg_env import dynamics as dyn
-from leg_env.contact import FLIGHT, SLIP_BACKWARD, SLIP_FORWARD, STICK
+from leg_env.contact import STICK
 from leg_env.hybrid import LOG_SIZE, MAX_EVENTS, hybrid_step
 from leg_env.params import LegParams
 

@@ -26,7 +26,6 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .. import checks
-from ..dynamics import foot_position
 from ..params import LegParams
 from ..task import (
     FLAG_NAMES,

@@ -41,12 +41,13 @@ SB3_TESTS   := test_env.py::test_sb3_check_env test_unilateral.py::test_sb3_chec
                test_unilateral.py::test_sb3_adapter_carries_the_contact_keys \
                test_video.py::test_vec_video_recorder_on_the_sb3_adapter \
                test_env_hardening.py::test_rejected_reset_changes_nothing_in_the_sb3_adapter \
-               test_env_hardening.py::test_sb3_step_before_reset_raises_and_changes_nothing
+               test_env_hardening.py::test_sb3_step_before_reset_raises_and_changes_nothing \
+               test_tasks.py::test_sb3_env_checker test_tasks.py::test_sb3_adapter_contract
 RLLIB_TESTS := $(wildcard tests/rllib/test_*.py)
 
 # numba caches a compiled kernel under its own file's timestamp, not those of the kernels it inlines
 # from other files: after any edit of the package, drop every cached kernel so that none is stale
-$(VENV)/.numba-fresh: $(wildcard leg_env/*.py leg_env/envs/*.py)
+$(VENV)/.numba-fresh: $(wildcard leg_env/*.py leg_env/envs/*.py leg_env/tasks/*.py)
 	mkdir -p $(VENV)
 	find leg_env \( -name '*.nbi' -o -name '*.nbc' \) -delete
 	touch $@

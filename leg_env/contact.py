@@ -34,7 +34,9 @@ leg's absolute angles ``theta = (th1, th2)`` obey ``K theta'' = r + G^T F`` for 
 relative to the COM, ``p_f - p_com = al1 (cos th1, sin th1) + al2 (cos th2, sin th2)``,
 ``al1 = l1 - a/m``, ``al2 = l2 - b/m``. The COM obeys ``m p_com'' = F - m g e_y`` and the torso turns
 by ``th_b'' = -tau_hip / I_b`` whatever ``F`` is. Hence ``Lambda = I/m + G K^-1 G^T`` and
-``a0 = -g e_y + G K^-1 r + Gdot theta'``: 2x2 solves by Cramer's rule, nothing is inverted.
+``a0 = -g e_y + G K^-1 r + Gdot theta'``: 2x2 solves by Cramer's rule, nothing is inverted. A horizontal
+force ``F`` on the torso's COM (``p[LOAD_X]``) adds ``F e_x / m`` to the COM's acceleration and
+``(a s1, b s2) F / m`` to ``r`` (the hip's position relative to the COM, differentiated).
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ import numpy as np
 from numba import njit
 
 from ._jit import CACHE
-from .dynamics import _CONTACT_NAMES, NQ, NU, _batched, _flight_inertia, _stance_core, _vec, params_array
+from .dynamics import _CONTACT_NAMES, LOAD_X, NQ, NU, _batched, _flight_inertia, _stance_core, _vec, params_array
 from .params import LegParams
 
 __all__ = list(_CONTACT_NAMES)  # leg_env.dynamics re-exports these names
@@ -99,9 +101,13 @@ def _free_terms(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, K11, K12, K22, inv_
     v2 = w2 * w2
     r1 = (tau_hip - tau_knee) - kf * s12 * v2
     r2 = tau_knee + kf * s12 * v1
+    F = p[LOAD_X]  # horizontal force on the torso's COM: (a s1, b s2) F / m on the leg, F / m on the COM
+    if F != 0.0:
+        r1 += F * a * s1 / m
+        r2 += F * b * s2 / m
     u1 = (K22 * r1 - K12 * r2) * inv_det
     u2 = (K11 * r2 - K12 * r1) * inv_det
-    a0x = -al1 * (s1 * u1 + co1 * v1) - al2 * (s2 * u2 + co2 * v2)
+    a0x = -al1 * (s1 * u1 + co1 * v1) - al2 * (s2 * u2 + co2 * v2) + F / m
     a0y = al1 * (co1 * u1 - s1 * v1) + al2 * (co2 * u2 - s2 * v2) - g
     return u1, u2, a0x, a0y
 
@@ -117,7 +123,7 @@ def _forced_accel(s1, co1, s2, co2, w1, w2, u1, u2, B1x, B1y, B2x, B2y, Fx, Fy, 
     dd1 = u1 + B1x * Fx + B1y * Fy
     dd2 = u2 + B2x * Fx + B2y * Fy
     # x_b = x_com - (a cos th1 + b cos th2) / m, and likewise y_b; m p_com'' = F - m g e_y
-    xdd = (Fx + a * (co1 * w1 * w1 + s1 * dd1) + b * (co2 * w2 * w2 + s2 * dd2)) / m
+    xdd = (Fx + a * (co1 * w1 * w1 + s1 * dd1) + b * (co2 * w2 * w2 + s2 * dd2) + p[LOAD_X]) / m
     ydd = (Fy + a * (s1 * w1 * w1 - co1 * dd1) + b * (s2 * w2 * w2 - co2 * dd2)) / m - g
     thbdd = -tau_hip / I_b
     return xdd, ydd, thbdd, dd1 - thbdd, dd2 - dd1

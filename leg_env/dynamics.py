@@ -22,6 +22,10 @@ Conventions, stated once:
       [ Jc    0   ] [lam] = [-Jcdot qd   ]
 
 * Gravity acts along ``-y``; ``P = g (m_b y_b + m1 y_c1 + m2 y_c2)``.
+* An external horizontal force ``F`` on the torso's COM (a push; ``p[LOAD_X]`` of the kernels' parameter
+  array, 0 unless a task sets it) adds the generalised force ``Q = J_b^T (F, 0)`` to the right-hand side,
+  ``J_b = d(x_b, y_b)/dq``. The torso's COM is the base point, so ``J_b = [I_2 0]`` and
+  ``Q = (F, 0, 0, 0, 0)``: it moves the base, and exerts no torque on the torso about its COM.
 
 Every public function takes one robot (``q`` of shape ``(5,)``) or a batch with
 leading axes (``(..., 5)``); ``q``, ``qd`` and ``tau`` broadcast over the leading
@@ -67,6 +71,8 @@ __all__ = [
 
 NQ = 5  # generalized coordinates
 NU = 2  # actuated joints
+NP = 11  # LegParams fields in the kernels' parameter array
+LOAD_X = NP  # the kernels' parameter array ends with the horizontal force on the torso's COM [N] (``params_array``)
 S = np.array([[0.0, 0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0]])
 S.setflags(write=False)
 
@@ -137,8 +143,9 @@ def _stance_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     K12 = kap * c12
     v1 = w1 * w1
     v2 = w2 * w2
-    r1 = (tau_hip - tau_knee) + g * e1 * co1 - kap * s12 * v2
-    r2 = tau_knee + g * e2 * co2 + kap * s12 * v1
+    F = p[LOAD_X]  # horizontal force on the torso's COM [N]; virtual work F d x_b = F (l1 s1 d th1 + l2 s2 d th2)
+    r1 = (tau_hip - tau_knee) + g * e1 * co1 - kap * s12 * v2 + F * l1 * s1
+    r2 = tau_knee + g * e2 * co2 + kap * s12 * v1 + F * l2 * s2
     # the 2x2 SPD system by Cramer's rule (one division on the critical path)
     inv_det = 1.0 / (K11 * K22 - K12 * K12)
     dd1 = (K22 * r1 - K12 * r2) * inv_det
@@ -148,7 +155,7 @@ def _stance_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     vx, vy = co1 * v1 + s1 * dd1, s1 * v1 - co1 * dd1
     xdd = l1 * vx + l2 * ux
     ydd = l1 * vy + l2 * uy
-    lam_x = e1 * vx + e2 * ux
+    lam_x = e1 * vx + e2 * ux - F  # m a_com = lam + F e_x - m g e_y
     lam_y = e1 * vy + e2 * uy + m * g
     thbdd = -tau_hip / I_b
     return xdd, ydd, thbdd, dd1 - thbdd, dd2 - dd1, lam_x, lam_y
@@ -193,14 +200,15 @@ def _flight_core(s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, p):
     K12 = kf * c12
     v1 = w1 * w1
     v2 = w2 * w2
-    r1 = (tau_hip - tau_knee) - kf * s12 * v2
-    r2 = tau_knee + kf * s12 * v1
+    F = p[LOAD_X]  # horizontal force on the torso's COM [N]: d(p_b - p_com)/d th_i . e_x = (a s1, b s2) / m
+    r1 = (tau_hip - tau_knee) - kf * s12 * v2 + F * a * s1 / m
+    r2 = tau_knee + kf * s12 * v1 + F * b * s2 / m
     inv_det = 1.0 / (K11 * K22 - K12 * K12)
     dd1 = (K22 * r1 - K12 * r2) * inv_det
     dd2 = (K11 * r2 - K12 * r1) * inv_det
     thbdd = -tau_hip / I_b
-    # x_b = x_com - (a cos th1 + b cos th2) / m, and likewise y_b; the COM falls freely
-    xdd = (a * (co1 * v1 + s1 * dd1) + b * (co2 * v2 + s2 * dd2)) / m
+    # x_b = x_com - (a cos th1 + b cos th2) / m, and likewise y_b; the COM falls freely (m x_com'' = F)
+    xdd = (a * (co1 * v1 + s1 * dd1) + b * (co2 * v2 + s2 * dd2) + F) / m
     ydd = (a * (s1 * v1 - co1 * dd1) + b * (s2 * v2 - co2 * dd2)) / m - g
     return xdd, ydd, thbdd, dd1 - thbdd, dd2 - dd1
 
@@ -417,14 +425,27 @@ def _com_batch(q, p, out):
 # ----------------------------------------------------------------------------
 
 
-def params_array(p: LegParams | np.ndarray) -> np.ndarray:
-    """``LegParams`` as the float64 array the kernels read (an array passes through)."""
+def params_array(p: LegParams | np.ndarray, load_x: float = 0.0) -> np.ndarray:
+    """``LegParams`` as the float64 array the kernels read: its 11 fields, then the load ``p[LOAD_X]``.
+
+    ``load_x`` is the horizontal force on the torso's COM [N] held over a step (0: no load). An array of
+    11 values gets the load appended; one of 12 passes through.
+    """
     if isinstance(p, LegParams):
-        return p.array
+        return _loaded(p.array, load_x)
     a = np.asarray(p, dtype=np.float64)
-    if a.shape != (11,):
-        raise ValueError(f"params must be LegParams or an array of 11 values, got shape {a.shape}")
+    if a.shape == (NP,):
+        return _loaded(a, load_x)
+    if a.shape != (NP + 1,):
+        raise ValueError(f"params must be LegParams or an array of {NP} values (or {NP + 1} with the load), got shape {a.shape}")
     return a
+
+
+def _loaded(a: np.ndarray, load_x: float) -> np.ndarray:
+    out = np.empty(NP + 1)
+    out[:NP] = a
+    out[LOAD_X] = load_x
+    return out
 
 
 _F64 = np.dtype(np.float64)

@@ -43,8 +43,12 @@ What a step accumulates (``ACC_*`` columns of ``acc``): the contact impulse of t
 (its mean over the step is the mean contact force, impacts excluded), the sum of impact impulses,
 the time in each mode, the slip distance, the actuator work ``tau . (q1, q2)(end) - (q1, q2)(start)``
 (exact: the joint angles are continuous and the torques constant), the friction dissipation (RK4
-quadrature of ``-lam_x x_f'``) and the kinetic energy lost in impulses, so that
-``E(end) - E(start) = work - slip_dissipation - impact_dissipation`` up to the RK4 error.
+quadrature of ``-lam_x x_f'``), the kinetic energy lost in impulses and the work of a horizontal force
+``F = p[LOAD_X]`` on the torso's COM (a push, held over the step like the torques:
+``F (x_b(end) - x_b(start))``, exact), so that
+``E(end) - E(start) = work + work_load - slip_dissipation - impact_dissipation`` up to the RK4 error.
+The force enters every mode's dynamics and so every witness and mode choice; impulses are unaffected
+(a finite force does no impulsive work).
 """
 
 from __future__ import annotations
@@ -69,7 +73,7 @@ from .contact import (
     _mode_at_rest,
     _mode_sliding,
 )
-from .dynamics import NQ, NU, _batched, _vec, params_array
+from .dynamics import LOAD_X, NQ, NU, _batched, _vec, params_array
 from .integrate import DT, MAX_ANGLE, SUBSTEPS, _accel, _checked_steps, _rk4_substep, _substeps_for_rates
 from .params import LegParams
 
@@ -106,8 +110,9 @@ _ROOT_ITERATIONS = 100
     ACC_SLIP_DISTANCE,  # [m]
     ACC_WORK, ACC_SLIP_DISSIPATION, ACC_IMPACT_DISSIPATION,  # [J]
     ACC_EVENTS, ACC_PAINLEVE, ACC_SETTLES,  # counts
+    ACC_WORK_LOAD,  # work of the horizontal force on the torso's COM, F (x_b(end) - x_b(start)) [J]
     ACC_DIM,
-) = range(15)  # fmt: skip
+) = range(16)  # fmt: skip
 
 
 @njit(cache=CACHE, inline="always")
@@ -448,6 +453,7 @@ def _hybrid_from(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, s1, c
         anchor[0] = _foot(X, p)[0]
     acc[ACC_EVENTS] = events
     acc[ACC_WORK] = t_hip * (X[3] - q[3]) + t_knee * (X[4] - q[4])
+    acc[ACC_WORK_LOAD] = p[LOAD_X] * (X[0] - q[0])  # exact: F constant over the step, x_b continuous
     for j in range(5):
         q[j] = X[j]
         qd[j] = X[5 + j]
@@ -455,12 +461,14 @@ def _hybrid_from(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, s1, c
 
 
 @njit(cache=CACHE)
-def _hybrid_batch(q, qd, tau, p, mu, mode, anchor, dt, substeps, max_angle, acc, log_t, log_k):
+def _hybrid_batch(q, qd, tau, p, load, mu, mode, anchor, dt, substeps, max_angle, acc, log_t, log_k):
+    pi = p.copy()
     for i in range(q.shape[0]):
         th1 = q[i, 2] + q[i, 3]
         th2 = th1 + q[i, 4]
+        pi[LOAD_X] = load[i]
         mode[i] = _hybrid_from(
-            q[i], qd[i], tau[i], p, mu[i], mode[i], anchor[i], dt, substeps, max_angle,
+            q[i], qd[i], tau[i], pi, mu[i], mode[i], anchor[i], dt, substeps, max_angle,
             np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), acc[i], log_t[i], log_k[i],
         )  # fmt: skip
 
@@ -479,6 +487,7 @@ class HybridStep(NamedTuple):
     flight_time: np.ndarray  # (...) [s]
     slip_distance: np.ndarray  # (...) [m]
     work: np.ndarray  # (...) actuator work [J]
+    work_load: np.ndarray  # (...) work of the horizontal force on the torso's COM [J]
     slip_dissipation: np.ndarray  # (...) energy dissipated by sliding friction [J]
     impact_dissipation: np.ndarray  # (...) kinetic energy lost in impulses [J]
     events: np.ndarray  # (...) int, located transitions
@@ -501,7 +510,8 @@ def _initial_modes(qf, qdf, tf, mu, p: LegParams) -> np.ndarray:
 
 
 def hybrid_step(
-    q, qd, tau, p: LegParams, mu, mode=None, anchor_x=None, dt: float = DT, substeps: int = SUBSTEPS, max_angle: float = MAX_ANGLE
+    q, qd, tau, p: LegParams, mu, mode=None, anchor_x=None, dt: float = DT, substeps: int = SUBSTEPS, max_angle: float = MAX_ANGLE,
+    load_x=0.0,
 ) -> HybridStep:
     """One control step of the leg on the unilateral ground ``y = 0`` (module docstring).
 
@@ -514,6 +524,8 @@ def hybrid_step(
             the state requires (a stick keeps its anchor).
         anchor_x: ``(...)`` stick contact points [m]; None: the feet's current ``x``.
         dt, substeps, max_angle: the step rule of ``leg_env.integrate.stance_step``.
+        load_x: ``(...)`` or scalar horizontal force on the torso's COM held over the step [N] (a push:
+            ``M qdd + h = S^T tau + Jc^T lam + (F, 0, 0, 0, 0)``, ``leg_env.dynamics``); its work is ``work_load``.
 
     Returns:
         ``HybridStep``: the new state and mode, and what the step did.
@@ -540,7 +552,10 @@ def hybrid_step(
     acc = np.empty((n, ACC_DIM))
     log_t = np.full((n, LOG_SIZE), np.nan)
     log_k = np.full((n, LOG_SIZE), -1, dtype=np.int64)
-    _hybrid_batch(qf, qdf, tf, params_array(p), mu_f, modes, anchor, dt, substeps, max_angle, acc, log_t, log_k)
+    load = np.ascontiguousarray(np.broadcast_to(np.asarray(load_x, dtype=np.float64), lead).reshape(-1))
+    if not np.all(np.isfinite(load)):
+        raise ValueError("load_x must be finite")
+    _hybrid_batch(qf, qdf, tf, params_array(p), load, mu_f, modes, anchor, dt, substeps, max_angle, acc, log_t, log_k)
 
     def r(x, tail=()):
         return x.reshape(lead + tail)
@@ -557,6 +572,7 @@ def hybrid_step(
         flight_time=r(acc[:, ACC_FLIGHT_TIME].copy()),
         slip_distance=r(acc[:, ACC_SLIP_DISTANCE].copy()),
         work=r(acc[:, ACC_WORK].copy()),
+        work_load=r(acc[:, ACC_WORK_LOAD].copy()),
         slip_dissipation=r(acc[:, ACC_SLIP_DISSIPATION].copy()),
         impact_dissipation=r(acc[:, ACC_IMPACT_DISSIPATION].copy()),
         events=r(acc[:, ACC_EVENTS].astype(np.int64)),

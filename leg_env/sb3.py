@@ -25,23 +25,21 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
 from . import checks
-from .envs.vector import REWARD_KEYS, STATE_KEYS, PlanarLegStanceVectorEnv
-from .task import STATE_MODE, UNILATERAL_KEYS
+from .envs.vector import REWARD_KEYS, STATE_KEYS, LegVectorEnv
+from .step import STATE_MODE
+from .tasks.stance import UNILATERAL_KEYS
 
 __all__ = ["LegStanceVecEnv", "make_sb3_vec_env"]
 
-# the per-env info values built from Python scalars, in the order step_wait unpacks them
-_SCALAR_KEYS = (
-    "reward_alive", "reward_drift", "reward_unilateral", "reward_friction", "reward_ctrl",
-    "normal_force", "unilateral_violation", "friction_violation", "numerical_failure", "base_drift", "foot_error",
-)  # fmt: skip
-assert set(_SCALAR_KEYS) | {"contact_force"} == set(REWARD_KEYS + STATE_KEYS)
+# the per-env state values built from Python scalars (after the task's reward terms)
+_STATE_SCALARS = ("normal_force", "unilateral_violation", "friction_violation", "numerical_failure", "base_drift", "foot_error")
+assert set(_STATE_SCALARS) | {"contact_force"} == set(STATE_KEYS)
 # attributes whose single-environment meaning differs from the batched env's
 _SINGLE_ATTRIBUTES = {"observation_space": "single_observation_space", "action_space": "single_action_space"}
 
 
 class LegStanceVecEnv(VecEnv):
-    """SB3 ``VecEnv`` whose sub-environments are the rows of one ``PlanarLegStanceVectorEnv``.
+    """SB3 ``VecEnv`` whose sub-environments are the rows of one ``LegVectorEnv`` (any task).
 
     The batched env must autoreset in ``SAME_STEP`` mode (``make_sb3_vec_env`` builds it so).
     ``step`` returns ``(obs, rewards, dones, infos)`` as SB3 expects: ``rewards`` float32,
@@ -68,9 +66,9 @@ class LegStanceVecEnv(VecEnv):
     ``VecVideoRecorder`` plays videos at real speed.
     """
 
-    def __init__(self, env: PlanarLegStanceVectorEnv):
-        if not isinstance(env, PlanarLegStanceVectorEnv):
-            raise TypeError(f"env must be an (unwrapped) PlanarLegStanceVectorEnv, got {type(env).__name__}")
+    def __init__(self, env: LegVectorEnv):
+        if not isinstance(env, LegVectorEnv):
+            raise TypeError(f"env must be an (unwrapped) LegVectorEnv, got {type(env).__name__}")
         if env.autoreset_mode != AutoresetMode.SAME_STEP:
             raise ValueError(
                 f"SB3 resets a sub-env in the step that ends it: build the env with autoreset_mode=AutoresetMode.SAME_STEP, "
@@ -102,31 +100,19 @@ class LegStanceVecEnv(VecEnv):
         t = env._step(actions)
         columns = env._step_info_columns(t)
         time_limit = t.truncated & ~t.terminated
-        scalars = [columns[key].tolist() for key in _SCALAR_KEYS]
-        infos = [
-            {
-                "reward_alive": alive,
-                "reward_drift": drift,
-                "reward_unilateral": unilateral,
-                "reward_friction": friction,
-                "reward_ctrl": ctrl,
-                "contact_force": contact_force,
-                "normal_force": normal_force,
-                "unilateral_violation": unilateral_violation,
-                "friction_violation": friction_violation,
-                "numerical_failure": numerical_failure,
-                "base_drift": base_drift,
-                "foot_error": foot_error,
-                "TimeLimit.truncated": truncated,
-            }
-            for (
-                alive, drift, unilateral, friction, ctrl,
-                normal_force, unilateral_violation, friction_violation, numerical_failure, base_drift, foot_error,
-                contact_force, truncated,
-            ) in zip(*scalars, columns["contact_force"], time_limit.tolist())  # _SCALAR_KEYS order
-        ]  # fmt: skip
-        if env.unilateral:  # the contact model's keys, as the single env's info has them
-            for key in UNILATERAL_KEYS:
+        rewards = env.reward_keys
+        n_rewards = len(rewards)
+        scalars = [columns[key].tolist() for key in rewards + _STATE_SCALARS]
+        infos = []
+        for row in zip(*scalars, columns["contact_force"], time_limit.tolist()):
+            info = dict(zip(rewards, row[:n_rewards]))
+            info["contact_force"] = row[-2]
+            info.update(zip(_STATE_SCALARS, row[n_rewards:-2]))
+            info["TimeLimit.truncated"] = row[-1]
+            infos.append(info)
+        extra_keys = (UNILATERAL_KEYS if env.unilateral else ()) + env.task.info_names
+        if extra_keys:  # the contact model's and the task's keys, as the single env's info has them
+            for key in extra_keys:
                 values = columns[key] if key == "impulse" else columns[key].tolist()
                 for info, value in zip(infos, values):
                     info[key] = value
@@ -186,17 +172,25 @@ def _per_env_state_infos(info: dict, rows, keys) -> list[dict]:
     return [{key: column[i] if key in _ARRAY_KEYS else column[i].item() for key, column in zip(keys, columns)} for i in rows]
 
 
-def make_sb3_vec_env(num_envs: int, seed: int | None = None, **env_kwargs: Any) -> LegStanceVecEnv:
-    """``LegStanceVecEnv`` over ``PlanarLegStanceVectorEnv(num_envs, autoreset_mode=SAME_STEP, **env_kwargs)``.
+def make_sb3_vec_env(num_envs: int, seed: int | None = None, env_id: str | None = None, **env_kwargs: Any) -> LegStanceVecEnv:
+    """``LegStanceVecEnv`` over ``LegVectorEnv(num_envs, autoreset_mode=SAME_STEP, **env_kwargs)``.
 
-    ``env_kwargs`` are the batched env's arguments (``max_episode_steps`` defaults to the registered
-    1000, ``params``, ``config``, any ``StanceConfig`` field, ``render_mode``...). With ``seed``, the
-    first ``reset`` seeds sub-env ``i`` with ``seed + i``.
+    ``env_kwargs`` are the batched env's arguments (``task``, ``max_episode_steps`` defaulting to the
+    registered 1000, ``params``, ``config``, any config field, ``render_mode``...). ``env_id`` (a registered
+    id, ``leg_env.tasks.REGISTRY``) gives the task and the id's arguments (``env_kwargs`` override them).
+    With ``seed``, the first ``reset`` seeds sub-env ``i`` with ``seed + i``.
     """
+    if env_id is not None:
+        from .tasks import REGISTRY
+
+        if env_id not in REGISTRY:
+            raise ValueError(f"env_id must be one of {sorted(REGISTRY)}, got {env_id!r}")
+        task, fixed = REGISTRY[env_id]
+        env_kwargs = {"task": task, **fixed, **env_kwargs}
     mode = env_kwargs.pop("autoreset_mode", AutoresetMode.SAME_STEP)
     if AutoresetMode(mode) != AutoresetMode.SAME_STEP:
         raise ValueError(f"the SB3 adapter needs autoreset_mode SAME_STEP, got {mode!r}")
-    venv = LegStanceVecEnv(PlanarLegStanceVectorEnv(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs))
+    venv = LegStanceVecEnv(LegVectorEnv(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs))
     if seed is not None:
         venv.seed(seed)
     return venv

@@ -1,13 +1,17 @@
-"""The Gymnasium environments: one robot (``stance``) and a native batch (``vector``)."""
+"""The Gymnasium environments, generic over the task: one robot (``single``) and a native batch (``vector``)."""
 
 from .stance import PlanarLegStanceEnv
 
-__all__ = ["PlanarLegStanceEnv", "PlanarLegStanceVectorEnv"]
+__all__ = ["LegEnv", "LegVectorEnv", "PlanarLegStanceEnv", "PlanarLegStanceVectorEnv"]
 
 
 def __getattr__(name: str):
-    if name == "PlanarLegStanceVectorEnv":
-        from .vector import PlanarLegStanceVectorEnv
+    if name == "LegEnv":
+        from .single import LegEnv
 
-        return PlanarLegStanceVectorEnv
+        return LegEnv
+    if name in ("LegVectorEnv", "PlanarLegStanceVectorEnv"):
+        from . import vector
+
+        return getattr(vector, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

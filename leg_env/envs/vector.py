@@ -27,36 +27,28 @@ from gymnasium.vector.utils import batch_space
 
 from .. import checks
 from ..params import LegParams
-from ..task import (
+from .. import tasks
+from ..step import (
     FLAG_NAMES,
-    INFO_NAMES,
-    OUT_DIM,
     OUT_EXTRA,
     OUT_LAM,
-    OUT_TERMS,
-    REWARD_TERMS,
     STATE_ACTION,
     STATE_ANCHOR,
-    STATE_DIM,
     STATE_Q,
     STATE_QD,
     STATE_MODE,
-    UNILATERAL_KEYS,
-    unilateral_columns,
     BitGeneratorRows,
-    StanceConfig,
-    start_batch,
-    starts_from_noise,
-    step_batch,
-    step_range,
-    task_constants,
+    physics_range,
+    physics_start,
 )
-from .stance import PlanarLegStanceEnv, contact_marks, explicit_start, start_anchor
+from ..tasks.stance import INFO_NAMES, REWARD_TERMS, UNILATERAL_KEYS, StanceConfig, starts_from_noise, task_constants, unilateral_columns
+from .single import LegEnv, contact_marks, explicit_start, start_anchor
 
-__all__ = ["PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
+__all__ = ["LegVectorEnv", "PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
 
 REWARD_KEYS = tuple(f"reward_{name}" for name in REWARD_TERMS)
-"""``info`` keys of the reward terms (after a step only); they sum to the reward."""
+"""``info`` keys of the balance task's reward terms (after a step only); they sum to the reward
+(a task's own: ``env.reward_keys``)."""
 STATE_KEYS = (
     "contact_force",
     "normal_force",
@@ -74,12 +66,12 @@ _EXTRA = {name: k for k, name in enumerate(INFO_NAMES)}
 _RESET_OPTIONS = ("qpos", "qvel", "reset_mask")
 MAX_ENVS = 2**31 - 1  # bound of num_envs and render_envs
 MAX_THREADS = 256  # bound of num_threads
-_VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_kernel_args")  # rebuilt by _bind, never pickled
+_VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_kernel_args", "_physics_args", "task")  # rebuilt by _bind, never pickled
 _UNPICKLED = _VIEWS + ("_pool",)  # the thread pool is made anew where it is used
 
 
-class PlanarLegStanceVectorEnv(VectorEnv):
-    r"""N independent copies of ``PlanarLegStanceEnv``, stepped by one batched kernel call.
+class LegVectorEnv(VectorEnv):
+    r"""N independent copies of ``LegEnv`` (any task; ``task`` names it), stepped by batched kernel calls.
 
     Everything about a sub-environment (dynamics, observation, reward terms, termination, ``info``,
     constructor arguments, spaces) is documented on ``leg_env.envs.stance.PlanarLegStanceEnv`` and
@@ -141,7 +133,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
     ``autoreset_mode`` (``AutoresetMode`` or its value string, default ``NEXT_STEP``),
     ``render_envs`` (frames per ``render()``, default None: every sub-env), ``num_threads`` (default 1: one thread, the
     right choice next to a training process; ``1 <= k <= 256`` splits the batch into ``k`` contiguous
-    chunks stepped by ``k`` Python threads, the compiled kernel releasing the GIL: bitwise the same
+    chunks whose physics is stepped by ``k`` Python threads, the compiled kernel releasing the GIL: bitwise the same
     results; fork-safe, since no OpenMP runtime is involved) and every argument of the single env:
     ``render_mode`` (None or ``"rgb_array"``), ``params``, ``config``, ``width``, ``height`` and the
     ``StanceConfig`` fields as keywords. Pickling keeps every argument and the full state.
@@ -164,6 +156,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         height: int = 480,
         render_envs: int | None = None,
         num_threads: int = 1,
+        task: str = "stance",
         **config_overrides: Any,
     ):
         num_envs = checks.integer("num_envs", num_envs, 1, MAX_ENVS)
@@ -180,7 +173,10 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         num_threads = checks.integer("num_threads", num_threads, 1, MAX_THREADS)
 
         # The single env checks the arguments and defines the spaces; the batch reuses both.
-        single = PlanarLegStanceEnv(params=params, config=config, width=width, height=height, **config_overrides)
+        single = LegEnv(params=params, config=config, width=width, height=height, task=task, **config_overrides)
+        self.task_name = single.task_name
+        self.task = single.task
+        self.reward_keys = self.task.reward_keys
         self.num_envs = n = int(num_envs)
         self.render_mode = render_mode
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
@@ -190,7 +186,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         self._pool: tuple[int, ThreadPoolExecutor] | None = None  # (pid, pool), made at the first threaded step
         self.width, self.height = single.width, single.height
         self.unilateral = single.unilateral
-        self.state_keys = STATE_KEYS + (UNILATERAL_KEYS if self.unilateral else ())
+        self.state_keys = STATE_KEYS + (UNILATERAL_KEYS if self.unilateral else ()) + self.task.info_names
         self.params, self.config, self.nominal = single.params, single.config, single.nominal
         self.metadata = {**type(self).metadata, "render_fps": single.metadata["render_fps"], "autoreset_mode": autoreset_mode}
         self.single_observation_space = single.observation_space
@@ -200,12 +196,13 @@ class PlanarLegStanceVectorEnv(VectorEnv):
 
         # the kernel's packed arrays (leg_env.task), row i is sub-env i; _bind() makes the views
         self._consts = task_constants(self.params, self.config, self.nominal)
-        self._state = np.zeros((n, STATE_DIM))  # q | qd | anchor | action | trig
-        self._out = np.zeros((n, OUT_DIM))  # lam | reward terms | extras
+        self._state = np.zeros((n, self.task.state_dim))  # leg_env.step's layout, then the task's columns
+        self._out = np.zeros((n, self.task.out_dim))  # leg_env.step's layout, then reward terms and task info
         self._obs = np.zeros((n, self.single_observation_space.shape[0]), dtype=np.float32)
         self._flags = np.zeros((n, len(FLAG_NAMES)), dtype=np.bool_)
         self._bind()
-        self._start(None, self.nominal.q, np.zeros(5), np.zeros(2))  # every row at the nominal posture
+        nominal_columns = self.task.task_columns(np.full((n, self.task.draws(self.config)), 0.5), self.config)
+        self._start(None, self.nominal.q, np.zeros(5), np.zeros(2), nominal_columns)  # every row at the nominal posture
         self._elapsed = np.zeros(n, dtype=np.int64)
         self._ended = np.zeros(n, dtype=np.bool_)  # ended on the last step and not reset since
         self._rngs = BitGeneratorRows(n)  # sub-env i's generator, drawn from in compiled code
@@ -231,10 +228,8 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         for i in rows.tolist():
             if seeds[i] is not None or self._rngs[i] is None:
                 self._rngs[i] = seeding.np_random(seeds[i])[0]
-        if rows.size == n:
-            self._start(None, *(explicit or self._draw_starts(rows)))
-        else:
-            self._start(rows, *(explicit or self._draw_starts(rows)))
+        starts = self._draw_starts(rows, explicit)
+        self._start(None if rows.size == n else rows, *starts)
         self._elapsed[rows] = 0
         self._ended[rows] = False
         self._needs_reset = any(rng is None for rng in self._rngs.generators)  # a reset_mask may leave some never reset
@@ -343,15 +338,18 @@ class PlanarLegStanceVectorEnv(VectorEnv):
                 'with reset(options={"reset_mask": mask}) before stepping them again'
             )
         if self.num_threads == 1:
-            step_batch(*self._kernel_args)
+            physics_range(0, self.num_envs, *self._physics_args)
         else:
-            self._step_threaded()
+            self._physics_threaded()
+        self.task.assess(*self._kernel_args)
         self._elapsed += 1
         if restarted is not None:
             self._start(restarted, *starts)  # zeroes their reward terms too
             self._elapsed[restarted] = 0
         terms = self._terms.copy()  # the step's, before a SAME_STEP reset zeroes the reset rows' terms
-        reward = terms[:, 0] + terms[:, 1] + terms[:, 2] + terms[:, 3] + terms[:, 4]
+        reward = terms[:, 0].copy()
+        for k in range(1, terms.shape[1]):  # summed in order, as the single env does
+            reward += terms[:, k]
         terminated = self._flags[:, 0].copy()
         if self.max_episode_steps is None:
             truncated = np.zeros(self.num_envs, dtype=np.bool_)
@@ -371,8 +369,8 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             self._ended = ended
         return _Transition(self._obs.copy(), reward, terminated, truncated, restarted, final, terms)
 
-    def _step_threaded(self) -> None:
-        """``step_batch`` split into ``num_threads`` contiguous chunks, each stepped by ``step_range`` in a thread.
+    def _physics_threaded(self) -> None:
+        """``physics_range`` split into ``num_threads`` contiguous chunks, each stepped in a thread.
 
         The kernel releases the GIL, so the chunks run in parallel; robots are independent, so the result is
         bitwise that of one thread. The pool is made in the process that uses it (a forked child, whose copy
@@ -381,8 +379,8 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         pid = os.getpid()
         if self._pool is None or self._pool[0] != pid:
             self._pool = (pid, ThreadPoolExecutor(self.num_threads, thread_name_prefix="leg_env"))
-        n, k, args = self.num_envs, self.num_threads, self._kernel_args
-        chunks = [self._pool[1].submit(step_range, j * n // k, (j + 1) * n // k, *args) for j in range(k)]
+        n, k, args = self.num_envs, self.num_threads, self._physics_args
+        chunks = [self._pool[1].submit(physics_range, j * n // k, (j + 1) * n // k, *args) for j in range(k)]
         for chunk in chunks:
             chunk.result()
 
@@ -403,29 +401,40 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             raise ValueError(f"actions must be finite; sub-env(s) {_some(bad)} got {a[bad[:3]].tolist()}")
         return a
 
-    def _draw_starts(self, rows: np.ndarray):
-        """Fresh start states of ``rows``, each drawn from its own generator as the single env draws it."""
-        noise = np.empty((rows.size, 6))
-        if self.config.reset_noise_scale > 0.0:
-            self._rngs.draw(rows, noise)
-        return starts_from_noise(noise, self.params, self.config, self.nominal)
+    def _draw_starts(self, rows: np.ndarray, explicit=None):
+        """Fresh start states ``(q, qd, anchor, task columns)`` of ``rows``, each drawn from its own
+        generator as the single env draws it (``explicit``: ``(q, qd, anchor)`` given, only the task draws)."""
+        posture = 6 if explicit is None and self.config.reset_noise_scale > 0.0 else 0
+        draws = np.empty((rows.size, posture + self.task.draws(self.config)))
+        if draws.shape[1]:
+            self._rngs.draw(rows, draws)
+        columns = self.task.task_columns(draws[:, posture:], self.config)
+        if explicit is not None:
+            return (*explicit, columns)
+        return (*starts_from_noise(np.ascontiguousarray(draws[:, :posture]), self.params, self.config, self.nominal), columns)
 
-    def _start(self, rows: np.ndarray | None, q, qd, anchor) -> None:
-        """Put ``rows`` (all if None) at ``(q, qd)`` on ``anchor`` and evaluate them without stepping.
+    def _start(self, rows: np.ndarray | None, q, qd, anchor, columns) -> None:
+        """Put ``rows`` (all if None) at ``(q, qd)`` on ``anchor`` with the task's state ``columns`` and
+        evaluate them without stepping.
 
-        Their reward terms become zero. ``q, qd, anchor`` are ``(len(rows), .)`` float64 arrays.
+        Their reward terms become zero. ``q, qd, anchor, columns`` are ``(len(rows), .)`` float64 arrays.
         """
+        first = self._state.shape[1] - len(self.task.state_names)  # the task's first state column
         if rows is None:
             self._q[:] = q
             self._qd[:] = qd
             self._anchor[:] = anchor
-            start_batch(*self._kernel_args)
+            self._state[:, first:] = columns
+            physics_start(*self._physics_args)
+            self.task.start(*self._kernel_args)
             return
         k = rows.size
-        state, out = np.zeros((k, STATE_DIM)), np.zeros((k, OUT_DIM))
+        state, out = np.zeros((k, self._state.shape[1])), np.zeros((k, self._out.shape[1]))
         obs, flags = np.empty((k, self._obs.shape[1]), dtype=np.float32), np.empty((k, len(FLAG_NAMES)), dtype=np.bool_)
         state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR] = q, qd, anchor
-        start_batch(state, self._consts, out, obs, flags)
+        state[:, first:] = columns
+        physics_start(state, self._consts, out, flags)
+        self.task.start(state, self._consts, out, obs, flags)
         self._state[rows] = state
         self._out[rows] = out
         self._obs[rows] = obs
@@ -434,9 +443,11 @@ class PlanarLegStanceVectorEnv(VectorEnv):
     def _bind(self) -> None:
         """Named views of the packed buffers and the kernel's argument tuple (rebuilt after unpickling)."""
         state, out = self._state, self._out
+        self.task = tasks.get(self.task_name)
         self._q, self._qd, self._anchor, self._action = state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR], state[:, STATE_ACTION]
-        self._lam, self._terms, self._extra = out[:, OUT_LAM], out[:, OUT_TERMS], out[:, OUT_EXTRA]
+        self._lam, self._terms, self._extra = out[:, OUT_LAM], out[:, self.task.out_terms], out[:, OUT_EXTRA]
         self._kernel_args = (state, self._consts, out, self._obs, self._flags)
+        self._physics_args = (state, self._consts, out, self._flags)
 
     def __getstate__(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if k not in _UNPICKLED}
@@ -480,7 +491,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         Rows that SAME_STEP reset during the step report their last step, not their reset
         (what Stable-Baselines3 puts in a sub-env's ``info``). Shared with ``leg_env.sb3``.
         """
-        columns = {key: t.terms[:, k] for k, key in enumerate(REWARD_KEYS)}
+        columns = {key: t.terms[:, k] for k, key in enumerate(self.reward_keys)}
         state = self._state_columns(self._out, self._flags, self._state[:, STATE_MODE])
         if t.final is not None:
             for key, rows_values in self._state_columns(t.final.out, t.final.flags, t.final.mode).items():
@@ -500,7 +511,7 @@ class PlanarLegStanceVectorEnv(VectorEnv):
             columns[:, ~mask] = 0.0
             masks = np.empty(columns.shape, dtype=np.bool_)
             masks[:] = mask
-        for k, key in enumerate(REWARD_KEYS):
+        for k, key in enumerate(self.reward_keys):
             info[key] = columns[k]
             info["_" + key] = masks[k]
 
@@ -534,6 +545,9 @@ class PlanarLegStanceVectorEnv(VectorEnv):
         }
         if self.unilateral:
             columns.update(unilateral_columns(out, modes))
+        if self.task.info_names:
+            task_info = out[:, self.task.out_info].T.copy()
+            columns.update(zip(self.task.info_names, task_info))
         return columns
 
 
@@ -562,3 +576,10 @@ def _some(rows: np.ndarray, limit: int = 10) -> str:
     """Up to ``limit`` sub-env indices, for error messages."""
     shown = rows[:limit].tolist()
     return f"{shown}{' ...' if rows.size > limit else ''}"
+
+
+class PlanarLegStanceVectorEnv(LegVectorEnv):
+    """``LegVectorEnv`` of the balance task (``leg_env/PlanarLegStance-v0``'s ``vector_entry_point``)."""
+
+    def __init__(self, num_envs: int = 1, render_mode: str | None = None, params=None, config=None, **kwargs: Any):
+        super().__init__(num_envs, render_mode, params, config, task="stance", **kwargs)

@@ -1,0 +1,28 @@
+"""The tasks: one module per task (``leg_env.tasks.<name>``), and the table of registered ids.
+
+Importing this package is cheap: a task module, and the numba kernels behind it, load on first use
+(``get``). ``REGISTRY`` maps each Gymnasium id to its task module and the keyword arguments the id
+fixes; ``leg_env/__init__.py`` registers every entry. Adding a task is its module plus its line here.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__all__ = ["REGISTRY", "get"]
+
+REGISTRY = {
+    # id: (task module, keyword arguments of the id)
+    "leg_env/PlanarLegStance-v0": ("stance", {}),
+    "leg_env/PlanarLegStance-v1": ("stance", {"contact": "unilateral", "reset_noise_scale": 0.05}),
+    "leg_env/PlanarLegPush-v0": ("push", {}),
+    "leg_env/PlanarLegHop-v0": ("hop", {}),
+}
+"""Every registered id: ``(task module, kwargs)``; ``PlanarLegStance-v0`` keeps its own entry points."""
+
+
+def get(name: str):
+    """The ``Task`` of the module ``leg_env.tasks.<name>``."""
+    if not isinstance(name, str) or name not in {module for module, _ in REGISTRY.values()}:
+        raise ValueError(f"task must be one of {sorted({module for module, _ in REGISTRY.values()})}, got {name!r}")
+    return importlib.import_module(f"{__name__}.{name}").TASK

@@ -1,0 +1,223 @@
+r"""``leg_env/PlanarLegHop-v0``: hop in place to a commanded apex height, on the unilateral ground.
+
+## Description
+The robot and the exact unilateral ground of ``PlanarLegStance`` (``contact="unilateral"``, the only
+model here: a pinned foot cannot hop). Each episode draws a command ``dh*``, uniform in
+``command_range`` (5 to 15 cm): the rise of the whole-body centre of mass at the apex of each hop above
+its standing height ``y_stand`` (the COM height of the nominal posture, 0.784 m at the default
+parameters). The command is in the observation. There is no equilibrium to linearise about: the task is
+a periodic hybrid orbit (stance, lift-off, flight, touchdown).
+
+## Observation Space
+``Box((19,), float32)``: the 18 entries of ``PlanarLegStance`` on the unilateral ground (base relative to
+the ground point under the foot, angles, velocities, mean contact force, foot height and velocity,
+contact flag, slip direction, impact impulse), then ``dh*`` [m] (entry 18).
+
+## Rewards
+``reward = reward_alive + reward_height + reward_drift + reward_tilt + reward_impact + reward_slip
++ reward_ctrl``, each in ``info``:
+
+- ``reward_alive = alive_bonus`` (1) on a healthy step.
+- ``reward_height = height_weight exp(-((E_v - E*) / (m g height_scale))^2)`` (2, 0.05 m): dense energy
+  shaping. ``E_v = m y_com'^2 / 2 + m g y_com`` is the COM's vertical energy; in flight it is constant
+  and equals ``m g`` times the coming (or past) apex height, so the term needs no apex event, and it
+  peaks when that apex is ``y_stand + dh*``: ``E* = m g (y_stand + dh*)``.
+- ``reward_drift = -drift_com_weight (x_com - x_com,0)^2`` (10 per m^2): the COM stays over its start.
+- ``reward_tilt = -tilt_weight th_b^2`` (1 per rad^2).
+- ``reward_impact = -impact_weight (|P| / m)^2`` (0.5 per (m/s)^2): ``P`` the step's impact impulses on
+  the foot, so hard landings cost the velocity change they impose on the robot.
+- ``reward_slip = -slip_weight slip_distance / dt`` (1 per m/s of mean slip speed).
+- ``reward_ctrl = -ctrl_cost_weight |a|^2`` (0.01).
+
+Flight is the task, so it is not charged. **Unilateral violation** here means what it means on the
+unilateral ground of ``PlanarLegStance``: ``info["unilateral_violation"]`` (``lam_y < 0``) and
+``friction_violation`` can only come from a Zeno settle or a Painleve jam (``leg_env.hybrid``); the ground
+never pulls. ``info["flight_time"]``, ``impulse`` and the event counts describe the hops.
+
+## Starting State, Episode End
+The nominal posture plus noise ``reset_noise_scale = 0.01`` (as ``PlanarLegStance``); the command is drawn
+after the posture noise (one uniform). Terminates on a fall (torso below 0.5 m above the ground or below
+the knee, ``|th_b| > 1`` rad) or a joint out of range; truncated at 1000 steps (10 s).
+
+## Solved
+Over 100 evaluation episodes on seeds not used in training: mean absolute apex error (COM apex minus
+``y_stand + dh*``, over all hops) under 2 cm, horizontal COM drift under 10 cm after 10 s, survival of at
+least 95%.
+
+## Version History
+* v0: Initial release.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .._jit import CACHE
+from .. import checks
+from ..hybrid import ACC_KICK_X, ACC_KICK_Y, ACC_SLIP_DISTANCE
+from ..step import OUT_BASE, STATE_DIM
+from .base import Task
+from .stance import OBS_DIM_UNILATERAL, StanceConfig, _assess, _evaluate, _unpack, _weight, observation_space as _stance_space
+
+__all__ = ["HopConfig", "TASK", "REWARD_TERMS", "OBS_DIM"]
+
+REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl")
+OBS_DIM = OBS_DIM_UNILATERAL + 1
+STATE_NAMES = ("command", "x_com0")
+_COMMAND, _XCOM0 = STATE_DIM, STATE_DIM + 1
+_BIG = 1.0e6
+_C_DT = 0  # StanceConfig.array() entry read here
+
+
+@dataclass(frozen=True)
+class HopConfig(StanceConfig):
+    """Settings of the hopping task: the balance task's (``StanceConfig``; the unilateral ground only) and the hop's.
+
+    Raises:
+        ValueError, ArgumentTypeError: as ``StanceConfig``, for every field (``leg_env.checks``).
+    """
+
+    contact: str = "unilateral"
+    command_range: tuple = (0.05, 0.15)  # commanded COM rise at the apex above standing [m]
+    height_weight: float = 2.0
+    height_scale: float = 0.05  # [m] of apex height error at which the height term is 1/e of its peak
+    drift_com_weight: float = 10.0  # per m^2 of COM x from the start
+    tilt_weight: float = 1.0  # per rad^2
+    impact_weight: float = 0.5  # per (m/s)^2 of |P| / m
+    slip_weight: float = 1.0  # per m/s of mean slip speed
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.contact != "unilateral":
+            raise ValueError(f"HopConfig.contact must be 'unilateral' (a pinned foot cannot hop), got {self.contact!r}")
+        value = checks.pair("HopConfig.command_range", self.command_range, 0.0, 10.0, unit="m")
+        if not value[0] <= value[1]:
+            raise ValueError(f"HopConfig.command_range must be (low, high) with low <= high, got {value!r}")
+        object.__setattr__(self, "command_range", value)
+        for name in ("height_weight", "drift_com_weight", "tilt_weight", "impact_weight", "slip_weight"):
+            object.__setattr__(self, name, checks.real(f"HopConfig.{name}", getattr(self, name), 0.0, _BIG))
+        object.__setattr__(self, "height_scale", checks.real("HopConfig.height_scale", self.height_scale, 0.0, _BIG, lo_open=True, unit="m"))
+
+    def task_array(self, p, nominal) -> np.ndarray:
+        """``consts`` after the nominal torques: ``y_stand`` and the weights."""
+        return np.array(
+            [
+                _com(nominal.q, p)[1],
+                self.height_weight,
+                self.height_scale,
+                self.drift_com_weight,
+                self.tilt_weight,
+                self.impact_weight,
+                self.slip_weight,
+            ]
+        )
+
+
+def _com(q, p) -> np.ndarray:
+    from ..dynamics import com_position
+
+    return com_position(q, p)
+
+
+def observation_space(params, config: HopConfig):
+    """``PlanarLegStance``'s 18 entries on the unilateral ground, then the command within ``command_range``."""
+    from gymnasium import spaces
+
+    base = _stance_space(params, config)
+    low = np.append(base.low, np.float32(config.command_range[0]))
+    high = np.append(base.high, np.float32(config.command_range[1]))
+    return spaces.Box(low, high, dtype=np.float32)
+
+
+def _draws(config: HopConfig) -> int:
+    return 1
+
+
+def _columns(draws: np.ndarray, config: HopConfig) -> np.ndarray:
+    lo, hi = config.command_range
+    out = np.zeros((draws.shape[0], len(STATE_NAMES)))
+    out[:, 0] = lo + (hi - lo) * draws[:, 0]
+    return out
+
+
+@njit(cache=CACHE, inline="always")
+def _com_state(s, p):
+    """Whole-body COM ``(x, y, y')`` of state row ``s`` (``trig`` columns: sin th1, cos th1, sin th2, cos th2)."""
+    m_b, m1, m2, l1, c1, c2 = p[0], p[1], p[2], p[6], p[8], p[9]
+    m = m_b + m1 + m2
+    a, b = m1 * c1 + m2 * l1, m2 * c2
+    s1, co1, s2, co2 = s[14], s[15], s[16], s[17]
+    w1 = s[7] + s[8]
+    w2 = w1 + s[9]
+    return s[0] + (a * co1 + b * co2) / m, s[1] + (a * s1 + b * s2) / m, s[6] + (a * co1 * w1 + b * co2 * w2) / m
+
+
+@njit(cache=CACHE)
+def assess(state, consts, out, obs, flags):
+    """The balance task's observation and flags, then the hop's reward terms."""
+    q, qd, anchor, action, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    terms = out[:, OUT_BASE:OUT_BASE + len(REWARD_TERMS)]
+    k0 = consts.shape[0] - 7
+    y_stand, w_h, h_scale, w_drift, w_tilt, w_imp, w_slip = (
+        consts[k0], consts[k0 + 1], consts[k0 + 2], consts[k0 + 3], consts[k0 + 4], consts[k0 + 5], consts[k0 + 6],
+    )  # fmt: skip
+    m = p[0] + p[1] + p[2]
+    g = p[10]
+    weight = _weight(p)
+    stance_terms = np.empty((state.shape[0], 5))
+    kept = np.empty(obs.shape[1])
+    for i in range(state.shape[0]):
+        s = state[i]
+        evaluated = _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, stance_terms, flags, extra, hyb, kept)
+        if not evaluated:
+            for k in range(terms.shape[1]):
+                terms[i, k] = 0.0
+            continue
+        x_com, y_com, vy_com = _com_state(s, p)
+        e_v = 0.5 * m * vy_com * vy_com + m * g * (y_com - anchor[i, 1])
+        e_star = m * g * (y_stand + s[_COMMAND])
+        err = (e_v - e_star) / (weight * h_scale)
+        dx = x_com - s[_XCOM0]
+        px, py = hyb[i, ACC_KICK_X], hyb[i, ACC_KICK_Y]
+        terms[i, 0] = stance_terms[i, 0]  # alive: the balance task's health predicate
+        terms[i, 1] = w_h * np.exp(-err * err)
+        terms[i, 2] = -w_drift * dx * dx
+        terms[i, 3] = -w_tilt * s[2] * s[2]
+        terms[i, 4] = -w_imp * (px * px + py * py) / (m * m)
+        terms[i, 5] = -w_slip * hyb[i, ACC_SLIP_DISTANCE] / c[_C_DT]
+        terms[i, 6] = stance_terms[i, 4]  # ctrl
+        if flags[i, 0]:  # terminated: nothing but the penalties
+            terms[i, 1] = 0.0
+
+
+@njit(cache=CACHE)
+def start(state, consts, out, obs, flags):
+    """The balance task at the start, the command in the observation, the COM reference; terms zero."""
+    q, qd, anchor, _, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    terms = out[:, OUT_BASE:OUT_BASE + len(REWARD_TERMS)]
+    weight = _weight(p)
+    stance_terms = np.empty((state.shape[0], 5))
+    for i in range(state.shape[0]):
+        s = state[i]
+        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, stance_terms, flags, extra, trig, mode, hyb)
+        for k in range(terms.shape[1]):
+            terms[i, k] = 0.0
+        obs[i, OBS_DIM - 1] = s[_COMMAND]
+        s[_XCOM0] = _com_state(s, p)[0]
+
+
+TASK = Task(
+    name="hop",
+    config_cls=HopConfig,
+    reward_terms=REWARD_TERMS,
+    assess=assess,
+    start=start,
+    observation_space=observation_space,
+    state_names=STATE_NAMES,
+    draws=_draws,
+    columns=_columns,
+)
+"""The hopping task as the shared environments see it (``leg_env.tasks.base.Task``)."""

@@ -1,0 +1,248 @@
+r"""``leg_env/PlanarLegPush-v0``: recover from horizontal pushes on the torso, on the unilateral ground.
+
+## Description
+The robot, the physics and the balance task of ``PlanarLegStance`` (``leg_env.envs.stance``), on the exact
+unilateral ground (``contact="unilateral"`` by default), with unannounced horizontal pushes on the torso's
+centre of mass. A push is a force ``F`` along ``x`` at the torso's COM, held over whole control steps:
+
+    M qdd + h = S^T tau + Jc^T lam + Q_push,    Q_push = J_b^T (F, 0) = (F, 0, 0, 0, 0)
+
+``J_b = d(x_b, y_b)/dq = [I_2 0]``: the hip, and so the base point, sits at the torso's COM, so the push is
+a generalised force on the base coordinates only and exerts no torque on the torso about its COM
+(``leg_env.dynamics``). It enters every contact mode's dynamics, the located events and the mode choice
+(``leg_env.hybrid``); the step's accumulators book its work ``F (x_b(end) - x_b(start))`` (exact: ``F`` is
+constant over the step and ``x_b`` continuous through impacts), so that
+``energy(t) - energy(0) = sum(work_actuators + work_push - dissipation_slip - dissipation_impacts)``.
+
+Small pushes can be absorbed standing; the stance LQR of ``policies/lqr.py`` survives 20 N for 0.1 s
+(2 N s) and falls at 40 N on the pinned model. Larger pushes need the foot to move: a hop that lands
+the foot under the new position of the centre of mass.
+
+## Push schedule (drawn at reset, not observed)
+``max_pushes`` (8) pushes per episode, drawn at ``reset`` from the robot's own generator (3 uniforms
+each, after the 6 of the posture noise): the first starts at ``first_push`` (uniform in [0.8, 1.2] s),
+each next one ``push_interval`` (uniform in [2, 3] s) after the previous start; start times are rounded
+to whole control steps. Each lasts ``push_duration`` (0.1 s, rounded to whole steps, at least one). Its
+sign is + or - with probability 1/2 and its magnitude is uniform in ``push_force`` (default
+[20, 150] N: 2 to 15 N s over 0.1 s, from what the LQR survives to far beyond). After the last
+scheduled push (at least 15 s in) there are none. The push is not in the observation; ``info["push_force"]``
+is the force held over the step, ``info["work_push"]`` its work.
+
+## Action and Observation Spaces
+Those of ``PlanarLegStance`` (``Box(-1, 1, (2,))`` torques; 18 observations on the unilateral ground,
+12 with ``contact="pinned"``).
+
+## Rewards
+``reward = reward_alive + reward_drift + reward_unilateral + reward_friction + reward_ctrl + reward_com``:
+the first five are the balance task's (``PlanarLegStance``), with ``unilateral_weight = 0.5`` by default
+(a recovery hop costs its flight time, ``-0.5 flight_time / dt`` per step, but is allowed); the base drift
+is measured from wherever the foot now stands (its contact point), so relocating the foot is not charged
+by it. ``reward_com = -com_weight (x_com - x_com,0)^2`` (``com_weight = 1`` per m^2) charges the whole-body
+centre of mass for moving away from where the episode started, so a hop is not free.
+
+## Starting State, Episode End, Arguments
+As ``PlanarLegStance`` (nominal posture, noise ``reset_noise_scale = 0.01``; falls and joint limits
+terminate; 1000 steps). Every ``PushConfig`` field is a keyword argument, checked by ``leg_env.checks``.
+
+| Parameter        | Default       | Description                                                    |
+|------------------|---------------|----------------------------------------------------------------|
+| `push_force`     | (20.0, 150.0) | range of the push magnitude [N], 0 <= low <= high              |
+| `push_duration`  | 0.1           | [s], rounded to whole control steps (at least one)             |
+| `first_push`     | (0.8, 1.2)    | range of the first push's start [s]                            |
+| `push_interval`  | (2.0, 3.0)    | range of the time between push starts [s]                      |
+| `com_weight`     | 1.0           | per m^2 of whole-body COM displacement along x                 |
+| `unilateral_weight` | 0.5        | per unit of flight time / dt                                   |
+| `contact`        | "unilateral"  | also `"pinned"` (the bilateral pin, for comparison)            |
+
+## Solved
+Survival (no termination in 1000 steps) on at least 90% of 100 evaluation episodes with the push
+magnitude fixed at ``push_force[1]`` (150 N, 15 N s), on seeds not used in training. Issue 10's bar is
+relative to the LQR: the push impulse survived 90% of the time at least 1.5 times the LQR's. The upper
+end of the range is not yet calibrated against a recovering reference.
+
+## Version History
+* v0: Initial release.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .._jit import CACHE
+from .. import checks
+from ..step import FAILED, OUT_BASE, STATE_DIM, STATE_LOAD, _PREV0
+from .base import Task
+from .stance import (
+    REWARD_TERMS as _STANCE_TERMS,
+    StanceConfig,
+    _assess,
+    _evaluate,
+    _unpack,
+    _weight,
+    observation_space,
+)
+
+__all__ = ["PushConfig", "TASK", "MAX_PUSHES", "REWARD_TERMS", "INFO_NAMES"]
+
+MAX_PUSHES = 8  # pushes scheduled per episode: at least 0.8 + 7 x 2 s = 14.8 s of them
+REWARD_TERMS = _STANCE_TERMS + ("com",)
+INFO_NAMES = ("push_force", "work_push")
+STATE_NAMES = ("steps", "x_com0") + tuple(f"push_start_{k}" for k in range(MAX_PUSHES)) + tuple(
+    f"push_force_{k}" for k in range(MAX_PUSHES)
+)
+_STEPS, _XCOM0, _START0, _FORCE0 = STATE_DIM, STATE_DIM + 1, STATE_DIM + 2, STATE_DIM + 2 + MAX_PUSHES
+_DRAWS_PER_PUSH = 3  # start time, sign, magnitude
+_BIG = 1.0e6
+PUSH_RANGES = {
+    # name: (low, high, unit) of each end of a range, or of the value
+    "push_force": (0.0, _BIG, "N"),
+    "push_duration": (0.0, 10.0, "s"),
+    "first_push": (0.0, 1.0e4, "s"),
+    "push_interval": (0.0, 1.0e4, "s"),
+    "com_weight": (0.0, _BIG, ""),
+}
+"""Accepted ranges of the ``PushConfig`` fields (``(low, high, unit)``; ``push_duration`` and the interval
+must be positive)."""
+
+
+@dataclass(frozen=True)
+class PushConfig(StanceConfig):
+    """Settings of the push-recovery task: the balance task's (``StanceConfig``) and the push schedule's.
+
+    Raises:
+        ValueError, ArgumentTypeError: as ``StanceConfig``, for every field (``leg_env.checks``).
+    """
+
+    unilateral_weight: float = 0.5  # per unit of flight time / dt: a recovery hop is allowed, not free
+    contact: str = "unilateral"
+    push_force: tuple = (20.0, 150.0)  # range of the push magnitude [N]
+    push_duration: float = 0.1  # [s], rounded to whole control steps
+    first_push: tuple = (0.8, 1.2)  # range of the first push's start [s]
+    push_interval: tuple = (2.0, 3.0)  # range of the time between push starts [s]
+    com_weight: float = 1.0  # per m^2 of whole-body COM displacement along x
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("push_force", "first_push", "push_interval"):
+            lo, hi, unit = PUSH_RANGES[name]
+            value = checks.pair(f"PushConfig.{name}", getattr(self, name), lo, hi, lo_open=name == "push_interval", unit=unit)
+            if not value[0] <= value[1]:
+                raise ValueError(f"PushConfig.{name} must be (low, high) with low <= high, got {value!r}")
+            object.__setattr__(self, name, value)
+        for name in ("push_duration", "com_weight"):
+            lo, hi, unit = PUSH_RANGES[name]
+            value = checks.real(f"PushConfig.{name}", getattr(self, name), lo, hi, lo_open=name == "push_duration", unit=unit)
+            object.__setattr__(self, name, value)
+
+    @property
+    def push_steps(self) -> int:
+        """Control steps of one push: ``push_duration / dt`` rounded, at least one."""
+        return max(1, int(round(self.push_duration / self.dt)))
+
+    def task_array(self, p, nominal) -> np.ndarray:
+        """``consts`` after the nominal torques: push length in steps, COM weight."""
+        return np.array([float(self.push_steps), self.com_weight])
+
+
+def _draws(config: PushConfig) -> int:
+    return _DRAWS_PER_PUSH * MAX_PUSHES
+
+
+def _columns(draws: np.ndarray, config: PushConfig) -> np.ndarray:
+    """The schedule of ``k`` robots from their ``(k, 3 MAX_PUSHES)`` uniforms: steps, x_com0, starts, forces.
+
+    Push ``j`` uses draws ``3 j`` (start time), ``3 j + 1`` (sign) and ``3 j + 2`` (magnitude). Row by row
+    the same arithmetic whatever ``k`` is, so a batch's schedules are the single env's bit for bit.
+    """
+    k = draws.shape[0]
+    u = draws.reshape(k, MAX_PUSHES, _DRAWS_PER_PUSH)
+    (f0, f1), (i0, i1), (m0, m1) = config.first_push, config.push_interval, config.push_force
+    gaps = np.empty((k, MAX_PUSHES))
+    gaps[:, 0] = f0 + (f1 - f0) * u[:, 0, 0]
+    gaps[:, 1:] = i0 + (i1 - i0) * u[:, 1:, 0]
+    times = np.cumsum(gaps, axis=1)
+    out = np.zeros((k, len(STATE_NAMES)))
+    out[:, 2:2 + MAX_PUSHES] = np.rint(times / config.dt)
+    sign = np.where(u[:, :, 1] < 0.5, 1.0, -1.0)
+    out[:, 2 + MAX_PUSHES:] = sign * (m0 + (m1 - m0) * u[:, :, 2])
+    return out
+
+
+@njit(cache=CACHE, inline="always")
+def _load_at(s, n, push_steps):
+    """The push force of state row ``s`` held over its control step number ``n`` (0 at the first)."""
+    for j in range(MAX_PUSHES):
+        start = s[_START0 + j]
+        if start <= n < start + push_steps:
+            return s[_FORCE0 + j]
+    return 0.0
+
+
+@njit(cache=CACHE, inline="always")
+def _com_x(s, p):
+    """Whole-body COM x: ``x_b + (a cos th1 + b cos th2) / m``, ``a = m1 c1 + m2 l1``, ``b = m2 c2``."""
+    m_b, m1, m2, l1, c1, c2 = p[0], p[1], p[2], p[6], p[8], p[9]
+    m = m_b + m1 + m2
+    return s[0] + ((m1 * c1 + m2 * l1) * s[15] + m2 * c2 * s[17]) / m  # trig columns: cos th1, cos th2
+
+
+@njit(cache=CACHE)
+def assess(state, consts, out, obs, flags):
+    """The balance task's evaluation, the COM term, the push's info, and the next step's push."""
+    q, qd, anchor, action, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    n_terms = len(REWARD_TERMS)
+    terms = out[:, OUT_BASE:OUT_BASE + n_terms]
+    info = out[:, OUT_BASE + n_terms:]
+    push_steps, w_com = consts[consts.shape[0] - 2], consts[consts.shape[0] - 1]
+    weight = _weight(p)
+    kept = np.empty(obs.shape[1])
+    for i in range(state.shape[0]):
+        s = state[i]
+        force = s[STATE_LOAD]
+        evaluated = _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept)
+        if evaluated:
+            dx = _com_x(s, p) - s[_XCOM0]
+            terms[i, n_terms - 1] = -w_com * dx * dx
+        info[i, 0] = force
+        info[i, 1] = force * (s[0] - s[_PREV0])  # exact: F constant over the step, x_b continuous (0 if undone)
+        s[_STEPS] += 1.0
+        s[STATE_LOAD] = _load_at(s, s[_STEPS], push_steps)
+
+
+@njit(cache=CACHE)
+def start(state, consts, out, obs, flags):
+    """The balance task at the start, the COM reference, and the first step's push (reward terms zero)."""
+    q, qd, anchor, _, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    n_terms = len(REWARD_TERMS)
+    terms = out[:, OUT_BASE:OUT_BASE + n_terms]
+    info = out[:, OUT_BASE + n_terms:]
+    push_steps = consts[consts.shape[0] - 2]
+    weight = _weight(p)
+    for i in range(state.shape[0]):
+        s = state[i]
+        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
+        for k in range(n_terms):
+            terms[i, k] = 0.0
+        info[i, 0] = 0.0
+        info[i, 1] = 0.0
+        s[_STEPS] = 0.0
+        s[_XCOM0] = _com_x(s, p)
+        s[STATE_LOAD] = _load_at(s, 0.0, push_steps)
+
+
+TASK = Task(
+    name="push",
+    config_cls=PushConfig,
+    reward_terms=REWARD_TERMS,
+    assess=assess,
+    start=start,
+    observation_space=observation_space,
+    info_names=INFO_NAMES,
+    state_names=STATE_NAMES,
+    draws=_draws,
+    columns=_columns,
+)
+"""The push-recovery task as the shared environments see it (``leg_env.tasks.base.Task``)."""

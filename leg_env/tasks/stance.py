@@ -1,0 +1,747 @@
+"""The balance task (``leg_env/PlanarLegStance-v0`` and ``-v1``): configuration, observation, reward, termination.
+
+A control step is two compiled calls on the packed arrays of ``leg_env.step``: the shared physics
+(``leg_env.step.physics_range``) and this task's kernel ``assess`` (observation, every reward term,
+every termination flag). The single environment calls them with a batch of one and the vector
+environment with a batch of N, so the two cannot disagree. ``StanceConfig`` holds every setting; tasks
+built on this one (``leg_env.tasks.push``) extend it and call ``_assess``.
+
+Observation (float32, ``OBS_DIM = 12``):
+
+===== ======================================== ======
+index meaning                                  unit
+===== ======================================== ======
+0     base x relative to the foot contact point m
+1     base y relative to the foot contact point m
+2     torso angle th_b                          rad
+3     hip angle q1                              rad
+4     knee angle q2                             rad
+5-9   qd = [x_b', y_b', th_b', q1', q2']        m/s, rad/s
+10    lam_x / (m_total g)                       1 (N if g = 0)
+11    lam_y / (m_total g)                       1 (N if g = 0)
+===== ======================================== ======
+
+The contact force is the mean over the last control step (the contact impulse / dt). With ``g = 0``
+there is no weight to divide by: the kernels divide by 1, so entries 10-11 are in newtons.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+
+import numpy as np
+from numba import njit
+
+from .._jit import CACHE
+from ..contact import FLIGHT, MODE_NAMES, SLIP_BACKWARD, SLIP_FORWARD, _foot_velocity
+from ..dynamics import NP, _energy_core, static_equilibrium
+from ..hybrid import (
+    ACC_DIM, ACC_EVENTS, ACC_FLIGHT_TIME, ACC_IMPACT_DISSIPATION, ACC_KICK_X, ACC_KICK_Y,
+    ACC_PAINLEVE, ACC_SETTLES, ACC_SLIP_DISSIPATION, ACC_SLIP_DISTANCE, ACC_SLIP_TIME, ACC_STICK_TIME, ACC_WORK,
+    ACC_WORK_LOAD,
+)  # fmt: skip
+from .. import checks
+from ..integrate import MAX_ANGLE, MAX_SUBSTEPS, SUBSTEPS, DT, _project_one
+from ..params import LegParams
+from ..step import (
+    ACC0, CONSTS_BASE, FAILED, FLAG_NAMES, NC, NOM0, OUT_BASE, OUT_EXTRA, OUT_LAM, OUT_ACC, OUT_HYBRID, STATE_ACTION,
+    STATE_ANCHOR, STATE_DIM, STATE_MODE, STATE_Q, STATE_QD, TAU0, BitGeneratorRows, compiled_entry, physics_range,
+    physics_start, undo_step,
+)  # fmt: skip
+
+__all__ = [
+    "StanceConfig",
+    "FIELD_RANGES",
+    "OBS_DIM",
+    "REWARD_TERMS",
+    "FLAG_NAMES",
+    "INFO_NAMES",
+    "Nominal",
+    "nominal_state",
+    "STATE_DIM",
+    "OUT_DIM",
+    "CONSTS_DIM",
+    "task_constants",
+    "step_batch",
+    "step_range",
+    "start_batch",
+    "reset_state",
+    "reset_states",
+    "starts_from_noise",
+    "BitGeneratorRows",
+    "OBS_DIM_UNILATERAL",
+    "CONTACT_MODELS",
+    "DEFAULT_MU",
+    "UNILATERAL_KEYS",
+    "unilateral_info",
+    "row_info",
+    "info_template",
+    "REWARD_INFO_KEYS",
+    "compiled_entry",
+    "unilateral_columns",
+]
+
+OBS_DIM = 12
+OBS_DIM_UNILATERAL = 18  # the pinned observation and the foot's height, velocity, contact, slip and impulse
+CONTACT_MODELS = ("pinned", "unilateral")
+DEFAULT_MU = {"pinned": 0.8, "unilateral": 0.5}
+"""Default friction coefficient per contact model. Pinned: the cone of the violation check (as in v0).
+Unilateral: 0.5, below the Painleve bound ``mu_critical`` everywhere in the joint box at the default
+parameters (its minimum there is about 0.52; 0.8 would leave about 8% of postures past it), so
+sliding is always well posed and the Painleve rule stays a fallback."""
+REWARD_TERMS = ("alive", "drift", "unilateral", "friction", "ctrl")
+INFO_NAMES = ("base_drift", "foot_error", "normal_force")
+HYBRID_NAMES = ("energy", "foot_height")  # unilateral extras after the step's accumulators (leg_env.hybrid.ACC_*)
+UNILATERAL_KEYS = (
+    "contact_mode", "foot_height", "impulse", "stick_time", "slip_time", "flight_time", "slip_distance",
+    "work_actuators", "dissipation_slip", "dissipation_impacts", "energy", "contact_events", "painleve_fallbacks",
+    "zeno_settles",
+)  # fmt: skip
+"""``info`` keys of the unilateral contact model, after ``reset`` and ``step`` (``unilateral_info``)."""
+
+# The packed arrays are those of ``leg_env.step`` (state, consts, out, obs, flags). This task's columns:
+#   out: ... | reward terms (REWARD_TERMS order, from OUT_BASE) ; no state columns, no task constants.
+#   obs (N, OBS_DIM or OBS_DIM_UNILATERAL) float32
+_TERMS0 = OUT_BASE
+OUT_DIM = OUT_BASE + len(REWARD_TERMS)
+OUT_TERMS = slice(_TERMS0, OUT_DIM)
+OUT_KICK = slice(ACC0 + ACC_KICK_X, ACC0 + ACC_KICK_Y + 1)  # the step's impact impulses (unilateral model)
+_INF = math.inf
+_BIG = 1.0e6  # bound of lengths, angles, torques, rates and reward weights: far beyond any use, far below overflow
+FIELD_RANGES = {
+    # name: (low, high, low open, high open, unit)
+    "dt": (0.0, 1.0, True, False, "s"),
+    "substeps": (1, MAX_SUBSTEPS, False, False, ""),
+    "max_angle": (0.0, _INF, True, False, "rad"),
+    "torque_limit": (0.0, _BIG, True, False, "N m"),
+    "nominal_knee": (0.0, math.pi, True, True, "rad"),
+    "alive_bonus": (0.0, _BIG, False, False, ""),
+    "drift_position_weight": (0.0, _BIG, False, False, ""),
+    "drift_angle_weight": (0.0, _BIG, False, False, ""),
+    "drift_velocity_weight": (0.0, _BIG, False, False, ""),
+    "unilateral_weight": (0.0, _BIG, False, False, ""),
+    "friction_weight": (0.0, _BIG, False, False, ""),
+    "ctrl_cost_weight": (0.0, _BIG, False, False, ""),
+    "mu": (0.0, _BIG, False, False, ""),
+    "min_base_height": (0.0, _BIG, True, False, "m"),
+    "max_torso_angle": (0.0, _BIG, True, False, "rad"),
+    "hip_range": (-_BIG, _BIG, False, False, "rad"),
+    "knee_range": (-_BIG, _BIG, False, False, "rad"),
+    "contact_loss_threshold": (-1.0e12, 1.0e12, False, False, "N"),
+    "max_rate": (0.0, _BIG, True, False, "m/s, rad/s"),
+    "reset_noise_scale": (0.0, math.pi, False, False, "rad, rad/s"),
+}
+"""The accepted range of every numeric ``StanceConfig`` field: ``(low, high, low_open, high_open, unit)``.
+
+``substeps`` is at most ``MAX_SUBSTEPS`` (4096, the most RK4 steps the step rule ever takes);
+``reset_noise_scale`` at most pi (a wider noise wraps the angles); ``max_angle`` may be ``inf`` (fixed
+steps). The other bounds only keep products and the float32 observation from overflowing."""
+
+_NP, _NC, _NOM0, _TAU0 = NP, NC, NOM0, TAU0
+CONSTS_DIM = CONSTS_BASE
+
+
+@dataclass(frozen=True)
+class StanceConfig:
+    """Settings of the balance task (everything that is not physics).
+
+    Every numeric field has the range in ``FIELD_RANGES`` (``(low, high, low_open, high_open, unit)``),
+    checked by ``leg_env.checks`` like every other argument.
+
+    Raises:
+        ValueError: a value is NaN, too large for a float or out of its range; the message names the
+            field and the range.
+        ArgumentTypeError: a value of the wrong type (a string, a bool for a number, a complex number);
+            it is also a ``ValueError``.
+    """
+
+    dt: float = DT  # control period [s]
+    substeps: int = SUBSTEPS  # least RK4 steps per control period
+    max_angle: float = MAX_ANGLE  # largest link/joint rotation per RK4 step [rad]
+    torque_limit: tuple = (50.0, 50.0)  # |tau_hip|, |tau_knee| at action +-1 [N m]; a number sets both
+    nominal_knee: float = 0.8  # knee angle of the nominal equilibrium [rad]
+    # reward weights
+    alive_bonus: float = 1.0  # paid on each healthy step
+    drift_position_weight: float = 10.0  # per m^2 of base offset from nominal
+    drift_angle_weight: float = 1.0  # per rad^2 of torso angle
+    drift_velocity_weight: float = 0.1  # per (m/s)^2 + (rad/s)^2 of torso velocity
+    unilateral_weight: float = 10.0  # per unit of max(0, -lam_y) / weight
+    friction_weight: float = 10.0  # per unit of max(0, |lam_x| - mu lam_y) / weight
+    ctrl_cost_weight: float = 0.01  # per unit of |action|^2
+    mu: float | None = None  # friction coefficient; None: DEFAULT_MU of the contact model (0.8 pinned, 0.5 unilateral)
+    # termination
+    min_base_height: float = 0.5  # torso above the contact point [m]
+    max_torso_angle: float = 1.0  # |th_b| [rad]
+    hip_range: tuple = (-3.0, -0.9)  # allowed q1 [rad]
+    knee_range: tuple = (0.05, 2.5)  # allowed q2 [rad]
+    terminate_on_contact_loss: bool = False
+    contact_loss_threshold: float = 0.0  # lam_y below this ends the episode, if enabled [N]
+    max_rate: float = 1.0e3  # any |qd| above this is a numerical failure [m/s, rad/s]
+    # reset
+    reset_noise_scale: float = 0.01  # uniform noise half-width on (th_b, q1, q2) [rad] and their rates [rad/s]
+    # physics
+    contact: str = "pinned"  # "pinned": the foot is a bilateral pin (v0); "unilateral": exact unilateral contact
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.contact, str):
+            raise checks.ArgumentTypeError(f"StanceConfig.contact must be one of {list(CONTACT_MODELS)}, got {checks.shown(self.contact)}")
+        if self.contact not in CONTACT_MODELS:
+            raise ValueError(f"StanceConfig.contact must be one of {list(CONTACT_MODELS)}, got {self.contact!r}")
+        if self.mu is None:
+            object.__setattr__(self, "mu", DEFAULT_MU[self.contact])
+        for name, (lo, hi, lo_open, hi_open, unit) in FIELD_RANGES.items():
+            value = getattr(self, name)
+            if name == "substeps":
+                value = checks.integer(f"StanceConfig.{name}", value, int(lo), int(hi), floats=True)
+            elif name in ("torque_limit", "hip_range", "knee_range"):
+                if name == "torque_limit" and checks.is_real(value):
+                    value = (value, value)  # one limit for both joints
+                value = checks.pair(f"StanceConfig.{name}", value, lo, hi, lo_open=lo_open, unit=unit)
+            else:
+                value = checks.real(f"StanceConfig.{name}", value, lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "terminate_on_contact_loss", checks.boolean("StanceConfig.terminate_on_contact_loss", self.terminate_on_contact_loss))
+        for name in ("hip_range", "knee_range"):
+            lo, hi = getattr(self, name)
+            if not lo < hi:
+                raise ValueError(f"StanceConfig.{name} must be (low, high) with low < high, got {getattr(self, name)!r}")
+
+    @classmethod
+    def from_kwargs(cls, config: "StanceConfig | dict | None" = None, **overrides) -> "StanceConfig":
+        """A config from an instance or dict, with keyword overrides.
+
+        An unknown keyword raises ``TypeError`` worded as Python's own ("got an unexpected keyword
+        argument 'name'"; wrappers such as TorchRL's ``GymEnv`` read that to drop an optional
+        argument); an unknown key of a ``config`` dict is a bad value, ``ValueError``.
+        """
+        names = {f.name for f in fields(cls)}
+        unknown = [name for name in overrides if name not in names]
+        if unknown:
+            listed = ", ".join(repr(name) for name in unknown)
+            what = f"an unexpected keyword argument {listed}" if len(unknown) == 1 else f"unexpected keyword arguments {listed}"
+            raise TypeError(f"got {what}: not an argument of the env nor a {cls.__name__} field")
+        if config is not None and not isinstance(config, (StanceConfig, dict)):
+            raise checks.ArgumentTypeError(
+                f"config must be a StanceConfig, a dict of its fields or None, got {checks.shown(config)} of type {type(config).__name__}"
+            )
+        base = {} if config is None else (asdict(config) if isinstance(config, StanceConfig) else dict(config))
+        unknown = sorted(set(base) - names)
+        if unknown:
+            raise ValueError(f"config has unknown {cls.__name__} field(s): {unknown}")
+        base.update(overrides)
+        return cls(**base)
+
+    def replace(self, **changes) -> "StanceConfig":
+        """A copy with ``changes`` (checked as at construction)."""
+        return replace(self, **changes)
+
+    def task_array(self, p: LegParams, nominal: "Nominal") -> np.ndarray:
+        """Constants of a task built on this one, after the nominal torques in ``consts`` (none here)."""
+        return np.zeros(0)
+
+    def array(self) -> np.ndarray:
+        """The numeric settings in the order the kernels read them (``_C_*`` indices; ``leg_env.step.C_*``)."""
+        return np.array(
+            [
+                self.dt,
+                self.substeps,
+                self.max_angle,
+                self.torque_limit[0],
+                self.torque_limit[1],
+                self.alive_bonus,
+                self.drift_position_weight,
+                self.drift_angle_weight,
+                self.drift_velocity_weight,
+                self.unilateral_weight,
+                self.friction_weight,
+                self.ctrl_cost_weight,
+                self.mu,
+                self.min_base_height,
+                self.max_torso_angle,
+                self.hip_range[0],
+                self.hip_range[1],
+                self.knee_range[0],
+                self.knee_range[1],
+                float(self.terminate_on_contact_loss),
+                self.contact_loss_threshold,
+                self.max_rate,
+                float(self.contact == "unilateral"),
+            ],
+            dtype=np.float64,
+        )
+
+
+if set(FIELD_RANGES) | {"terminate_on_contact_loss", "contact"} != {f.name for f in fields(StanceConfig)}:
+    raise RuntimeError("FIELD_RANGES must list every numeric StanceConfig field")  # a developer error
+
+(
+    _C_DT,
+    _C_SUBSTEPS,
+    _C_MAX_ANGLE,
+    _C_TAU_HIP,
+    _C_TAU_KNEE,
+    _C_ALIVE,
+    _C_W_POS,
+    _C_W_ANG,
+    _C_W_VEL,
+    _C_W_UNI,
+    _C_W_FRIC,
+    _C_W_CTRL,
+    _C_MU,
+    _C_MIN_HEIGHT,
+    _C_MAX_TORSO,
+    _C_HIP_LO,
+    _C_HIP_HI,
+    _C_KNEE_LO,
+    _C_KNEE_HI,
+    _C_TERM_CONTACT,
+    _C_CONTACT_THRESH,
+    _C_MAX_RATE,
+    _C_UNILATERAL,
+) = range(23)
+
+
+@dataclass(frozen=True)
+class Nominal:
+    """The nominal equilibrium of a task: state with the foot at the origin, holding torques, contact force."""
+
+    q: np.ndarray
+    tau: np.ndarray
+    lam: np.ndarray
+
+    @property
+    def base(self) -> np.ndarray:
+        """Nominal base position relative to the contact point [m]."""
+        return self.q[:2]
+
+
+def nominal_state(p: LegParams, config: StanceConfig) -> Nominal:
+    """The task's nominal posture: a static equilibrium with the torso level and the COM above the foot."""
+    q, tau, lam = static_equilibrium(p, config.nominal_knee)
+    if np.any(np.abs(tau) > np.asarray(config.torque_limit)):
+        raise ValueError(
+            f"torque_limit {config.torque_limit} cannot hold the nominal posture, which needs {tau.round(2).tolist()} N m"
+        )
+    return Nominal(q=q, tau=tau, lam=lam)
+
+
+def task_constants(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.ndarray:
+    """The kernels' read-only ``consts`` array: parameters, settings, nominal posture and torques, task constants."""
+    parts = (p.array, config.array(), nominal.q, nominal.tau, config.task_array(p, nominal))
+    if [len(x) for x in parts[:4]] != [_NP, _NC, 5, 2]:
+        raise RuntimeError(f"task_constants: layout mismatch {[len(x) for x in parts]}")  # a developer error
+    out = np.concatenate(parts).astype(np.float64)
+    out.setflags(write=False)
+    return out
+
+
+@njit(cache=CACHE, inline="always")
+def _unpack(state, consts, out):
+    """Named views of the packed kernel arrays (``leg_env.step``), the reward terms excepted."""
+    return (
+        state[:, 0:5], state[:, 5:10], state[:, 10:12], state[:, 12:14], state[:, 14:18], state[:, STATE_MODE],
+        consts[:NP], consts[NP:NOM0], consts[NOM0:TAU0],
+        out[:, 0:2], out[:, 2:5], out[:, ACC0:OUT_BASE],
+    )  # fmt: skip
+
+
+@njit(cache=CACHE, inline="always")
+def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb):
+    """Reward terms, flags, extras and observation of robot ``i`` at its (finite) state and force.
+
+    The one place where the task's predicates (health, feasibility) are written. ``mode`` and ``hyb``
+    (the step's accumulators and the unilateral extras) are read and written in the unilateral model only.
+    Tasks built on this one (``leg_env.tasks.push``) call it and add their own terms.
+    """
+    lam_x, lam_y = lam[i, 0], lam[i, 1]
+    dx = q[i, 0] - anchor[i, 0] - q_nom[0]
+    dy = q[i, 1] - anchor[i, 1] - q_nom[1]
+    th_b = q[i, 2]
+    # foot error and knee height from the same kinematics as the integrator
+    l1, l2 = p[6], p[7]
+    s1, co1, s2, co2 = trig[i, 0], trig[i, 1], trig[i, 2], trig[i, 3]  # of q, written by the physics
+    knee_y = q[i, 1] + l1 * s1
+    fx = q[i, 0] + l1 * co1 + l2 * co2 - anchor[i, 0]
+    fy = knee_y + l2 * s2 - anchor[i, 1]
+    height = q[i, 1] - anchor[i, 1]
+    unilateral_model = c[_C_UNILATERAL] > 0.5
+
+    unilateral = max(0.0, -lam_y)
+    friction = max(0.0, abs(lam_x) - c[_C_MU] * lam_y)
+    fell = (
+        height < c[_C_MIN_HEIGHT]
+        or q[i, 1] < knee_y
+        or abs(th_b) > c[_C_MAX_TORSO]
+        or q[i, 3] < c[_C_HIP_LO]
+        or q[i, 3] > c[_C_HIP_HI]
+        or q[i, 4] < c[_C_KNEE_LO]
+        or q[i, 4] > c[_C_KNEE_HI]
+    )
+    if unilateral_model:  # the ground cannot pull: what is charged is time off it and sliding on it
+        dt = c[_C_DT]
+        flight_time = hyb[i, ACC_FLIGHT_TIME]
+        lost = c[_C_TERM_CONTACT] > 0.5 and (flight_time > 0.0 or lam_y < c[_C_CONTACT_THRESH])
+    else:
+        lost = c[_C_TERM_CONTACT] > 0.5 and lam_y < c[_C_CONTACT_THRESH]
+    terminated = fell or lost
+
+    terms[i, 0] = 0.0 if terminated else c[_C_ALIVE]
+    terms[i, 1] = -(
+        c[_C_W_POS] * (dx * dx + dy * dy)
+        + c[_C_W_ANG] * th_b * th_b
+        + c[_C_W_VEL] * (qd[i, 0] ** 2 + qd[i, 1] ** 2 + qd[i, 2] ** 2)
+    )
+    if unilateral_model:
+        terms[i, 2] = -c[_C_W_UNI] * flight_time / dt
+        terms[i, 3] = -c[_C_W_FRIC] * hyb[i, ACC_SLIP_DISTANCE] / dt
+        flags[i, 2] = friction > 1e-9 * weight  # a stick force outside the cone: only by the Painleve rule
+    else:
+        terms[i, 2] = -c[_C_W_UNI] * unilateral / weight
+        terms[i, 3] = -c[_C_W_FRIC] * friction / weight
+        flags[i, 2] = friction > 0.0
+    terms[i, 4] = -c[_C_W_CTRL] * (a0 * a0 + a1 * a1)
+    flags[i, 0] = terminated
+    flags[i, 1] = lam_y < 0.0
+    flags[i, 3] = False
+    extra[i, 0] = np.sqrt(dx * dx + dy * dy)
+    extra[i, 1] = np.sqrt(fx * fx + fy * fy)
+    extra[i, 2] = lam_y
+    # observation
+    obs[i, 0] = q[i, 0] - anchor[i, 0]
+    obs[i, 1] = height
+    for j in range(2, 5):
+        obs[i, j] = q[i, j]
+    for j in range(5):
+        obs[i, 5 + j] = qd[i, j]
+    obs[i, 10] = lam_x / weight
+    obs[i, 11] = lam_y / weight
+    if unilateral_model:
+        w1 = qd[i, 2] + qd[i, 3]
+        w2 = w1 + qd[i, 4]
+        vfx, vfy = _foot_velocity(s1, co1, s2, co2, qd[i, 0], qd[i, 1], w1, w2, p)
+        m = mode[i]
+        obs[i, 12] = fy
+        obs[i, 13] = vfx
+        obs[i, 14] = vfy
+        obs[i, 15] = 0.0 if m == FLIGHT else 1.0
+        obs[i, 16] = 1.0 if m == SLIP_FORWARD else (-1.0 if m == SLIP_BACKWARD else 0.0)
+        obs[i, 17] = hyb[i, ACC_KICK_Y] / (weight * c[_C_DT])
+        hyb[i, ACC_DIM] = _energy_core(s1, co1, s2, co2, q[i, 1] - anchor[i, 1], qd[i, 0], qd[i, 1], qd[i, 2], w1, w2, p)
+        hyb[i, ACC_DIM + 1] = fy
+
+
+@njit(cache=CACHE, inline="always")
+def _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept):
+    """Evaluate robot ``i`` after ``leg_env.step.physics_range`` stepped it; ``kept`` is scratch.
+
+    A numerical failure of the physics (``flags[i, FAILED]``) pays nothing and ends the episode. So does
+    an observation that does not fit float32: the step is undone (``leg_env.step.undo_step``) and the
+    observation left at the last good one. Returns whether the robot was evaluated (no numerical failure).
+    """
+    if flags[i, FAILED]:
+        _fail(i, q, anchor, q_nom, terms, flags, extra)
+        return False
+    for j in range(obs.shape[1]):
+        kept[j] = obs[i, j]
+    a0 = min(1.0, max(-1.0, action[i, 0]))
+    a1 = min(1.0, max(-1.0, action[i, 1]))
+    _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
+    total = 0.0  # float64: finite for any finite float32 entries, inf or NaN if one of them is
+    for j in range(obs.shape[1]):
+        total += obs[i, j]
+    if np.isfinite(total):
+        return True
+    # the state is finite, but the observation overflowed float32
+    for j in range(obs.shape[1]):
+        obs[i, j] = kept[j]
+    undo_step(state[i])
+    lam[i, 0] = 0.0
+    lam[i, 1] = 0.0
+    for k in range(hyb.shape[1]):
+        hyb[i, k] = 0.0
+    _fail(i, q, anchor, q_nom, terms, flags, extra)
+    return False
+
+
+@njit(cache=CACHE, inline="always")
+def _fail(i, q, anchor, q_nom, terms, flags, extra):
+    """The outputs of a numerical failure of robot ``i``: end the episode, pay nothing.
+
+    The physics (``leg_env.step``) has restored the last good state; the observation is left at the
+    last good one; ``flags`` say terminated and ``numerical_failure``.
+    """
+    for k in range(terms.shape[1]):
+        terms[i, k] = 0.0
+    flags[i, 0] = True
+    flags[i, 1] = False
+    flags[i, 2] = False
+    flags[i, FAILED] = True
+    extra[i, 0] = np.sqrt((q[i, 0] - anchor[i, 0] - q_nom[0]) ** 2 + (q[i, 1] - anchor[i, 1] - q_nom[1]) ** 2)
+    extra[i, 1] = 0.0
+    extra[i, 2] = 0.0
+
+
+@njit(cache=CACHE, inline="always")
+def _weight(p):
+    weight = (p[0] + p[1] + p[2]) * p[10]
+    return weight if weight > 0.0 else 1.0
+
+
+@njit(cache=CACHE)
+def assess(state, consts, out, obs, flags):
+    """The task after a control step of every robot (``leg_env.step.physics_range``), in place.
+
+    Writes the observation, the reward terms (``OUT_TERMS``; they sum to the reward), the extras and
+    ``flags`` (``FLAG_NAMES`` order); the actions are read (clipped) for the control cost.
+    """
+    q, qd, anchor, action, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    terms = out[:, OUT_TERMS]
+    weight = _weight(p)
+    kept = np.empty(obs.shape[1])
+    for i in range(state.shape[0]):
+        _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept)
+
+
+@njit(cache=CACHE)
+def start(state, consts, out, obs, flags):
+    """The task at freshly started robots (after ``leg_env.step.physics_start``): reward terms zero."""
+    q, qd, anchor, _, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    terms = out[:, OUT_TERMS]
+    weight = _weight(p)
+    for i in range(state.shape[0]):
+        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
+        for k in range(terms.shape[1]):
+            terms[i, k] = 0.0
+
+
+def step_batch(state, consts, out, obs, flags):
+    """Advance every robot one control step and evaluate the task, in place (one thread).
+
+    Args:
+        state: ``(N, STATE_DIM)`` float64 packed state (``leg_env.step``); ``q`` and ``qd`` are
+            overwritten (left unchanged on numerical failure); the actions must already be checked
+            finite and are clipped here to [-1, 1].
+        consts: ``task_constants(...)``.
+        out: ``(N, OUT_DIM)`` float64 out: mean contact force over the step [N], the extras, the
+            hybrid step's accumulators and the reward terms (columns ``OUT_*``).
+        obs: ``(N, 12 or 18)`` float32 out (left at the previous observation on numerical failure).
+        flags: ``(N, 4)`` bool out, in ``FLAG_NAMES`` order.
+    """
+    physics_range(0, state.shape[0], state, consts, out, flags)
+    assess(state, consts, out, obs, flags)
+
+
+def step_range(lo, hi, state, consts, out, obs, flags):
+    """``step_batch`` of the rows ``lo <= i < hi`` only (the physics releases the GIL).
+
+    Robots are independent: the rows of a batch stepped in any split are bitwise those of ``step_batch``.
+    """
+    physics_range(lo, hi, state, consts, out, flags)
+    assess(state[lo:hi], consts, out[lo:hi], obs[lo:hi], flags[lo:hi])
+
+
+def start_batch(state, consts, out, obs, flags):
+    """Put freshly reset robots on their contact and evaluate them without stepping.
+
+    ``leg_env.step.physics_start`` (its docstring says how each contact model starts), then ``start``:
+    the reward terms are zero and ``flags[:, 0]`` tells whether the start state is already terminal.
+    Arguments as in ``step_batch`` (the actions are not read).
+    """
+    physics_start(state, consts, out, flags)
+    start(state, consts, out, obs, flags)
+
+
+def reset_state(rng: np.random.Generator, p: LegParams, config: StanceConfig, nominal: Nominal):
+    """Sample one initial state: nominal posture + uniform noise, projected onto the contact.
+
+    Noise of half-width ``reset_noise_scale`` is added to ``(th_b, q1, q2)`` and their rates;
+    the base position and velocity then follow from the contact (foot at the origin, ``Jc qd = 0``).
+    Draws exactly 6 uniforms from ``rng`` (none when the scale is 0), so resets are reproducible.
+
+    Returns:
+        ``(q, qd, anchor)`` as float64 arrays of shapes (5,), (5,), (2,).
+    """
+    q, qd, anchor = reset_states([rng], p, config, nominal)
+    return q[0], qd[0], anchor[0]
+
+
+def reset_states(rngs, p: LegParams, config: StanceConfig, nominal: Nominal):
+    """``reset_state`` for several robots at once, robot ``j`` drawing from ``rngs[j]``.
+
+    Row ``j`` is exactly ``reset_state(rngs[j], ...)``; one compiled call builds and projects the batch.
+
+    Returns:
+        ``(q, qd, anchor)`` as float64 arrays of shapes (k, 5), (k, 5), (k, 2), ``k = len(rngs)``.
+    """
+    noise = np.empty((len(rngs), 6))
+    if config.reset_noise_scale > 0.0:
+        for j, rng in enumerate(rngs):
+            rng.random(out=noise[j])
+    return starts_from_noise(noise, p, config, nominal)
+
+
+def starts_from_noise(noise: np.ndarray, p: LegParams, config: StanceConfig, nominal: Nominal):
+    """The start states of ``reset_states`` from its ``(k, 6)`` draws of ``rng.random()`` (ignored at zero noise).
+
+    ``rng.uniform(-s, s, 6)`` is ``-s + 2 s rng.random(6)``, computed here exactly as numpy does, so
+    the states are the same bit for bit whether the draws were made in Python or in compiled code
+    (``BitGeneratorRows``).
+    """
+    return _perturbed_starts(noise, config.reset_noise_scale, nominal.q, p.array)
+
+
+@njit(cache=CACHE)
+def _perturbed_starts(noise, s, q_nom, p):
+    """Nominal posture + ``uniform(-s, s)`` noise (from ``noise`` in [0, 1)) on (th_b, q1, q2) and their rates, projected."""
+    k = noise.shape[0]
+    q = np.empty((k, 5))
+    qd = np.zeros((k, 5))
+    anchor = np.zeros((k, 2))
+    low, width = -s, s - (-s)  # numpy's uniform(low, high): low + (high - low) * random()
+    for i in range(k):
+        for j in range(5):
+            q[i, j] = q_nom[j]
+        if s > 0.0:
+            for j in range(3):
+                q[i, 2 + j] += low + width * noise[i, j]
+                qd[i, 2 + j] += low + width * noise[i, 3 + j]
+        _project_one(q[i], qd[i], p, anchor[i])
+    return q, qd, anchor
+
+
+# ``row_info`` unpacks a whole output row at once: it relies on this layout of ``out``
+assert (OUT_EXTRA.start, ACC0, OUT_BASE) == (2, 5, 22) and (ACC_KICK_X, ACC_STICK_TIME, ACC_EVENTS, ACC_WORK_LOAD, ACC_DIM) == (2, 4, 11, 14, 15)
+
+
+def info_template(unilateral: bool, tail_keys: tuple = ()) -> dict:
+    """The keys of ``row_info``'s dict, in its order, each None: ``row_info`` copies it and fills it.
+
+    ``tail_keys`` are the names of the output columns from ``OUT_BASE`` on (a task's reward keys, then its
+    own info names), as ``row_info`` writes them.
+    """
+    keys = ("contact_force", "normal_force", "unilateral_violation", "friction_violation", "numerical_failure", "base_drift", "foot_error")
+    return dict.fromkeys(keys + (UNILATERAL_KEYS if unilateral else ()) + tuple(tail_keys))
+
+
+def row_info(
+    out: list, flags: list, force: np.ndarray, template: dict, impulse: np.ndarray | None = None, mode: float = 0.0
+) -> dict:
+    """``info`` of one robot after a step, from its output row and flags (each as a list).
+
+    ``force`` and ``impulse`` are the row's ``OUT_LAM`` and ``OUT_KICK`` columns (views, copied here:
+    Gymnasium asks for new info data on every call); ``template`` is ``info_template(...)`` of the env.
+    The keys are ``contact_force`` (shape (2,)), ``normal_force``, the three violation / failure flags,
+    ``base_drift`` and ``foot_error``; with an ``impulse`` (the unilateral model) also the
+    ``UNILATERAL_KEYS`` of ``unilateral_info``, ``mode`` giving ``contact_mode``; the template's tail keys
+    are left for the caller to fill (from the columns ``out[OUT_BASE:]``). This runs at every ``env.step``: a copy of a template does not grow its table item by item as a large dict
+    display would.
+    """
+    (
+        base_drift, foot_error, normal_force,
+        _, _, _, _, stick_time, slip_time, flight_time, slip_distance, work, d_slip, d_impacts,
+        events, painleve, settles, _, energy, foot_height,
+    ) = out[2:OUT_BASE]  # fmt: skip
+    _, unilateral_violation, friction_violation, failure = flags
+    info = template.copy()
+    info["contact_force"] = force.copy()
+    info["normal_force"] = normal_force
+    info["unilateral_violation"] = unilateral_violation
+    info["friction_violation"] = friction_violation
+    info["numerical_failure"] = failure
+    info["base_drift"] = base_drift
+    info["foot_error"] = foot_error
+    if impulse is not None:
+        info["contact_mode"] = _MODE_NAME_OF[mode]
+        info["foot_height"] = foot_height
+        info["impulse"] = impulse.copy()
+        info["stick_time"] = stick_time
+        info["slip_time"] = slip_time
+        info["flight_time"] = flight_time
+        info["slip_distance"] = slip_distance
+        info["work_actuators"] = work
+        info["dissipation_slip"] = d_slip
+        info["dissipation_impacts"] = d_impacts
+        info["energy"] = energy
+        info["contact_events"] = int(events) if events else 0
+        info["painleve_fallbacks"] = int(painleve) if painleve else 0
+        info["zeno_settles"] = int(settles) if settles else 0
+    return info
+
+
+_MODE_NAME_OF = {float(mode): name for mode, name in enumerate(MODE_NAMES)}  # the mode column's value -> name
+_UNILATERAL_TEMPLATE = info_template(True)
+REWARD_INFO_KEYS = tuple(f"reward_{name}" for name in REWARD_TERMS)
+"""``info`` keys of the balance task's reward terms, after a step only (they sum to the reward)."""
+
+
+def unilateral_info(out: list, mode: float) -> dict:
+    """The ``UNILATERAL_KEYS`` of one robot from its output row (as a list) and its mode.
+
+    ``contact_mode`` is ``"stick"``, ``"slip"`` or ``"flight"`` at the end of the step; ``foot_height`` [m];
+    ``impulse`` the sum of impact impulses on the foot in the step [N s], shape (2,); ``stick_time``,
+    ``slip_time``, ``flight_time`` [s] (they sum to ``dt``); ``slip_distance`` [m]; ``work_actuators``,
+    ``dissipation_slip``, ``dissipation_impacts`` [J] (``energy(t) - energy(0)`` is the sum over the steps
+    of the first minus the other two) and ``energy`` (kinetic + potential, [J]); ``contact_events``,
+    ``painleve_fallbacks``, ``zeno_settles`` (ints) count what ``leg_env.hybrid`` describes.
+    """
+    row = np.asarray(out, dtype=np.float64)
+    info = row_info(out[:OUT_BASE], [False] * len(FLAG_NAMES), row[OUT_LAM], _UNILATERAL_TEMPLATE, row[OUT_KICK], mode)
+    return {key: info[key] for key in UNILATERAL_KEYS}
+
+
+def unilateral_columns(out: np.ndarray, modes: np.ndarray) -> dict:
+    """``unilateral_info`` of many robots at once: one fresh array per key over the rows of ``out``."""
+    acc = out[:, ACC0:OUT_BASE].T.copy()  # one copy serves every key
+    counts = acc[[ACC_EVENTS, ACC_PAINLEVE, ACC_SETTLES]].astype(np.int64)
+    return {
+        "contact_mode": np.take(_MODE_NAME_ARRAY, modes.astype(np.intp)),
+        "foot_height": acc[ACC_DIM + 1],
+        "impulse": acc[ACC_KICK_X:ACC_KICK_Y + 1].T,
+        "stick_time": acc[ACC_STICK_TIME],
+        "slip_time": acc[ACC_SLIP_TIME],
+        "flight_time": acc[ACC_FLIGHT_TIME],
+        "slip_distance": acc[ACC_SLIP_DISTANCE],
+        "work_actuators": acc[ACC_WORK],
+        "dissipation_slip": acc[ACC_SLIP_DISSIPATION],
+        "dissipation_impacts": acc[ACC_IMPACT_DISSIPATION],
+        "energy": acc[ACC_DIM],
+        "contact_events": counts[0],
+        "painleve_fallbacks": counts[1],
+        "zeno_settles": counts[2],
+    }
+
+
+_MODE_NAME_ARRAY = np.array(MODE_NAMES)
+
+
+def observation_space(params: LegParams, config: StanceConfig):
+    """One robot's observation space: 12 entries (pinned) or 18 (unilateral); see ``PlanarLegStanceEnv``'s table."""
+    from gymnasium import spaces
+
+    reach = 1.01 * (params.l1 + params.l2)
+    unilateral = config.contact == "unilateral"
+    high = np.full(OBS_DIM_UNILATERAL if unilateral else OBS_DIM, np.inf, dtype=np.float32)
+    high[0] = reach
+    if not unilateral:  # on the unilateral ground the base may fly: its height has no bound
+        high[1] = reach
+    else:
+        high[15] = 1.0  # contact flag
+        high[16] = 1.0  # slip direction
+    low = -high
+    if unilateral:
+        low[15] = 0.0
+    return spaces.Box(low, high, dtype=np.float32)
+
+
+from .base import Task  # noqa: E402  (after the kernels it names)
+
+TASK = Task(
+    name="stance",
+    config_cls=StanceConfig,
+    reward_terms=REWARD_TERMS,
+    assess=assess,
+    start=start,
+    observation_space=observation_space,
+)
+"""The balance task as the shared environments see it (``leg_env.tasks.base.Task``)."""

@@ -1,0 +1,401 @@
+"""Every registered task id through the shared environments: checkers, determinism, pickling, vector /
+single parity bit for bit, the SB3 contract, the push schedule and the push's effect in the env."""
+
+from __future__ import annotations
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env, data_equivalence
+from gymnasium.vector import AutoresetMode
+
+import leg_env
+from leg_env import dynamics as dyn
+from leg_env.tasks import REGISTRY
+
+NEW_IDS = ("leg_env/PlanarLegStance-v1", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0")
+ALL_IDS = tuple(REGISTRY)
+NUM_ENVS = 4
+SEED = 5
+STEPS = 120
+MAX_STEPS = 40
+# frequent pushes, so that short test episodes have them
+FAST_PUSHES = dict(first_push=(0.05, 0.15), push_interval=(0.1, 0.2), push_force=(40.0, 160.0))
+KWARGS = {
+    "leg_env/PlanarLegStance-v0": dict(reset_noise_scale=0.05, ctrl_cost_weight=0.02),
+    "leg_env/PlanarLegStance-v1": dict(ctrl_cost_weight=0.02, params={"m_b": 9.0}),
+    "leg_env/PlanarLegPush-v0": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
+    "leg_env/PlanarLegHop-v0": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
+}
+
+
+def actions(steps: int, n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return (0.8 * rng.uniform(-1.0, 1.0, size=(steps, n, 2)) + np.array([0.0, -0.45])).astype(np.float32)
+
+
+def test_every_task_id_is_registered():
+    assert set(ALL_IDS) <= set(gym.registry) and set(NEW_IDS) <= set(ALL_IDS) and leg_env.ENV_IDS == ALL_IDS
+
+
+def test_stance_v1_is_stance_on_the_unilateral_ground_with_a_larger_noise():
+    env = gym.make("leg_env/PlanarLegStance-v1").unwrapped
+    assert env.config.contact == "unilateral" and env.config.reset_noise_scale == 0.05 and env.config.mu == 0.5
+    assert env.observation_space.shape == (18,)
+    v0 = gym.make("leg_env/PlanarLegStance-v0", contact="unilateral", reset_noise_scale=0.05)
+    a = actions(50, 1)[:, 0]
+    env = gym.make("leg_env/PlanarLegStance-v1")
+    assert data_equivalence(env.reset(seed=3), v0.reset(seed=3), exact=True)
+    for x in a:
+        assert data_equivalence(env.step(x), v0.step(x), exact=True)
+
+
+@pytest.mark.parametrize("env_id", NEW_IDS)
+def test_gymnasium_env_checker(env_id):
+    env = gym.make(env_id, render_mode="rgb_array").unwrapped
+    check_env(env, skip_render_check=False)
+
+
+@pytest.mark.parametrize("env_id", NEW_IDS)
+def test_sb3_env_checker(env_id):
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    sb3_check_env(gym.make(env_id), warn=True)
+
+
+@pytest.mark.parametrize("env_id", NEW_IDS)
+def test_same_seed_same_rollout_also_after_later_resets(env_id):
+    runs = []
+    for _ in range(2):
+        env = gym.make(env_id, max_episode_steps=MAX_STEPS, **KWARGS[env_id])
+        out = [env.reset(seed=SEED)]
+        for a in actions(STEPS, 1)[:, 0]:
+            step = env.step(a)
+            out.append(step)
+            if step[2] or step[3]:
+                out.append(env.reset())
+        runs.append(out)
+    assert data_equivalence(runs[0], runs[1], exact=True)
+
+
+@pytest.mark.parametrize("env_id", NEW_IDS)
+def test_pickle_round_trips_arguments_and_state(env_id):
+    env = gym.make(env_id, **KWARGS[env_id]).unwrapped
+    env.reset(seed=SEED)
+    for a in actions(30, 1)[:, 0]:
+        env.step(a)
+    copy = pickle.loads(pickle.dumps(env))
+    assert copy.config == env.config and copy.params == env.params and copy.task.name == env.task.name
+    for a in actions(40, 1, seed=2)[:, 0]:
+        assert data_equivalence(env.step(a), copy.step(a), exact=True)
+    venv = gym.make_vec(env_id, num_envs=3, **KWARGS[env_id])
+    venv.reset(seed=SEED)
+    vcopy = pickle.loads(pickle.dumps(venv))
+    for a in actions(30, 3, seed=4):
+        assert data_equivalence(venv.step(a), vcopy.step(a), exact=True)
+
+
+def _as_sync_info(info: dict, reward_keys) -> dict:
+    """Our info as SyncVectorEnv shapes it: no reward terms on a step where no sub-env stepped, and strings
+    (``contact_mode``) in object arrays (ours are numpy string arrays; the values are compared exactly)."""
+    if "_reward_alive" in info and not info["_reward_alive"].any():
+        info = {k: v for k, v in info.items() if k.lstrip("_") not in reward_keys}
+    return _strings_as_objects(info)
+
+
+def _strings_as_objects(x):
+    """String arrays as object arrays, with None where their mask says no value (as SyncVectorEnv fills
+    them; the native batch has had ``""`` there since issue 9, kept for bitwise v0)."""
+    if isinstance(x, dict):
+        out = {}
+        for k, v in x.items():
+            v = _strings_as_objects(v)
+            if isinstance(v, np.ndarray) and v.dtype == object and f"_{k}" in x and k != "final_obs":
+                v = v.copy()
+                v[~x[f"_{k}"]] = None
+            out[k] = v
+        return out
+    if isinstance(x, np.ndarray) and x.dtype.kind == "U":
+        return x.astype(object)
+    return x
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+@pytest.mark.parametrize("env_id", NEW_IDS)
+def test_native_batch_equals_sync_vector_env_bit_for_bit(env_id, mode):
+    """Observations, rewards, flags and the whole info of the native batch equal SyncVectorEnv's over single envs."""
+    kwargs = KWARGS[env_id]
+    ours = gym.make_vec(env_id, num_envs=NUM_ENVS, autoreset_mode=mode, max_episode_steps=MAX_STEPS, **kwargs)
+    sync = gym.make_vec(
+        env_id, num_envs=NUM_ENVS, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode},
+        max_episode_steps=MAX_STEPS, **kwargs,
+    )  # fmt: skip
+    obs, info = ours.reset(seed=SEED)
+    assert data_equivalence((obs, _strings_as_objects(info)), sync.reset(seed=SEED), exact=True)
+    ended = 0
+    pushed = 0
+    for t, a in enumerate(actions(STEPS, NUM_ENVS, seed=1)):
+        step_ours, step_sync = ours.step(a), sync.step(a)
+        step_ours = (*step_ours[:4], _as_sync_info(step_ours[4], ours.unwrapped.reward_keys))
+        for name, x, y in zip(("obs", "reward", "terminated", "truncated", "info"), step_ours, step_sync):
+            assert data_equivalence(x, y, exact=True), f"step {t} {name} differ:\n{x}\n{y}"
+        ended += int(np.sum(step_ours[2] | step_ours[3]))
+        if "push_force" in step_ours[4]:
+            pushed += int(np.sum(step_ours[4]["push_force"] != 0.0))
+    assert ended >= 4
+    if env_id == "leg_env/PlanarLegPush-v0":
+        assert pushed >= 10
+
+
+_THREADED_SCRIPT = """
+import sys
+import numpy as np, gymnasium as gym, leg_env
+from gymnasium.utils.env_checker import data_equivalence
+sys.path.insert(0, "tests")
+from test_tasks import KWARGS, NEW_IDS, SEED, actions
+for env_id in NEW_IDS:
+    runs = []
+    for threads in (1, 2):
+        envs = gym.make_vec(env_id, num_envs=64, num_threads=threads, **KWARGS[env_id])
+        out = [envs.reset(seed=SEED)]
+        out += [envs.step(x) for x in actions(60, 64, seed=3)]
+        runs.append(out)
+    print(env_id, "SAME" if data_equivalence(runs[0], runs[1], exact=True) else "DIFFERENT")
+"""
+
+
+def test_threaded_batch_is_bitwise_the_serial_one():
+    """Two numba threads split the physics of the batch (a process with a pool of 2): every output of every
+    new task equals the one-thread run exactly."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, NUMBA_NUM_THREADS="2")
+    out = subprocess.run([sys.executable, "-c", _THREADED_SCRIPT], env=env, capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr
+    lines = [line for line in out.stdout.splitlines() if line.startswith("leg_env/")]
+    assert lines == [f"{env_id} SAME" for env_id in NEW_IDS], out.stdout
+
+
+@pytest.mark.parametrize("env_id", NEW_IDS)
+def test_sb3_adapter_contract(env_id):
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from leg_env.sb3 import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(NUM_ENVS, seed=SEED, env_id=env_id, max_episode_steps=MAX_STEPS, **KWARGS[env_id])
+    task = venv.env.task
+    obs = venv.reset()
+    assert obs.shape == (NUM_ENVS,) + venv.observation_space.shape
+    assert set(venv.reset_infos[0]) == set(venv.env.state_keys)
+    wrapped = VecNormalize(VecMonitor(make_sb3_vec_env(NUM_ENVS, seed=SEED, env_id=env_id, **KWARGS[env_id])))
+    wrapped.reset()
+    done_seen = 0
+    for a in actions(STEPS, NUM_ENVS, seed=6):
+        obs, rewards, dones, infos = venv.step(a)
+        wrapped.step(a)
+        assert rewards.dtype == np.float32 and dones.dtype == np.bool_ and len(infos) == NUM_ENVS
+        for i, info in enumerate(infos):
+            assert set(task.reward_keys) <= set(info) and set(task.info_names) <= set(info)
+            assert np.isclose(sum(info[k] for k in task.reward_keys), rewards[i], rtol=1e-6, atol=1e-5)
+            if dones[i]:
+                done_seen += 1
+                assert info["terminal_observation"].shape == venv.observation_space.shape
+    assert done_seen >= 4
+    bad = {"ctrl_cost_weight": -1.0, "com_weight": "1", "command_range": (0.2, 0.1)}
+    field = {NEW_IDS[0]: "ctrl_cost_weight", PUSH: "com_weight", HOP: "command_range"}[env_id]
+    with pytest.raises(ValueError, match=field):  # ArgumentTypeError is a ValueError too
+        make_sb3_vec_env(2, env_id=env_id, **{field: bad[field]})
+
+
+def test_push_schedule_follows_the_config_and_is_not_observed():
+    """The schedule drawn at reset (the task's state columns): first push at 0.8-1.2 s, then every 2-3 s,
+    0.1 s long, 20-150 N of either sign; the env applies exactly that force on those steps, and nothing
+    of it is in the observation."""
+    from leg_env.step import STATE_DIM
+    from leg_env.tasks.push import MAX_PUSHES
+
+    env = gym.make("leg_env/PlanarLegPush-v0").unwrapped
+    signs = []
+    for seed in range(40):
+        env.reset(seed=seed)
+        cols = env._state[0, STATE_DIM:]
+        starts, forces = cols[2:2 + MAX_PUSHES], cols[2 + MAX_PUSHES:]
+        assert np.all(starts == np.rint(starts)) and 80 <= starts[0] <= 120
+        assert np.all((np.diff(starts) >= 200) & (np.diff(starts) <= 300))
+        assert np.all((np.abs(forces) >= 20.0) & (np.abs(forces) <= 150.0))
+        signs += np.sign(forces).tolist()
+    assert 0.3 < np.mean(np.array(signs) > 0) < 0.7
+    env = gym.make("leg_env/PlanarLegPush-v0", reset_noise_scale=0.0).unwrapped  # stands still until pushed
+    env.reset(seed=3)
+    cols = env._state[0, STATE_DIM:]
+    first, force = int(cols[2]), cols[2 + MAX_PUSHES]
+    hold = (env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32)
+    seen = []
+    for _ in range(first + 10):
+        obs, _, term, _, info = env.step(hold)
+        seen.append(info["push_force"])
+        assert obs.shape == (18,)
+    assert seen[:first] == [0.0] * first and seen[first:] == [force] * 10
+
+
+@pytest.mark.parametrize("contact", ["unilateral", "pinned"])
+def test_push_moves_the_robot_as_the_momentum_balance_says(contact):
+    """In the env: per step, m (v_com(end) - v_com(start)) = dt (contact_force + (push, 0) - (0, m g)) + impulse."""
+    env = gym.make("leg_env/PlanarLegPush-v0", contact=contact, **FAST_PUSHES).unwrapped
+    env.reset(seed=1)
+    p = env.params
+    m = p.total_mass
+    hold = (env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32)
+    pushed = 0
+    for _ in range(60):
+        q0, qd0, _ = env.state
+        obs, r, term, trunc, info = env.step(hold)
+        if info["numerical_failure"]:
+            break
+        q1, qd1, _ = env.state
+        dP = m * (_v_com(q1, qd1, p) - _v_com(q0, qd0, p))
+        expected = env.dt * (info["contact_force"] + np.array([info["push_force"], -m * p.g])) + info.get("impulse", 0.0)
+        assert np.abs(dP - expected).max() < 1e-6, (dP, expected, info["push_force"])
+        assert info["work_push"] == pytest.approx(info["push_force"] * (q1[0] - q0[0]), abs=1e-12)
+        pushed += info["push_force"] != 0.0
+        if term:
+            break
+    assert pushed >= 5
+
+
+def _v_com(q, qd, p):
+    m = p.total_mass
+    a, b = p.m1 * p.c1 + p.m2 * p.l1, p.m2 * p.c2
+    th1 = q[2] + q[3]
+    th2 = th1 + q[4]
+    w1 = qd[2] + qd[3]
+    w2 = w1 + qd[4]
+    return np.array([qd[0] - (a * np.sin(th1) * w1 + b * np.sin(th2) * w2) / m, qd[1] + (a * np.cos(th1) * w1 + b * np.cos(th2) * w2) / m])
+
+
+def test_push_energy_balance_over_an_episode():
+    env = gym.make("leg_env/PlanarLegPush-v0", **FAST_PUSHES).unwrapped
+    _, info = env.reset(seed=2)
+    e0 = info["energy"]
+    booked = 0.0
+    hold = (env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32)
+    for a in actions(80, 1, seed=9)[:, 0] * 0.3 + hold:
+        _, _, term, _, info = env.step(a)
+        booked += info["work_actuators"] + info["work_push"] - info["dissipation_slip"] - info["dissipation_impacts"]
+        if term or info["numerical_failure"]:
+            break
+    assert abs(info["energy"] - e0 - booked) < 1e-5 * (1.0 + abs(e0))
+
+
+def test_hop_reward_peaks_at_the_commanded_apex_on_scripted_flights():
+    """Ballistic flights (zero torques, the robot translating upwards) whose COM apex is ``rise`` above
+    standing: the height term is largest for ``rise`` = the command, where it is the full weight, and
+    falls off as ``exp(-((rise - command) / height_scale)^2)``."""
+    from leg_env.step import STATE_DIM
+
+    env = gym.make("leg_env/PlanarLegHop-v0", reset_noise_scale=0.0).unwrapped
+    obs, _ = env.reset(seed=4)
+    command = env._state[0, STATE_DIM]
+    assert obs[18] == np.float32(command) and 0.05 <= command <= 0.15
+    p = env.params
+    y_stand = dyn.com_position(env.nominal.q, p)[1]
+    lift = 0.005  # the foot 5 mm above the ground
+    rises = np.r_[np.linspace(0.01, 0.25, 49), command]
+    rewards = []
+    for rise in rises:
+        q = env.nominal.q.copy()
+        q[1] += lift
+        qd = np.zeros(5)
+        qd[1] = np.sqrt(2.0 * p.g * (rise - lift))  # apex: y_stand + lift + v^2 / (2 g) = y_stand + rise
+        obs, _ = env.reset(seed=4, options={"qpos": q, "qvel": qd})
+        assert obs[15] == 0.0  # in flight
+        _, _, term, _, info = env.step(np.zeros(2, dtype=np.float32))
+        assert info["flight_time"] == pytest.approx(env.dt, abs=1e-15) and not term
+        rewards.append(info["reward_height"])
+        expected = env.config.height_weight * np.exp(-(((y_stand + rise) - (y_stand + command)) / env.config.height_scale) ** 2)
+        assert info["reward_height"] == pytest.approx(expected, rel=1e-6, abs=1e-9), (rise, command)
+    rewards = np.array(rewards)
+    assert rewards[-1] == pytest.approx(env.config.height_weight, rel=1e-9)  # the peak, at the command
+    assert np.all(rewards[:-1] <= rewards[-1])
+    assert abs(rises[np.argmax(rewards[:-1])] - command) <= 0.0025
+
+
+def test_hop_landing_impulse_is_charged():
+    env = gym.make("leg_env/PlanarLegHop-v0", reset_noise_scale=0.0).unwrapped
+    q = env.nominal.q.copy()
+    q[1] += 0.001
+    qd = np.zeros(5)
+    qd[1] = -1.0  # landing at 1 m/s
+    env.reset(seed=0, options={"qpos": q, "qvel": qd})
+    hold = (env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32)
+    _, _, _, _, info = env.step(hold)
+    P = info["impulse"]
+    assert P[1] > 0.0
+    m = env.params.total_mass
+    assert info["reward_impact"] == pytest.approx(-env.config.impact_weight * (P @ P) / m**2, rel=1e-12)
+
+
+def test_push_reward_charges_the_com_leaving_the_start():
+    env = gym.make("leg_env/PlanarLegPush-v0", com_weight=3.0, reset_noise_scale=0.0).unwrapped
+    env.reset(seed=0)
+    q = env.nominal.q.copy()
+    q[0] += 0.2  # the base (and COM) 0.2 m forward of the start, the foot with it
+    _, info = env.reset(seed=0, options={"qpos": q})
+    obs, r, *_, info = env.step((env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32))
+    # the reference is the start of this episode: a small step later the COM term is tiny
+    assert -1e-3 < info["reward_com"] <= 0.0
+    assert r == pytest.approx(sum(info[k] for k in env.task.reward_keys), abs=0.0)
+
+
+PUSH, HOP = "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0"
+BAD_CONFIGS = [
+    (PUSH, {"push_force": (50.0, 20.0)}, ValueError, "push_force"),
+    (PUSH, {"push_force": (-1.0, 20.0)}, ValueError, "push_force"),
+    (PUSH, {"push_force": "big"}, TypeError, "push_force"),
+    (PUSH, {"push_force": (True, 60)}, TypeError, "push_force"),
+    (PUSH, {"push_duration": 0.0}, ValueError, "push_duration"),
+    (PUSH, {"push_duration": float("nan")}, ValueError, "push_duration"),
+    (PUSH, {"push_interval": (0.0, 1.0)}, ValueError, "push_interval"),
+    (PUSH, {"first_push": (1.0, float("inf"))}, ValueError, "first_push"),
+    (PUSH, {"com_weight": -1.0}, ValueError, "com_weight"),
+    (PUSH, {"com_weight": True}, TypeError, "com_weight"),
+    (PUSH, {"com_weight": 10**400}, ValueError, "com_weight"),
+    (PUSH, {"unilateral_weight": "0.5"}, TypeError, "unilateral_weight"),
+    (HOP, {"contact": "pinned"}, ValueError, "contact"),
+    (HOP, {"command_range": (0.2, 0.1)}, ValueError, "command_range"),
+    (HOP, {"command_range": (-0.1, 0.1)}, ValueError, "command_range"),
+    (HOP, {"command_range": 0.1}, TypeError, "command_range"),
+    (HOP, {"height_scale": 0.0}, ValueError, "height_scale"),
+    (HOP, {"height_weight": float("inf")}, ValueError, "height_weight"),
+    (HOP, {"impact_weight": "1"}, TypeError, "impact_weight"),
+    (HOP, {"slip_weight": -2.0}, ValueError, "slip_weight"),
+    (HOP, {"drift_com_weight": 1j}, TypeError, "drift_com_weight"),
+    (HOP, {"tilt_weight": np.nan}, ValueError, "tilt_weight"),
+]
+
+
+@pytest.mark.parametrize("env_id, kwargs, error, field", BAD_CONFIGS, ids=[f"{i.split('/')[1]}-{k}" for i, k, _, _ in BAD_CONFIGS])
+def test_task_config_is_checked_by_the_one_validation_path(env_id, kwargs, error, field):
+    """``leg_env.checks`` refuses every bad task field (wrong type: ``ArgumentTypeError``, a ``TypeError``;
+    out of range, NaN, overflow: ``ValueError``), naming it, through every constructor (the SB3 adapter's
+    in ``test_sb3_adapter_contract``)."""
+    with pytest.raises(error, match=field):
+        gym.make(env_id, **kwargs)
+    with pytest.raises(error, match=field):
+        gym.make_vec(env_id, num_envs=2, **kwargs)
+
+
+def test_unknown_keyword_is_a_type_error_for_every_task():
+    for env_id in ALL_IDS:
+        with pytest.raises(TypeError, match="unexpected keyword argument 'nope'"):
+            gym.make(env_id, nope=1)
+
+
+def test_push_kernel_param_array_is_the_lesson_params_and_a_load():
+    p = leg_env.LegParams()
+    a = dyn.params_array(p, 12.5)
+    assert a.shape == (12,) and a[dyn.LOAD_X] == 12.5 and np.array_equal(a[:11], p.array)

@@ -9,23 +9,22 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from leg_env.task import REWARD_TERMS
-
 __all__ = ["RewardTermsLogger", "PeriodicEvaluation", "PeriodicCheckpoint", "run_vec_episodes", "evaluate_now"]
 
-REWARD_KEYS = tuple(f"reward_{name}" for name in REWARD_TERMS)
 VIOLATION_KEYS = ("unilateral_violation", "friction_violation")
 
 
 class RewardTermsLogger(BaseCallback):
     """Log, per rollout, the mean of each ``reward_*`` info term per env step and the rate of contact violations.
 
-    TensorBoard keys: ``rollout/reward_<term>`` and ``rollout/<unilateral|friction>_violation_rate``.
+    TensorBoard keys: ``rollout/reward_<term>`` (the task's terms: ``reward_keys``) and
+    ``rollout/<unilateral|friction>_violation_rate``.
     """
 
-    def __init__(self):
+    def __init__(self, reward_keys: tuple):
         super().__init__()
-        self._sums = dict.fromkeys(REWARD_KEYS + VIOLATION_KEYS, 0.0)
+        self.reward_keys = tuple(reward_keys)
+        self._sums = dict.fromkeys(self.reward_keys + VIOLATION_KEYS, 0.0)
         self._count = 0
 
     def _on_rollout_start(self) -> None:
@@ -36,7 +35,7 @@ class RewardTermsLogger(BaseCallback):
     def _on_step(self) -> bool:
         sums = self._sums
         for info in self.locals["infos"]:
-            for key in REWARD_KEYS:
+            for key in self.reward_keys:
                 sums[key] += info[key]
             for key in VIOLATION_KEYS:
                 sums[key] += info[key]
@@ -46,7 +45,7 @@ class RewardTermsLogger(BaseCallback):
     def _on_rollout_end(self) -> None:
         if self._count == 0:
             return
-        for key in REWARD_KEYS:
+        for key in self.reward_keys:
             self.logger.record(f"rollout/{key}", self._sums[key] / self._count)
         for key in VIOLATION_KEYS:
             self.logger.record(f"rollout/{key}_rate", self._sums[key] / self._count)

@@ -1,13 +1,17 @@
-"""Evaluate a trained policy, or the model-based LQR controller, over deterministic episodes.
+"""Evaluate a trained policy, or a model-based controller, over deterministic episodes of any task.
 
     python -m train.evaluate runs/ppo_stance --baseline lqr --episodes 20 --gif
     python -m train.evaluate policies/ppo_stance
     python -m train.evaluate lqr --out runs/lqr_eval
+    python -m train.evaluate policies/ppo_push --baseline lqr --episodes 100 --push-curve
+    python -m train.evaluate policies/ppo_hop --baseline hopper --episodes 100 --gif
 
 ``policy`` is a run or policy folder (``model.zip``, ``vecnormalize.pkl``, optionally ``config.yaml``
 whose ``eval_env_kwargs`` the evaluation env uses: by default none, the registered task as is, even
 when training shaped the reward through ``env_kwargs``), a ``python -m train.rllib`` run folder (its
-newest checkpoint) or checkpoint, or ``lqr``. Episode ``i`` is seeded ``seed + i``
+newest checkpoint) or checkpoint, or a model-based controller: ``lqr`` (``policies.lqr``, the balance and
+push tasks) or ``hopper`` (``policies.hopper``, the hop task). The task is the policy's own (its
+``config.yaml``'s ``env_id``), else ``--env-id`` (default ``leg_env/PlanarLegStance-v0``). Episode ``i`` is seeded ``seed + i``
 (default 10_000 + i: training uses small seeds, in-training evaluation 20_000 + i) and runs in the
 single env from ``gymnasium.make`` with its 1000-step time limit. Results go to ``<policy>/eval/``
 (or ``--out``): one JSON per controller, ``table.md`` with the side-by-side table that is also
@@ -23,7 +27,13 @@ Metrics (over all episodes; "steps" are all control steps of all episodes):
 - ``rms_torso_angle`` [rad]: the torso's tilt (0 in the nominal posture);
 - ``unilateral_violation_frac``: fraction of steps with ``lam_y < 0`` (the ground would have to pull);
 - ``friction_violation_frac``: fraction of steps with ``|lam_x| > mu lam_y``;
-- ``rms_torque`` [N m]: hip and knee; ``mean_reward_terms``: each reward term per episode.
+- ``rms_torque`` [N m]: hip and knee; ``mean_reward_terms``: each reward term per episode (the task's terms).
+
+The hop task adds the metrics of ``train.task_metrics.HopTracker`` (apex error, hop period, drift after
+10 s, landing impulses) and ``hops.png``, a few hops of the first episode (COM height against its target,
+contact mode, contact force, impulses). ``--push-curve`` (push task) adds survival against the push
+impulse for every controller on the same seeds (``train.task_metrics.push_survival``): ``push_curve.json``,
+``push_curve.md`` and ``push_curve.png``, with the largest impulse each survives 90% of the time.
 """
 
 from __future__ import annotations
@@ -96,13 +106,29 @@ def _read_config(folder: Path) -> dict:
     return config
 
 
-def load_policy(path, env_kwargs: dict | None = None):
-    """A policy with ``predict(obs)`` from a run/policy folder (or its ``model.zip``), or ``"lqr"``.
+def _lqr(params, config):
+    from policies.lqr import LQRController
+
+    return LQRController(params, config)
+
+
+def _hopper(params, config):
+    from policies.hopper import HopperController
+
+    return HopperController(params, config)
+
+
+BASELINES = {"lqr": _lqr, "hopper": _hopper}
+"""The model-based controllers by name: ``(params, config) -> controller`` with ``predict``."""
+
+
+def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None):
+    """A policy with ``predict(obs)`` from a run/policy folder (or its ``model.zip``), or a baseline's name.
 
     A folder written by ``python -m train.rllib``, or one of its checkpoints, loads as a
     ``train.rllib.RLlibPolicy`` (needs the ``rllib`` extra).
 
-    For ``"lqr"`` the controller is built for the env made with ``env_kwargs``. For a folder,
+    A baseline (``BASELINES``: ``"lqr"``, ``"hopper"``) is built for the env ``env_id`` made with ``env_kwargs``. For a folder,
     ``env_kwargs`` (default: the run's ``eval_env_kwargs``) are kept as the policy's ``env_kwargs``,
     the evaluation env's arguments.
 
@@ -111,15 +137,12 @@ def load_policy(path, env_kwargs: dict | None = None):
             is missing; the message names the path (a ``FileNotFoundError``).
         PolicyLoadError: a file exists but is corrupt or of the wrong kind; the message names it.
     """
-    if isinstance(path, str) and path.lower() == "lqr":
-        from leg_env.params import LegParams
-        from leg_env.task import StanceConfig
-        from policies.lqr import LQRController
+    if isinstance(path, str) and path.lower() in BASELINES:
+        import gymnasium as gym
 
-        kwargs = dict(env_kwargs or {})
-        params = kwargs.pop("params", None)
-        config = StanceConfig.from_kwargs(kwargs.pop("config", None), **{k: v for k, v in kwargs.items() if k not in ("render_mode", "width", "height")})
-        return LQRController(LegParams.from_any(params), config)
+        kwargs = {k: v for k, v in (env_kwargs or {}).items() if k not in ("render_mode", "width", "height")}
+        env = gym.make(env_id or ENV_ID, **kwargs).unwrapped  # the task's params and config, checked
+        return BASELINES[path.lower()](env.params, env.config)
 
     from train.rllib import RLlibPolicy, is_rllib_checkpoint, is_rllib_run
 
@@ -175,27 +198,33 @@ def load_policy(path, env_kwargs: dict | None = None):
             )
     if env_kwargs is None:
         env_kwargs = config.get("eval_env_kwargs", config.get("env_kwargs")) or {}
-    return TrainedPolicy(model, vec_normalize, env_kwargs, folder)
+    policy = TrainedPolicy(model, vec_normalize, env_kwargs, folder)
+    policy.env_id = config.get("env_id")
+    return policy
 
 
-def run_episodes(policy, seeds, env_kwargs: dict | None = None, record: int | None = None, frames: bool = False):
+def run_episodes(
+    policy, seeds, env_kwargs: dict | None = None, record: int | None = None, frames: bool = False, env_id: str = ENV_ID
+):
     """Run one deterministic episode per seed; return the summary and the recorded episode.
 
     Args:
         policy: anything with SB3's ``predict``.
         seeds: one seed per episode.
         env_kwargs: keyword arguments of ``gymnasium.make``.
+        env_id: the task.
         record: index of the episode whose time series is returned (None: none).
         frames: also render that episode, one ``rgb_array`` frame per ``GIF_FRAME_SKIP`` steps.
 
     Returns:
         ``(summary, series)``: the metrics (module docstring) with per-episode lists, and for the
         recorded episode a dict of ``base_drift`` (T,), ``torso_angle`` (T,), ``torque`` (T, 2), ``contact_force`` (T, 2),
-        ``weight`` and ``frames`` (or None).
+        ``weight`` and ``frames`` (or None); on the unilateral ground also ``mode`` (T,) and ``impulse``
+        (T, 2), and on the hop task the ``HopTracker`` series.
     """
     import gymnasium as gym
 
-    from leg_env.task import REWARD_TERMS
+    from train.task_metrics import HopTracker
 
     if len(seeds) == 0:
         raise ValueError("run_episodes needs at least one seed")
@@ -204,17 +233,24 @@ def run_episodes(policy, seeds, env_kwargs: dict | None = None, record: int | No
     drift_sq, drift_max, torque_sq, steps, unilateral, friction = 0.0, 0.0, np.zeros(2), 0, 0, 0
     tilt_sq = 0.0
     series = None
+    hop = HopTracker() if env_id == "leg_env/PlanarLegHop-v0" else None
+    reward_terms = None
     for i, seed in enumerate(seeds):
         recording = record == i
         kwargs = dict(env_kwargs)
         if recording and frames:
             kwargs.update(render_mode="rgb_array", width=GIF_SIZE, height=GIF_SIZE)
-        env = gym.make(ENV_ID, **kwargs)
+        env = gym.make(env_id, **kwargs)
         limit = np.asarray(env.unwrapped.config.torque_limit)
+        reward_terms = env.unwrapped.task.reward_terms
         obs, _ = env.reset(seed=int(seed))
-        terms = dict.fromkeys(REWARD_TERMS, 0.0)
+        if hasattr(policy, "reset"):
+            policy.reset()
+        if hop is not None:
+            hop.start(env, obs)
+        terms = dict.fromkeys(reward_terms, 0.0)
         ep_return, length, ep_drift_sq = 0.0, 0, 0.0
-        rec = {"base_drift": [], "torso_angle": [], "torque": [], "contact_force": [], "frames": []} if recording else None
+        rec = {"base_drift": [], "torso_angle": [], "torque": [], "contact_force": [], "mode": [], "impulse": [], "frames": []} if recording else None
         if recording and frames:
             rec["frames"].append(env.render())
         terminated = truncated = False
@@ -225,8 +261,10 @@ def run_episodes(policy, seeds, env_kwargs: dict | None = None, record: int | No
             tau = np.clip(action, -1.0, 1.0) * limit
             ep_return += reward
             length += 1
-            for name in REWARD_TERMS:
+            for name in reward_terms:
                 terms[name] += info[f"reward_{name}"]
+            if hop is not None:
+                hop.step(env, obs, info)
             d = info["base_drift"]
             ep_drift_sq += d * d
             drift_max = max(drift_max, d)
@@ -239,6 +277,8 @@ def run_episodes(policy, seeds, env_kwargs: dict | None = None, record: int | No
                 rec["torso_angle"].append(float(obs[2]))
                 rec["torque"].append(tau)
                 rec["contact_force"].append(np.asarray(info["contact_force"], dtype=np.float64))
+                rec["mode"].append(info.get("contact_mode", "stick"))
+                rec["impulse"].append(np.asarray(info.get("impulse", (0.0, 0.0)), dtype=np.float64))
                 if frames and length % GIF_FRAME_SKIP == 0:
                     rec["frames"].append(env.render())
         if rec is not None:
@@ -251,8 +291,13 @@ def run_episodes(policy, seeds, env_kwargs: dict | None = None, record: int | No
                 "dt": env.unwrapped.dt,
                 "torque_limit": tuple(limit),
                 "frames": rec["frames"] if frames else None,
+                "mode": rec["mode"],
+                "impulse": np.asarray(rec["impulse"]),
+                "hop": dict(hop.series) if hop is not None else None,
             }
         env.close()
+        if hop is not None:
+            hop.end(bool(truncated and not terminated))
         drift_sq += ep_drift_sq
         steps += length
         per_episode.append(
@@ -278,8 +323,9 @@ def run_episodes(policy, seeds, env_kwargs: dict | None = None, record: int | No
         "unilateral_violation_frac": unilateral / steps,
         "friction_violation_frac": friction / steps,
         "rms_torque": np.sqrt(torque_sq / steps).round(4).tolist(),
-        "mean_reward_terms": {k: float(np.mean([e["reward_terms"][k] for e in per_episode])) for k in REWARD_TERMS},
+        "mean_reward_terms": {k: float(np.mean([e["reward_terms"][k] for e in per_episode])) for k in reward_terms},
         "steps": int(steps),
+        **(hop.summary() if hop is not None else {}),
         "per_episode": per_episode,
     }
     return summary, series
@@ -296,7 +342,15 @@ _ROWS = (
     ("steps with lam_y < 0", "unilateral_violation_frac", lambda v: f"{100 * v:.2f}%"),
     ("steps outside friction cone", "friction_violation_frac", lambda v: f"{100 * v:.2f}%"),
     ("RMS torque hip / knee [N m]", "rms_torque", lambda v: f"{v[0]:.2f} / {v[1]:.2f}"),
+    # the hop task's (train.task_metrics.HopTracker); rows whose key a result lacks are left out
+    ("hops", "hops", lambda v: f"{v}"),
+    ("mean abs apex error [cm]", "mean_abs_apex_error", lambda v: f"{100 * v:.2f}"),
+    ("RMS apex error [cm]", "rms_apex_error", lambda v: f"{100 * v:.2f}"),
+    ("mean hop period [s]", "mean_hop_period", lambda v: f"{v:.3f}"),
+    ("mean / max COM drift after 10 s [cm]", "mean_drift_10s", None),
+    ("mean / max landing impulse [N s]", "mean_landing_impulse", None),
 )
+_PAIRS = {"mean_drift_10s": ("max_drift_10s", 100.0, "{:.2f} / {:.2f}"), "mean_landing_impulse": ("max_landing_impulse", 1.0, "{:.2f} / {:.2f}")}
 
 
 def format_table(results: dict[str, dict]) -> str:
@@ -304,7 +358,14 @@ def format_table(results: dict[str, dict]) -> str:
     names = list(results)
     lines = ["| metric | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
     for label, key, fmt in _ROWS:
-        lines.append(f"| {label} | " + " | ".join(fmt(results[n][key]) for n in names) + " |")
+        if not all(key in results[n] for n in names):
+            continue
+        if fmt is None:
+            other, scale, pattern = _PAIRS[key]
+            cells = [pattern.format(scale * results[n][key], scale * results[n][other]) for n in names]
+        else:
+            cells = [fmt(results[n][key]) for n in names]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
     for term in next(iter(results.values()))["mean_reward_terms"]:
         lines.append(
             f"| return from reward_{term} | " + " | ".join(f"{results[n]['mean_reward_terms'][term]:.3f}" for n in names) + " |"
@@ -321,13 +382,18 @@ def _write_gif(frames, path: Path, fps: float) -> Path:
 
 @dataclass
 class EvalArgs:
-    """Evaluate a trained policy or the LQR baseline over deterministic episodes and write the results."""
+    """Evaluate a trained policy or a model-based controller over deterministic episodes and write the results."""
 
     policy: str = "lqr"
     """Run or policy folder (with model.zip and vecnormalize.pkl), a train.rllib run folder or checkpoint, or
-    'lqr' for the model-based controller."""
+    a model-based controller: 'lqr' (balance, push) or 'hopper' (hop)."""
     baseline: str | None = None
-    """Also evaluate this controller ('lqr' or a folder) on the same seeds and print both side by side."""
+    """Also evaluate this controller ('lqr', 'hopper' or a folder) on the same seeds and print both side by side."""
+    env_id: str | None = None
+    """The task (None: the policy's own from its config.yaml, else leg_env/PlanarLegStance-v0)."""
+    push_curve: bool = False
+    """Push task: also measure survival against the push impulse (PUSH_FORCES, --episodes per force) for
+    every controller, and the largest impulse each survives 90% of the time."""
     episodes: int = 20
     """Number of episodes."""
     seed: int = EVAL_SEED
@@ -348,40 +414,42 @@ class EvalArgs:
 
 
 def _label(spec: str) -> str:
-    return "lqr" if spec.lower() == "lqr" else (Path(spec).name or "policy")
+    return spec.lower() if spec.lower() in BASELINES else (Path(spec).name or "policy")
 
 
 def evaluate(args: EvalArgs) -> Path:
     """Evaluate ``args.policy`` (and ``args.baseline``) and write the results; returns the output folder."""
-    is_lqr = args.policy.lower() == "lqr"
+    is_model = args.policy.lower() in BASELINES
     seeds = [args.seed + i for i in range(args.episodes)]
 
-    policy = load_policy(args.policy)
-    env_kwargs = {} if is_lqr else policy.env_kwargs
+    policy = load_policy(args.policy, env_id=args.env_id)
+    env_id = args.env_id or (None if is_model else getattr(policy, "env_id", None)) or ENV_ID
+    env_kwargs = {} if is_model else policy.env_kwargs
     controllers = {_label(args.policy): policy}
     if args.baseline is not None:
         label = _label(args.baseline)
         if label in controllers:
             label = f"{label} (baseline)"
-        controllers[label] = load_policy(args.baseline, env_kwargs=env_kwargs)
+        controllers[label] = load_policy(args.baseline, env_kwargs=env_kwargs, env_id=env_id)
     # only once every controller has loaded: a mistyped policy folder must not be created as <policy>/eval
-    out = Path(args.out) if args.out is not None else (Path("runs/eval_lqr") if is_lqr else policy.path / "eval")
+    out = Path(args.out) if args.out is not None else (Path(f"runs/eval_{args.policy.lower()}") if is_model else policy.path / "eval")
     out.mkdir(parents=True, exist_ok=True)
 
     results, series = {}, {}
     for k, (label, controller) in enumerate(controllers.items()):
-        summary, rec = run_episodes(controller, seeds, env_kwargs, record=0, frames=args.gif and k == 0)
-        summary = {"controller": args.policy if k == 0 else args.baseline, "env_kwargs": env_kwargs, "seeds": seeds, **summary}
+        summary, rec = run_episodes(controller, seeds, env_kwargs, record=0, frames=args.gif and k == 0, env_id=env_id)
+        summary = {"controller": args.policy if k == 0 else args.baseline, "env_id": env_id, "env_kwargs": env_kwargs, "seeds": seeds, **summary}
         results[label] = summary
         series[label] = rec
-        name = "lqr" if label.startswith("lqr") else ("policy" if k == 0 else "baseline")
+        base = label.split(" ")[0]
+        name = base if base in BASELINES else ("policy" if k == 0 else "baseline")
         (out / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
         if k == 0 and args.gif and rec["frames"]:
             _write_gif(rec["frames"], out / "episode.gif", 1.0 / (rec["dt"] * GIF_FRAME_SKIP))
 
     table = format_table(results)
     (out / "table.md").write_text(
-        f"{args.episodes} deterministic episodes, seeds {seeds[0]}..{seeds[-1]}, env kwargs {env_kwargs or 'default'}\n\n"
+        f"{env_id}: {args.episodes} deterministic episodes, seeds {seeds[0]}..{seeds[-1]}, env kwargs {env_kwargs or 'default'}\n\n"
         + table
         + "\n"
     )
@@ -391,13 +459,48 @@ def evaluate(args: EvalArgs) -> Path:
 
         first = next(iter(series.values()))
         plot_time_series(series, out / "timeseries.png", first["dt"], first["torque_limit"])
-        log = None if is_lqr else policy.path / "evaluations.json"
-        if not is_lqr and log.is_file():
-            reference = next((results[k] for k in results if k.startswith("lqr")), None)
+        if first.get("hop") is not None:
+            from train.plots import plot_hops
+
+            plot_hops(series, out / "hops.png", first["dt"])
+        log = None if is_model else policy.path / "evaluations.json"
+        if not is_model and log.is_file():
+            reference = next((results[k] for k in results if k.split(" ")[0] in BASELINES), None)
             history = json.loads(log.read_text())["evaluations"]
-            plot_learning_curve(history, out / "learning_curve.png", ENV_ID, reference)
+            plot_learning_curve(history, out / "learning_curve.png", env_id, reference)
+    if args.push_curve:
+        _push_curve(controllers, env_id, env_kwargs, args, out)
     print(f"results written to {out}/")
     return out
+
+
+PUSH_FORCES = tuple(range(20, 201, 10))
+"""Push magnitudes of ``--push-curve`` [N]: 2 to 20 N s over the task's 0.1 s push."""
+
+
+def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs, out: Path) -> dict:
+    """Survival against the push impulse for every controller (``train.task_metrics.push_survival``)."""
+    from train.task_metrics import largest_survived_impulse, push_survival
+
+    if env_id != "leg_env/PlanarLegPush-v0":
+        raise ValueError(f"--push-curve needs the push task leg_env/PlanarLegPush-v0, not {env_id}")
+    curves = {label: push_survival(c, PUSH_FORCES, args.episodes, args.seed, env_kwargs) for label, c in controllers.items()}
+    best = {label: largest_survived_impulse(rows) for label, rows in curves.items()}
+    (out / "push_curve.json").write_text(json.dumps({"seeds": [args.seed, args.seed + args.episodes - 1], "curves": curves, "impulse_90": best}, indent=2) + "\n")
+    names = list(curves)
+    lines = ["| push [N] | impulse [N s] | " + " | ".join(f"{n} survival" for n in names) + " |", "|---:|---:|" + "---:|" * len(names)]
+    for k, force in enumerate(PUSH_FORCES):
+        impulse = curves[names[0]][k]["impulse"]
+        lines.append(f"| {force} | {impulse:.1f} | " + " | ".join(f"{100 * curves[n][k]['survival_rate']:.0f}%" for n in names) + " |")
+    lines.append("| **90% survival up to** | | " + " | ".join(f"**{best[n]:.1f} N s**" for n in names) + " |")
+    table = "\n".join(lines)
+    (out / "push_curve.md").write_text(f"{args.episodes} episodes per push magnitude, seeds {args.seed}..{args.seed + args.episodes - 1}\n\n{table}\n")
+    print(table)
+    if args.plot:
+        from train.plots import plot_push_curve
+
+        plot_push_curve(curves, best, out / "push_curve.png")
+    return best
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["plot_learning_curve", "plot_time_series"]
+__all__ = ["plot_learning_curve", "plot_time_series", "plot_hops", "plot_push_curve"]
 
 
 def _pyplot():
@@ -93,6 +93,67 @@ def plot_time_series(series: dict[str, dict], path: Path, dt: float, torque_limi
     for ax in axes:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="upper right", ncol=2)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+_MODE_LEVEL = {"flight": 0, "slip": 1, "stick": 2}
+
+
+def plot_hops(series: dict[str, dict], path: Path, dt: float, seconds: float = 3.0) -> Path:
+    """The first ``seconds`` of each controller's recorded hop episode: COM height against its target,
+    contact mode, contact force and impact impulses (``train.evaluate``'s series with a ``hop`` entry)."""
+    import numpy as np
+
+    plt = _pyplot()
+    fig, axes = plt.subplots(4, 1, figsize=(7.0, 8.0), dpi=100, sharex=True, height_ratios=(3, 1, 2, 2))
+    for k, (label, s) in enumerate(series.items()):
+        if s.get("hop") is None:
+            continue
+        n = min(len(s["hop"]["com_height"]), int(round(seconds / dt)))
+        t = dt * np.arange(1, n + 1)
+        color = f"C{k}"
+        axes[0].plot(t, 100.0 * np.asarray(s["hop"]["com_height"][:n]), color=color, label=f"{label}: COM height")
+        axes[0].axhline(100.0 * s["hop"]["target"], color=color, ls="--", lw=1, label=f"{label}: commanded apex")
+        axes[1].step(t, [_MODE_LEVEL[m] for m in s["mode"][:n]], where="post", color=color, label=label)
+        lam = np.asarray(s["contact_force"][:n]) / s["weight"]
+        axes[2].plot(t, lam[:, 1], color=color, label=f"{label}: lam_y")
+        axes[2].plot(t, lam[:, 0], color=color, ls=":", label=f"{label}: lam_x")
+        impulse = np.asarray(s["impulse"][:n])
+        hits = np.flatnonzero(np.hypot(impulse[:, 0], impulse[:, 1]) > 0)
+        axes[3].stem(t[hits], impulse[hits, 1], linefmt=color, basefmt=" ", label=f"{label}: P_y")
+    axes[0].set_ylabel("COM height [cm]")
+    axes[1].set_yticks([0, 1, 2], ["flight", "slip", "stick"])
+    axes[1].set_ylabel("mode")
+    axes[2].set_ylabel("force / mg")
+    axes[3].set_ylabel("impact impulse [N s]")
+    axes[3].set_xlabel("time [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right", ncol=2)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_push_curve(curves: dict[str, list], best: dict[str, float], path: Path) -> Path:
+    """Survival rate against push impulse for each controller, with the 90% level and each one's largest impulse there."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=100)
+    for k, (label, rows) in enumerate(curves.items()):
+        color = f"C{k}"
+        ax.plot([r["impulse"] for r in rows], [100.0 * r["survival_rate"] for r in rows], "o-", ms=4, color=color, label=f"{label} (90% up to {best[label]:.1f} N s)")
+        if best[label] > 0:
+            ax.axvline(best[label], color=color, ls=":", lw=1)
+    ax.axhline(90.0, color="k", ls="--", lw=0.8)
+    ax.set_xlabel("push impulse [N s] (horizontal force on the torso for 0.1 s)")
+    ax.set_ylabel("survival over 10 s [%]")
+    ax.set_ylim(-5, 105)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

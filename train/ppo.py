@@ -1,6 +1,7 @@
-"""Train PPO on ``leg_env/PlanarLegStance-v0`` with Stable-Baselines3.
+"""Train PPO on any leg-env task (default ``leg_env/PlanarLegStance-v0``) with Stable-Baselines3.
 
     python -m train.ppo --out runs/ppo_stance              # the default configuration
+    python -m train.ppo --env-id leg_env/PlanarLegPush-v0 --out runs/ppo_push
     python -m train.ppo --out runs/try --params learning_rate:1.0e-3 n_envs:64
 
 The env is natively batched and reaches SB3 through ``leg_env.sb3``'s VecEnv adapter, wrapped in
@@ -302,7 +303,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
     n_envs, seed = config["n_envs"], config["seed"]
     set_random_seed(seed)
     # each (re)start draws fresh episodes from its own block of small seeds
-    venv = make_sb3_vec_env(n_envs, seed=seed + progress["resumes"] * n_envs, **config["env_kwargs"])
+    venv = make_sb3_vec_env(n_envs, seed=seed + progress["resumes"] * n_envs, env_id=config["env_id"], **config["env_kwargs"])
     if checkpoint is None:
         if config["normalize"] is not False:
             venv = VecNormalize(venv, **config["normalize"])
@@ -354,10 +355,10 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
             )
 
     eval_cfg = config["eval"]
-    eval_venv = make_sb3_vec_env(eval_cfg["episodes"], seed=eval_cfg["seed"], **config["eval_env_kwargs"])
+    eval_venv = make_sb3_vec_env(eval_cfg["episodes"], seed=eval_cfg["seed"], env_id=config["env_id"], **config["eval_env_kwargs"])
     checkpointer = PeriodicCheckpoint(config["checkpoint_freq"], save)
     callbacks = [
-        RewardTermsLogger(),
+        RewardTermsLogger(eval_venv.env.reward_keys),
         PeriodicEvaluation(eval_venv, vec_normalize, eval_cfg["freq"], eval_cfg["seed"], history, report, clock),
         checkpointer,
     ]

@@ -1,0 +1,127 @@
+"""Training and evaluation on every task: train.ppo and train.evaluate take any task id, the Zoo file has
+an entry per task, the model-based baselines, and the task metrics (hop apexes, push survival)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import yaml
+
+import leg_env
+from policies.hopper import HopperController
+from policies.lqr import LQRController
+from train.evaluate import EvalArgs, evaluate, load_policy, run_episodes
+from train.ppo import TrainArgs, train
+from train.task_metrics import HopTracker, largest_survived_impulse, push_survival
+
+ROOT = Path(__file__).resolve().parents[1]
+TASK_IDS = ("leg_env/PlanarLegStance-v1", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0")
+TINY = ["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]
+
+
+def test_zoo_file_has_an_entry_per_task():
+    entries = yaml.safe_load((ROOT / "train" / "hyperparams" / "ppo.yml").read_text())
+    assert set(leg_env.ENV_IDS) <= set(entries)
+
+
+@pytest.mark.parametrize("env_id", TASK_IDS)
+def test_train_and_evaluate_take_any_task(env_id, tmp_path):
+    out = train(TrainArgs(out=tmp_path / "run", env_id=env_id, params=list(TINY), total_timesteps=128, eval_freq=128,
+                          eval_episodes=2, checkpoint_freq=0, progress_bar=False, verbose=0))  # fmt: skip
+    config = yaml.safe_load((out / "config.yaml").read_text())
+    assert config["env_id"] == env_id
+    policy = load_policy(out)
+    env = gym.make(env_id)
+    assert policy.model.observation_space.shape == env.observation_space.shape
+    result = evaluate(EvalArgs(policy=str(out), episodes=2, plot=False))  # the task from the run's config
+    summary = json.loads((result / "policy.json").read_text())
+    assert summary["env_id"] == env_id
+    assert set(summary["mean_reward_terms"]) == set(env.unwrapped.task.reward_terms)
+
+
+def test_lqr_reads_the_unilateral_observation():
+    env = gym.make("leg_env/PlanarLegStance-v1")
+    lqr = load_policy("lqr", env_id="leg_env/PlanarLegStance-v1")
+    assert isinstance(lqr, LQRController)
+    obs, _ = env.reset(seed=3)
+    action, _ = lqr.predict(obs)
+    pinned = LQRController(env.unwrapped.params, env.unwrapped.config).predict(obs[:12])[0]
+    np.testing.assert_array_equal(action, pinned)  # the same entries, the same gain
+    with pytest.raises(ValueError, match="observation"):
+        lqr.predict(np.zeros(13))
+
+
+def test_hopper_is_loaded_for_the_hop_task_and_is_batched():
+    hopper = load_policy("hopper", env_id="leg_env/PlanarLegHop-v0")
+    assert isinstance(hopper, HopperController)
+    envs = gym.make_vec("leg_env/PlanarLegHop-v0", num_envs=3)
+    obs, _ = envs.reset(seed=5)
+    batch, _ = hopper.predict(obs)
+    singles = []
+    for row in obs:
+        hopper.reset()
+        singles.append(hopper.predict(row)[0])
+    np.testing.assert_array_equal(batch, np.stack(singles))
+    assert batch.shape == (3, 2) and np.all(np.abs(batch) <= 1.0)
+    with pytest.raises(ValueError, match="19"):
+        hopper.predict(np.zeros(18))
+
+
+def test_hop_tracker_apex_is_the_ballistic_apex():
+    """A robot thrown upwards with zero torques: the tracker's apex is the same at every instant of the
+    flight and lies above the highest sampled COM height by at most g dt^2 / 8."""
+    env = gym.make("leg_env/PlanarLegHop-v0")
+    env.reset(seed=0)
+    q, _, _ = env.unwrapped.state
+    q = q.copy()
+    q[1] += 0.05  # the foot 5 cm above the ground
+    qd = np.zeros(5)
+    qd[1] = 1.0
+    obs, _ = env.reset(seed=0, options={"qpos": q, "qvel": qd})
+    tracker = HopTracker()
+    tracker.start(env, obs)
+    heights = []
+    while True:
+        obs, _, _, _, info = env.step(np.zeros(2))
+        if info["contact_mode"] != "flight":
+            break
+        tracker.step(env, obs, info)
+        heights.append(tracker.series["com_height"][-1])
+    apex = np.asarray(tracker.series["apex"])
+    assert len(apex) > 10
+    np.testing.assert_allclose(apex, apex[0], rtol=0, atol=1e-9)
+    g, dt = env.unwrapped.params.g, env.unwrapped.dt
+    assert 0.0 <= apex[0] - max(heights) <= g * dt * dt / 8 + 1e-12
+    assert tracker.summary()["hops"] == 0  # it started in flight: no lift-off was seen
+
+
+def test_hop_tracker_counts_hops_and_errors_of_the_hopper():
+    hopper = HopperController()
+    summary, series = run_episodes(hopper, [10_000], record=0, env_id="leg_env/PlanarLegHop-v0")
+    assert {"hops", "mean_abs_apex_error", "rms_apex_error", "mean_hop_period", "mean_landing_impulse"} <= set(summary)
+    hop = series["hop"]
+    assert len(hop["com_height"]) == summary["per_episode"][0]["length"]
+    flying = ~np.isnan(np.asarray(hop["apex"]))  # apexes exist in flight only
+    assert summary["hops"] == int(flying[0]) + int(np.sum(flying[1:] & ~flying[:-1]))  # it starts standing
+    assert summary["hops"] > 0
+
+
+def test_push_survival_uses_the_same_seeds_and_fixed_forces():
+    lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v0")
+    rows = push_survival(lqr, [0.0, 200.0], episodes=4, seed=10_000)
+    assert [r["force"] for r in rows] == [0.0, 200.0]
+    assert rows[0]["survival_rate"] == 1.0  # no push: the LQR balances
+    assert rows[1]["survival_rate"] == 0.0  # 20 N s: far beyond standing recovery
+    assert rows[1]["impulse"] == pytest.approx(20.0)
+    assert largest_survived_impulse(rows) == 0.0
+    assert largest_survived_impulse([{"impulse": 1.0, "survival_rate": 1.0}, {"impulse": 2.0, "survival_rate": 0.9},
+                                     {"impulse": 3.0, "survival_rate": 0.5}, {"impulse": 4.0, "survival_rate": 0.95}]) == 2.0  # fmt: skip
+
+
+def test_push_curve_needs_the_push_task(tmp_path):
+    with pytest.raises(ValueError, match="PlanarLegPush-v0"):
+        evaluate(EvalArgs(policy="lqr", env_id="leg_env/PlanarLegStance-v1", episodes=1, push_curve=True, out=tmp_path, plot=False))

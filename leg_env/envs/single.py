@@ -16,7 +16,7 @@ from ..hybrid import GROUND_TOL
 from .. import tasks
 from ..step import (
     FLAG_NAMES, OUT_EXTRA, OUT_LAM, STATE_ACTION, STATE_ANCHOR, STATE_MODE, STATE_Q, STATE_QD, compiled_entry,
-    physics_range, physics_start,
+    physics_start,
 )  # fmt: skip
 from ..step import OUT_BASE
 from ..tasks.stance import OUT_KICK, StanceConfig, info_template, nominal_state, row_info, starts_from_noise, task_constants
@@ -29,8 +29,8 @@ QPOS_BOUND = 1.0e6
 MAX_PIXELS = 16384  # largest frame width or height
 # attributes that are views of the buffers (rebuilt by _bind, never pickled)
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_action_row", "_out_row", "_flag_row", "_obs_row", "_kernel_args", "_force_row", "_kick_row",
-          "_physics_kernel", "_physics_start", "_step_kernel", "_start_kernel", "_task_columns", "task", "_physics_args",
-          "_tail_keys", "_n_terms", "_template")  # fmt: skip
+          "_physics_start", "_step_kernel", "_start_kernel", "_task_columns", "task", "_physics_args",
+          "_tail_keys", "_template")  # fmt: skip
 
 
 class LegEnv(gym.Env):
@@ -122,18 +122,13 @@ class LegEnv(gym.Env):
             self._open_window()  # before the state changes
         self._action_row[0] = a0
         self._action_row[1] = a1
-        self._physics_kernel(0, 1, *self._physics_args)
-        self._step_kernel(*self._kernel_args)
+        reward = self._step_kernel(0, 1, *self._kernel_args)  # physics, then the task; the terms summed in order
         out, flags = self._out_row.tolist(), self._flag_row.tolist()  # one conversion each serves every key
         if self.unilateral:
             info = row_info(out, flags, self._force_row, self._template, self._kick_row, self._state[0, STATE_MODE])
         else:
             info = row_info(out, flags, self._force_row, self._template)
-        tail = out[OUT_BASE:]  # the reward terms, then the task's own info
-        info.update(zip(self._tail_keys, tail))
-        reward = tail[0]
-        for k in range(1, self._n_terms):  # summed in order
-            reward += tail[k]
+        info.update(zip(self._tail_keys, out[OUT_BASE:]))  # the reward terms, then the task's own info
         if self.render_mode == "human":
             self.render()
         return self._obs_row.copy(), reward, flags[0], False, info
@@ -193,12 +188,10 @@ class LegEnv(gym.Env):
         self._force_row, self._kick_row = out[0, OUT_LAM], out[0, OUT_KICK]
         self._kernel_args = (state, self._consts, out, self._obs, self._flags)
         self._physics_args = (state, self._consts, out, self._flags)
-        self._physics_kernel = compiled_entry(physics_range, (0, 1) + self._physics_args)
         self._physics_start = compiled_entry(physics_start, self._physics_args)
-        self._step_kernel = compiled_entry(self.task.assess, self._kernel_args)
+        self._step_kernel = compiled_entry(self.task.step_one, (0, 1) + self._kernel_args)
         self._start_kernel = compiled_entry(self.task.start, self._kernel_args)
         self._tail_keys = self.task.reward_keys + self.task.info_names  # the columns out[OUT_BASE:]
-        self._n_terms = len(self.task.reward_terms)
         self._template = info_template(self.unilateral, self._tail_keys)
         self._task_columns = state[0, len(state[0]) - len(self.task.state_names):] if self.task.state_names else None
 

@@ -58,13 +58,14 @@ from numba import njit
 from .._jit import CACHE
 from .. import checks
 from ..hybrid import ACC_KICK_X, ACC_KICK_Y, ACC_SLIP_DISTANCE
-from ..step import OUT_BASE, STATE_DIM
+from ..step import OUT_BASE, STATE_DIM, physics_range
 from .base import Task
 from .stance import OBS_DIM_UNILATERAL, StanceConfig, _assess, _evaluate, _unpack, _weight, observation_space as _stance_space
 
 __all__ = ["HopConfig", "TASK", "REWARD_TERMS", "OBS_DIM"]
 
 REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl")
+N_TERMS = len(REWARD_TERMS)
 OBS_DIM = OBS_DIM_UNILATERAL + 1
 STATE_NAMES = ("command", "x_com0")
 _COMMAND, _XCOM0 = STATE_DIM, STATE_DIM + 1
@@ -209,12 +210,26 @@ def start(state, consts, out, obs, flags):
         s[_XCOM0] = _com_state(s, p)[0]
 
 
+@njit(cache=CACHE)
+def step_one(lo, hi, state, consts, out, obs, flags):
+    """The single env's control step in one compiled call: ``physics_range`` of the rows ``lo .. hi - 1``
+    (all of them: the single env has one), then ``assess``; returns row ``lo``'s reward, its terms summed
+    in order."""
+    physics_range(lo, hi, state, consts, out, flags)
+    assess(state, consts, out, obs, flags)
+    reward = out[lo, OUT_BASE]
+    for k in range(1, N_TERMS):
+        reward += out[lo, OUT_BASE + k]
+    return reward
+
+
 TASK = Task(
     name="hop",
     config_cls=HopConfig,
     reward_terms=REWARD_TERMS,
     assess=assess,
     start=start,
+    step_one=step_one,
     observation_space=observation_space,
     state_names=STATE_NAMES,
     draws=_draws,

@@ -73,7 +73,7 @@ from numba import njit
 
 from .._jit import CACHE
 from .. import checks
-from ..step import FAILED, OUT_BASE, STATE_DIM, STATE_LOAD, _PREV0
+from ..step import FAILED, OUT_BASE, STATE_DIM, STATE_LOAD, _PREV0, physics_range
 from .base import Task
 from .stance import (
     REWARD_TERMS as _STANCE_TERMS,
@@ -89,6 +89,7 @@ __all__ = ["PushConfig", "TASK", "MAX_PUSHES", "REWARD_TERMS", "INFO_NAMES"]
 
 MAX_PUSHES = 8  # pushes scheduled per episode: at least 0.8 + 7 x 2 s = 14.8 s of them
 REWARD_TERMS = _STANCE_TERMS + ("com",)
+N_TERMS = len(REWARD_TERMS)
 INFO_NAMES = ("push_force", "work_push")
 STATE_NAMES = ("steps", "x_com0") + tuple(f"push_start_{k}" for k in range(MAX_PUSHES)) + tuple(
     f"push_force_{k}" for k in range(MAX_PUSHES)
@@ -233,12 +234,26 @@ def start(state, consts, out, obs, flags):
         s[STATE_LOAD] = _load_at(s, 0.0, push_steps)
 
 
+@njit(cache=CACHE)
+def step_one(lo, hi, state, consts, out, obs, flags):
+    """The single env's control step in one compiled call: ``physics_range`` of the rows ``lo .. hi - 1``
+    (all of them: the single env has one), then ``assess``; returns row ``lo``'s reward, its terms summed
+    in order."""
+    physics_range(lo, hi, state, consts, out, flags)
+    assess(state, consts, out, obs, flags)
+    reward = out[lo, OUT_BASE]
+    for k in range(1, N_TERMS):
+        reward += out[lo, OUT_BASE + k]
+    return reward
+
+
 TASK = Task(
     name="push",
     config_cls=PushConfig,
     reward_terms=REWARD_TERMS,
     assess=assess,
     start=start,
+    step_one=step_one,
     observation_space=observation_space,
     info_names=INFO_NAMES,
     state_names=STATE_NAMES,

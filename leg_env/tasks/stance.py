@@ -105,6 +105,7 @@ UNILATERAL_KEYS = (
 #   obs (N, OBS_DIM or OBS_DIM_UNILATERAL) float32
 _TERMS0 = OUT_BASE
 OUT_DIM = OUT_BASE + len(REWARD_TERMS)
+N_TERMS = len(REWARD_TERMS)
 OUT_TERMS = slice(_TERMS0, OUT_DIM)
 OUT_KICK = slice(ACC0 + ACC_KICK_X, ACC0 + ACC_KICK_Y + 1)  # the step's impact impulses (unilateral model)
 _INF = math.inf
@@ -515,6 +516,19 @@ def start(state, consts, out, obs, flags):
             terms[i, k] = 0.0
 
 
+@njit(cache=CACHE)
+def step_one(lo, hi, state, consts, out, obs, flags):
+    """The single env's control step in one compiled call: ``physics_range`` of the rows ``lo .. hi - 1``
+    (all of them: the single env has one), then ``assess``; returns row ``lo``'s reward, its terms summed
+    in order."""
+    physics_range(lo, hi, state, consts, out, flags)
+    assess(state, consts, out, obs, flags)
+    reward = out[lo, OUT_BASE]
+    for k in range(1, N_TERMS):
+        reward += out[lo, OUT_BASE + k]
+    return reward
+
+
 def step_batch(state, consts, out, obs, flags):
     """Advance every robot one control step and evaluate the task, in place (one thread).
 
@@ -742,6 +756,7 @@ TASK = Task(
     reward_terms=REWARD_TERMS,
     assess=assess,
     start=start,
+    step_one=step_one,
     observation_space=observation_space,
 )
 """The balance task as the shared environments see it (``leg_env.tasks.base.Task``)."""

@@ -9,7 +9,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-__all__ = ["RewardTermsLogger", "PeriodicEvaluation", "PeriodicCheckpoint", "run_vec_episodes", "evaluate_now"]
+__all__ = ["RewardTermsLogger", "PeriodicEvaluation", "PeriodicCheckpoint", "FrozenActor", "run_vec_episodes", "evaluate_now"]
 
 VIOLATION_KEYS = ("unilateral_violation", "friction_violation")
 
@@ -203,3 +203,34 @@ class PeriodicCheckpoint(_Periodic):
 
     def _on_rollout_end(self) -> None:
         self.collecting = False
+
+
+class FrozenActor(BaseCallback):
+    """Keep the actor (its network, action head and ``log_std``) fixed until ``until`` environment steps.
+
+    For a warm start from a cloned controller (``train.warmstart``): the value network starts untrained, and
+    PPO's first updates on its advantages would undo the clone; the critic learns first, on the clone's own
+    rollouts. The parameters are frozen through ``requires_grad``, so the optimiser skips them, and thawed
+    at the first rollout that starts at or after ``until`` (a resumed run past it starts thawed).
+    """
+
+    def __init__(self, until: int):
+        super().__init__()
+        self.until = int(until)
+
+    def _actor(self):
+        policy = self.model.policy
+        return list(policy.mlp_extractor.policy_net.parameters()) + list(policy.action_net.parameters()) + [policy.log_std]
+
+    def _init_callback(self) -> None:
+        self._set(self.model.num_timesteps >= self.until)
+
+    def _on_rollout_start(self) -> None:
+        self._set(self.model.num_timesteps >= self.until)
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _set(self, trainable: bool) -> None:
+        for parameter in self._actor():
+            parameter.requires_grad_(trainable)

@@ -474,8 +474,8 @@ def evaluate(args: EvalArgs) -> Path:
     return out
 
 
-PUSH_FORCES = tuple(range(20, 201, 10))
-"""Push magnitudes of ``--push-curve`` [N]: 2 to 20 N s over the task's 0.1 s push."""
+PUSH_FORCES = tuple(range(5, 201, 5))
+"""Push magnitudes of ``--push-curve`` [N]: 0.5 to 20 N s over the task's 0.1 s push, in steps of 0.5 N s."""
 
 
 def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs, out: Path) -> dict:

@@ -112,6 +112,13 @@ class TrainArgs:
     registered task as is, whatever reward shaping the training env's env_kwargs add."""
     seed: int = 0
     """Seed of the training envs, the network initialisation and the sampling."""
+    critic_warmup: int = 500_000
+    """With --init-from lqr or hopper: environment steps during which only the value network learns (the
+    cloned actor is kept fixed, train.callbacks.FrozenActor); 0 to train both from the start."""
+    init_from: str | None = None
+    """Start from a trained policy folder's networks (e.g. policies/ppo_stance: every parameter copied, zero
+    input weights for observation entries the source lacks), or from a model-based controller cloned into
+    the actor ('lqr', 'hopper': behaviour cloning, train/warmstart.py) instead of random networks."""
     eval_freq: int = 100_000
     """Environment steps between evaluations (0 disables them; one is always run at the end)."""
     eval_episodes: int = 20
@@ -137,7 +144,7 @@ class TrainArgs:
             raise ValueError(f"total_timesteps must be >= 1, got {self.total_timesteps}")
         if self.eval_episodes < 1:
             raise ValueError(f"eval_episodes must be >= 1 (one is always run at the end), got {self.eval_episodes}")
-        for name in ("eval_freq", "checkpoint_freq", "seed"):
+        for name in ("eval_freq", "checkpoint_freq", "seed", "critic_warmup"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
 
@@ -184,6 +191,8 @@ def resolve_config(args: TrainArgs) -> dict:
         "env_kwargs": hp.pop("env_kwargs", None) or {},
         "eval_env_kwargs": dict(_parse_override(item) for item in args.eval_env_kwargs),
         "seed": int(args.seed),
+        "critic_warmup": int(args.critic_warmup) if args.init_from is not None and args.init_from.lower() in ("lqr", "hopper") else 0,
+        "init_from": None if args.init_from is None else (args.init_from if args.init_from.lower() in ("lqr", "hopper") else _display_path(Path(args.init_from))),
         "n_envs": int(hp.pop("n_envs", 1)),
         "total_timesteps": int(total),
         "policy": hp.pop("policy", "MlpPolicy"),
@@ -214,6 +223,20 @@ def _schedule(value):
         initial = float(initial)
         return lambda progress_remaining: progress_remaining * initial
     return value
+
+
+def warm_start(model, init_from: str, config: dict) -> None:
+    """Start ``model`` from ``init_from`` (``TrainArgs.init_from``, ``train.warmstart``)."""
+    from train import warmstart
+
+    if init_from.lower() in ("lqr", "hopper"):
+        from train.evaluate import load_policy
+
+        controller = load_policy(init_from.lower(), env_kwargs=config["env_kwargs"], env_id=config["env_id"])
+        rms = warmstart.clone_controller(model, controller, config["env_id"], config["env_kwargs"], config["seed"])
+        print(f"init_from {init_from}: the actor fitted to its actions, RMS error {rms:.4f} (action units)")
+    else:
+        warmstart.copy_policy(model, Path(init_from))
 
 
 def _ppo_kwargs(config: dict) -> dict:
@@ -281,7 +304,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
     from stable_baselines3.common.vec_env import VecNormalize
 
     from leg_env.sb3 import make_sb3_vec_env
-    from train.callbacks import PeriodicCheckpoint, PeriodicEvaluation, RewardTermsLogger, evaluate_now
+    from train.callbacks import FrozenActor, PeriodicCheckpoint, PeriodicEvaluation, RewardTermsLogger, evaluate_now
     from train.plots import plot_learning_curve
 
     checkpoint = None
@@ -316,6 +339,8 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
             verbose=max(0, args.verbose - 1),
             **_ppo_kwargs(config),
         )
+        if config.get("init_from"):
+            warm_start(model, config["init_from"], config)
     else:
         if checkpoint.vec_normalize is not None:
             checkpoint.vec_normalize.set_venv(venv)
@@ -362,6 +387,8 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
         PeriodicEvaluation(eval_venv, vec_normalize, eval_cfg["freq"], eval_cfg["seed"], history, report, clock),
         checkpointer,
     ]
+    if config.get("critic_warmup"):
+        callbacks.append(FrozenActor(config["critic_warmup"]))
     remaining = config["total_timesteps"] - model.num_timesteps
     try:
         if remaining > 0:

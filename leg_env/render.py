@@ -14,7 +14,9 @@ feasible and red when a contact constraint is violated (``lam_y < 0`` or outside
 On the unilateral ground (``mode`` given) the foot shows its contact mode: a green disc in stick, an
 orange disc with an arrow along the sliding direction in slip, a hollow blue ring in flight (with a
 dashed line down to the ground); the friction cone is drawn only in contact. A step with an impact
-draws a yellow burst at the foot whose size grows with the impulse.
+draws a yellow burst at the foot whose size grows with the impulse. A horizontal push on the torso
+(``push``, the push-recovery task) is a purple arrow ending at the hip, drawn at the scale of the ground's
+force (the robot's weight as half a leg length).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ VIOLATED = (215, 35, 35)
 SLIPPING = (235, 130, 20)
 FLYING = (40, 120, 220)
 BURST = (250, 200, 30)
+PUSH = (150, 60, 190)
 
 
 def _pygame():
@@ -98,7 +101,7 @@ def _arrow(pygame, surface, start, end, colour, width_px: int) -> None:
     pygame.draw.polygon(surface, colour, [(ex, ey), (bx - half * uy, by + half * ux), (bx + half * uy, by - half * ux)])
 
 
-def _paint(pygame, surface, q, anchor, lam, params: LegParams, violated: bool, mu: float | None, mode=None, impulse=None) -> None:
+def _paint(pygame, surface, q, anchor, lam, params: LegParams, violated: bool, mu: float | None, mode=None, impulse=None, push=0.0) -> None:
     """Paint one frame of the robot on ``surface`` (see the module docstring)."""
     width, height = surface.get_size()
     p = params
@@ -162,6 +165,10 @@ def _paint(pygame, surface, q, anchor, lam, params: LegParams, violated: bool, m
         k = 0.5 * leg / weight
         tip = camera(foot[0] + k * lam_x, foot[1] + k * lam_y)
         _arrow(pygame, surface, camera(*foot), tip, VIOLATED if violated else FEASIBLE, max(3, round(0.012 * height)))
+    push = float(push)
+    if push != 0.0 and math.isfinite(push):  # the push on the torso's COM (the hip), pointing at it
+        tail = camera(x_b - 0.5 * leg / weight * push, y_b)
+        _arrow(pygame, surface, tail, camera(x_b, y_b), PUSH, max(3, round(0.012 * height)))
 
 
 def _contact_mode_marker(pygame, surface, camera, foot, ground: float, mode: int, joint_px: float) -> None:
@@ -196,7 +203,7 @@ def _burst(pygame, surface, centre, speed_change: float, joint_px: float) -> Non
 
 def draw(
     q, anchor, lam, params: LegParams, violated: bool = False, width: int = 480, height: int = 480, mu: float | None = None,
-    mode: int | None = None, impulse=None,
+    mode: int | None = None, impulse=None, push: float = 0.0,
 ) -> np.ndarray:  # fmt: skip
     """One frame of the robot, off-screen (no display needed).
 
@@ -210,13 +217,14 @@ def draw(
         mu: friction coefficient; if given, the friction cone is drawn at the contact point.
         mode: the contact mode on the unilateral ground (``leg_env.contact`` constants), or None (pinned).
         impulse: ``(2,)`` impact impulse of the last step [N s] (a burst is drawn if it is not zero).
+        push: horizontal force on the torso's COM over the last step [N] (an arrow is drawn if it is not zero).
 
     Returns:
         ``(height, width, 3)`` uint8 RGB frame.
     """
     pygame = _pygame()
     surface = pygame.Surface((int(width), int(height)))
-    _paint(pygame, surface, q, anchor, lam, params, violated, mu, mode, impulse)
+    _paint(pygame, surface, q, anchor, lam, params, violated, mu, mode, impulse, push)
     return np.ascontiguousarray(np.transpose(pygame.surfarray.array3d(surface), (1, 0, 2)))
 
 
@@ -260,10 +268,10 @@ class Viewer:
         self.clock = pygame.time.Clock()
         self.fps = fps
 
-    def show(self, q, anchor, lam, params: LegParams, violated: bool = False, mu: float | None = None, mode=None, impulse=None) -> None:
+    def show(self, q, anchor, lam, params: LegParams, violated: bool = False, mu: float | None = None, mode=None, impulse=None, push=0.0) -> None:
         """Draw the robot in the window (arguments of ``draw``) and wait for the next frame time."""
         pygame = self._pygame
-        _paint(pygame, self.screen, q, anchor, lam, params, violated, mu, mode, impulse)
+        _paint(pygame, self.screen, q, anchor, lam, params, violated, mu, mode, impulse, push)
         pygame.event.pump()
         pygame.display.flip()
         self.clock.tick(self.fps)

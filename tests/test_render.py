@@ -92,3 +92,30 @@ def test_human_mode_opens_a_window_and_closes():
     assert clone._viewer is None
     env.close()
     env.close()  # closing twice is allowed
+
+
+def test_a_push_shows_as_an_arrow_at_the_torso():
+    """The push task's frames show the push (purple) while it acts, ending at the hip from the side it
+    pushes from, and not before or after it."""
+    from leg_env.render import PUSH, _Camera
+
+    env = gym.make("leg_env/PlanarLegPush-v0", render_mode="rgb_array", push_force=(100.0, 100.0), first_push=(0.05, 0.05))
+    env.reset(seed=1)
+    assert count(env.render(), PUSH) == 0
+    for _ in range(10):  # the push starts 0.05 s in and lasts 10 steps of 0.01 s
+        _, _, _, _, info = env.step(np.zeros(2))
+        if info["push_force"] != 0.0:
+            break
+    assert abs(info["push_force"]) == 100.0
+    frame = env.render()
+    purple = np.all(frame == np.array(PUSH, dtype=np.uint8), axis=-1)
+    assert purple.sum() > 20
+    q, _, anchor = env.unwrapped.state
+    u = env.unwrapped
+    hip_col = _Camera(anchor, u.params, u.width, u.height)(q[0], q[1])[0]
+    columns = np.flatnonzero(purple.any(axis=0))
+    side = np.sign(info["push_force"])  # a push to +x comes from the left of the hip
+    assert np.all(side * (columns - hip_col) <= 2) and np.any(side * (columns - hip_col) < -20)
+    for _ in range(10):
+        _, _, terminated, _, info = env.step(np.zeros(2))
+    assert info["push_force"] == 0.0 and count(env.render(), PUSH) == 0

@@ -144,12 +144,14 @@ class LegEnv(gym.Env):
 
         violated = bool(self._flags[0, 1] or self._flags[0, 2])
         mode, impulse = contact_marks(self._state, self._out, 0, self.unilateral)
+        push = push_mark(self.task, self._out, 0)
         if self.render_mode == "rgb_array":
             return render.draw(
-                self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.width, self.height, self.config.mu, mode, impulse
-            )
+                self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.width, self.height, self.config.mu, mode, impulse,
+                push,
+            )  # fmt: skip
         self._open_window()
-        self._viewer.show(self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.config.mu, mode, impulse)
+        self._viewer.show(self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.config.mu, mode, impulse, push)
         return None
 
     def _open_window(self) -> None:
@@ -263,6 +265,14 @@ def contact_marks(state: np.ndarray, out: np.ndarray, i: int, unilateral: bool):
     if not unilateral:
         return None, None
     return int(state[i, STATE_MODE]), out[i, OUT_KICK]
+
+
+def push_mark(task, out: np.ndarray, i: int) -> float:
+    """The push on robot ``i``'s torso over its last step [N] for the renderer (the task's ``push_force``
+    info column), 0 for a task without pushes."""
+    if "push_force" not in task.info_names:
+        return 0.0
+    return float(out[i, task.out_info.start + task.info_names.index("push_force")])
 
 
 def start_anchor(q: np.ndarray, params: LegParams, unilateral: bool) -> np.ndarray:

@@ -42,7 +42,7 @@ from ..step import (
     physics_start,
 )
 from ..tasks.stance import INFO_NAMES, REWARD_TERMS, UNILATERAL_KEYS, StanceConfig, starts_from_noise, task_constants, unilateral_columns
-from .single import LegEnv, contact_marks, explicit_start, start_anchor
+from .single import LegEnv, contact_marks, explicit_start, push_mark, start_anchor
 
 __all__ = ["LegVectorEnv", "PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
 
@@ -287,7 +287,7 @@ class LegVectorEnv(VectorEnv):
             frames.append(
                 render.draw(
                     self._q[i], self._anchor[i], self._lam[i], self.params, violated, self.width, self.height, self.config.mu,
-                    mode, impulse,
+                    mode, impulse, push_mark(self.task, self._out, i),
                 )
             )  # fmt: skip
         return tuple(frames)

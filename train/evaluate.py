@@ -474,8 +474,9 @@ def evaluate(args: EvalArgs) -> Path:
     return out
 
 
-PUSH_FORCES = tuple(range(5, 201, 5))
-"""Push magnitudes of ``--push-curve`` [N]: 0.5 to 20 N s over the task's 0.1 s push, in steps of 0.5 N s."""
+PUSH_FORCES = tuple(2.5 * k for k in range(1, 25)) + tuple(range(70, 201, 10))
+"""Push magnitudes of ``--push-curve`` [N]: 2.5 to 60 N in steps of 2.5 N (0.25 N s over the task's 0.1 s push,
+where the controllers' limits lie), then to 200 N (20 N s) in steps of 10 N."""
 
 
 def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs, out: Path) -> dict:
@@ -491,8 +492,8 @@ def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs
     lines = ["| push [N] | impulse [N s] | " + " | ".join(f"{n} survival" for n in names) + " |", "|---:|---:|" + "---:|" * len(names)]
     for k, force in enumerate(PUSH_FORCES):
         impulse = curves[names[0]][k]["impulse"]
-        lines.append(f"| {force} | {impulse:.1f} | " + " | ".join(f"{100 * curves[n][k]['survival_rate']:.0f}%" for n in names) + " |")
-    lines.append("| **90% survival up to** | | " + " | ".join(f"**{best[n]:.1f} N s**" for n in names) + " |")
+        lines.append(f"| {force:g} | {impulse:.2f} | " + " | ".join(f"{100 * curves[n][k]['survival_rate']:.0f}%" for n in names) + " |")
+    lines.append("| **90% survival up to** | | " + " | ".join(f"**{best[n]:.2f} N s**" for n in names) + " |")
     table = "\n".join(lines)
     (out / "push_curve.md").write_text(f"{args.episodes} episodes per push magnitude, seeds {args.seed}..{args.seed + args.episodes - 1}\n\n{table}\n")
     print(table)

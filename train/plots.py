@@ -145,7 +145,7 @@ def plot_push_curve(curves: dict[str, list], best: dict[str, float], path: Path)
     fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=100)
     for k, (label, rows) in enumerate(curves.items()):
         color = f"C{k}"
-        ax.plot([r["impulse"] for r in rows], [100.0 * r["survival_rate"] for r in rows], "o-", ms=4, color=color, label=f"{label} (90% up to {best[label]:.1f} N s)")
+        ax.plot([r["impulse"] for r in rows], [100.0 * r["survival_rate"] for r in rows], "o-", ms=4, color=color, label=f"{label} (90% up to {best[label]:.2f} N s)")
         if best[label] > 0:
             ax.axvline(best[label], color=color, ls=":", lw=1)
     ax.axhline(90.0, color="k", ls="--", lw=0.8)

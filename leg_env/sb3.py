@@ -25,7 +25,7 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
 from . import checks
-from .envs.vector import REWARD_KEYS, STATE_KEYS, LegVectorEnv
+from .envs.vector import STATE_KEYS, LegVectorEnv
 from .step import STATE_MODE
 from .tasks.stance import UNILATERAL_KEYS
 

@@ -1,6 +1,10 @@
-"""The balance task's names where they used to live: ``leg_env.tasks.stance`` (kept for imports)."""
+"""The balance task's names where they used to live (kept for imports): ``leg_env.tasks.stance`` and the
+packed-array layout of ``leg_env.step`` it builds on."""
 
+from . import step as _step
 from .tasks import stance as _stance
 
-globals().update({name: value for name, value in vars(_stance).items() if not name.startswith("__")})
+for _module in (_step, _stance):
+    globals().update({name: value for name, value in vars(_module).items() if not name.startswith("__")})
+del _module
 __all__ = _stance.__all__

@@ -73,7 +73,7 @@ from numba import njit
 
 from .._jit import CACHE
 from .. import checks
-from ..step import FAILED, OUT_BASE, STATE_DIM, STATE_LOAD, _PREV0, physics_range
+from ..step import OUT_BASE, STATE_DIM, STATE_LOAD, _PREV0, physics_range
 from .base import Task
 from .stance import (
     REWARD_TERMS as _STANCE_TERMS,

@@ -45,9 +45,8 @@ from .. import checks
 from ..integrate import MAX_ANGLE, MAX_SUBSTEPS, SUBSTEPS, DT, _project_one
 from ..params import LegParams
 from ..step import (
-    ACC0, CONSTS_BASE, FAILED, FLAG_NAMES, NC, NOM0, OUT_BASE, OUT_EXTRA, OUT_LAM, OUT_ACC, OUT_HYBRID, STATE_ACTION,
-    STATE_ANCHOR, STATE_DIM, STATE_MODE, STATE_Q, STATE_QD, TAU0, BitGeneratorRows, compiled_entry, physics_range,
-    physics_start, undo_step,
+    ACC0, CONSTS_BASE, FAILED, FLAG_NAMES, NC, NOM0, OUT_BASE, OUT_EXTRA, OUT_LAM, STATE_DIM, STATE_MODE, TAU0,
+    BitGeneratorRows, compiled_entry, physics_range, physics_start, undo_step,
 )  # fmt: skip
 
 __all__ = [

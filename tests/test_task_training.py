@@ -175,3 +175,37 @@ def test_clone_controller_fits_the_lqr(monkeypatch):
     rms = warmstart.clone_controller(model, lqr, "leg_env/PlanarLegStance-v1", {}, seed=0)
     held_out = error()
     assert rms < 0.05 and held_out < 0.15 and held_out < before / 2  # fits its data, and carries over to fresh states
+
+
+def test_residual_env_applies_the_controller_plus_the_scaled_correction():
+    from leg_env.sb3 import make_sb3_vec_env
+    from train.residual import ResidualVecEnv, residual_action
+
+    np.testing.assert_array_equal(residual_action(np.array([0.5, -0.9]), np.array([3.0, -0.5]), 0.3), np.float32([0.8, -1.0]))
+    lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v0")
+    wrapped = ResidualVecEnv(make_sb3_vec_env(3, seed=7, env_id="leg_env/PlanarLegPush-v0"), lqr, 0.5)
+    plain = make_sb3_vec_env(3, seed=7, env_id="leg_env/PlanarLegPush-v0")
+    obs_w, obs_p = wrapped.reset(), plain.reset()
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        correction = rng.uniform(-1, 1, (3, 2)).astype(np.float32)
+        obs_w, _, _, _ = wrapped.step(correction)
+        obs_p, _, _, _ = plain.step(residual_action(lqr.predict(obs_p)[0], correction, 0.5))
+        np.testing.assert_array_equal(obs_w, obs_p)
+
+
+def test_residual_run_reloads_as_the_sum(tmp_path):
+    from train.residual import ResidualPolicy
+
+    out = train(TrainArgs(out=tmp_path / "run", env_id="leg_env/PlanarLegHop-v0", residual="hopper", residual_scale=0.2,
+                          params=list(TINY), total_timesteps=128, eval_freq=128, eval_episodes=2, checkpoint_freq=0,
+                          progress_bar=False, verbose=0))  # fmt: skip
+    policy = load_policy(out)
+    assert isinstance(policy, ResidualPolicy) and policy.scale == 0.2
+    obs = gym.make("leg_env/PlanarLegHop-v0").reset(seed=4)[0]
+    hopper = HopperController()
+    expected = np.clip(hopper.predict(obs)[0] + 0.2 * np.clip(policy.network.predict(obs)[0], -1, 1), -1, 1)
+    policy.reset()
+    np.testing.assert_allclose(policy.predict(obs)[0], expected, atol=1e-6)
+    with pytest.raises(ValueError, match="residual"):
+        TrainArgs(out=tmp_path / "x", residual="pid")

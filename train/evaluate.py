@@ -200,6 +200,14 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
         env_kwargs = config.get("eval_env_kwargs", config.get("env_kwargs")) or {}
     policy = TrainedPolicy(model, vec_normalize, env_kwargs, folder)
     policy.env_id = config.get("env_id")
+    residual = config.get("residual")
+    if residual:  # a residual on a model-based controller (train.residual): the policy is their sum
+        from train.residual import ResidualPolicy
+
+        if not isinstance(residual, dict) or residual.get("controller") not in BASELINES:
+            raise PolicyLoadError(f"the run configuration {folder / 'config.yaml'} has an unknown residual {residual!r}")
+        controller = load_policy(residual["controller"], env_kwargs=config.get("env_kwargs") or {}, env_id=policy.env_id)
+        return ResidualPolicy(policy, controller, residual["scale"])
     return policy
 
 

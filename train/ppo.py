@@ -112,6 +112,11 @@ class TrainArgs:
     registered task as is, whatever reward shaping the training env's env_kwargs add."""
     seed: int = 0
     """Seed of the training envs, the network initialisation and the sampling."""
+    residual: str | None = None
+    """Train a residual on a model-based controller ('lqr', 'hopper'): the robots get the controller's action
+    plus residual_scale times the network's (train/residual.py); the shipped policy is that sum."""
+    residual_scale: float = 0.3
+    """With --residual: the largest correction, in action units."""
     critic_warmup: int = 500_000
     """With --init-from lqr or hopper: environment steps during which only the value network learns (the
     cloned actor is kept fixed, train.callbacks.FrozenActor); 0 to train both from the start."""
@@ -144,6 +149,10 @@ class TrainArgs:
             raise ValueError(f"total_timesteps must be >= 1, got {self.total_timesteps}")
         if self.eval_episodes < 1:
             raise ValueError(f"eval_episodes must be >= 1 (one is always run at the end), got {self.eval_episodes}")
+        if self.residual is not None and self.residual.lower() not in ("lqr", "hopper"):
+            raise ValueError(f"residual must be 'lqr' or 'hopper', got {self.residual!r}")
+        if not 0.0 < self.residual_scale <= 2.0:
+            raise ValueError(f"residual_scale must be in (0, 2], got {self.residual_scale}")
         for name in ("eval_freq", "checkpoint_freq", "seed", "critic_warmup"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
@@ -191,6 +200,7 @@ def resolve_config(args: TrainArgs) -> dict:
         "env_kwargs": hp.pop("env_kwargs", None) or {},
         "eval_env_kwargs": dict(_parse_override(item) for item in args.eval_env_kwargs),
         "seed": int(args.seed),
+        "residual": None if args.residual is None else {"controller": args.residual.lower(), "scale": float(args.residual_scale)},
         "critic_warmup": int(args.critic_warmup) if args.init_from is not None and args.init_from.lower() in ("lqr", "hopper") else 0,
         "init_from": None if args.init_from is None else (args.init_from if args.init_from.lower() in ("lqr", "hopper") else _display_path(Path(args.init_from))),
         "n_envs": int(hp.pop("n_envs", 1)),
@@ -223,6 +233,18 @@ def _schedule(value):
         initial = float(initial)
         return lambda progress_remaining: progress_remaining * initial
     return value
+
+
+def _with_residual(venv, config: dict):
+    """``venv`` as seen by a residual policy (``train.residual``) when the run trains one, else itself."""
+    if not config.get("residual"):
+        return venv
+    from train.evaluate import load_policy
+    from train.residual import ResidualVecEnv
+
+    residual = config["residual"]
+    controller = load_policy(residual["controller"], env_kwargs=config["env_kwargs"], env_id=config["env_id"])
+    return ResidualVecEnv(venv, controller, residual["scale"])
 
 
 def warm_start(model, init_from: str, config: dict) -> None:
@@ -326,7 +348,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
     n_envs, seed = config["n_envs"], config["seed"]
     set_random_seed(seed)
     # each (re)start draws fresh episodes from its own block of small seeds
-    venv = make_sb3_vec_env(n_envs, seed=seed + progress["resumes"] * n_envs, env_id=config["env_id"], **config["env_kwargs"])
+    venv = _with_residual(make_sb3_vec_env(n_envs, seed=seed + progress["resumes"] * n_envs, env_id=config["env_id"], **config["env_kwargs"]), config)
     if checkpoint is None:
         if config["normalize"] is not False:
             venv = VecNormalize(venv, **config["normalize"])
@@ -380,10 +402,10 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
             )
 
     eval_cfg = config["eval"]
-    eval_venv = make_sb3_vec_env(eval_cfg["episodes"], seed=eval_cfg["seed"], env_id=config["env_id"], **config["eval_env_kwargs"])
+    eval_venv = _with_residual(make_sb3_vec_env(eval_cfg["episodes"], seed=eval_cfg["seed"], env_id=config["env_id"], **config["eval_env_kwargs"]), config)
     checkpointer = PeriodicCheckpoint(config["checkpoint_freq"], save)
     callbacks = [
-        RewardTermsLogger(eval_venv.env.reward_keys),
+        RewardTermsLogger(eval_venv.unwrapped.env.reward_keys),
         PeriodicEvaluation(eval_venv, vec_normalize, eval_cfg["freq"], eval_cfg["seed"], history, report, clock),
         checkpointer,
     ]

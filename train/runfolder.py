@@ -33,7 +33,7 @@ __all__ = ["RunFolderError", "RunLockedError", "RunLock", "prepare_run_folder", 
 
 LOCK_NAME = "train.lock"
 # configuration entries that define the training; a resume must match them
-RESUME_KEYS = ("env_id", "env_kwargs", "eval_env_kwargs", "seed", "n_envs", "policy", "normalize", "ppo")
+RESUME_KEYS = ("env_id", "env_kwargs", "eval_env_kwargs", "seed", "n_envs", "policy", "normalize", "ppo", "residual", "init_from")
 # what a run writes into its folder (the lock aside)
 RUN_FILES = (
     "model.zip",

@@ -125,11 +125,17 @@ def test_existing_run_is_not_overwritten(tmp_path):
     assert yaml.safe_load((out / "config.yaml").read_text())["seed"] == 1
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(tmp_path):
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "train.ppo", "--out", str(out), "--total-timesteps", "1000000", "--eval-freq", "0",
            "--checkpoint-freq", "0", "--no-progress-bar", "--verbose", "0", "--params", *TINY]  # fmt: skip
-    proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    # a Ctrl-C at a terminal: SIGINT at its default action in the child, even when this suite runs as a
+    # background job (a shell starts those with SIGINT ignored, and Python then installs no handler)
+    proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
     try:
         deadline = time.time() + 120
         while not list((out / "tb").rglob("events.out.tfevents.*")) and time.time() < deadline:

@@ -24,7 +24,7 @@ Packed arrays (row ``i`` is robot ``i``):
   a task that finds its observation overflowing float32 and must undo the step.
 * ``consts`` float64, read only: ``LegParams.array | config.array() | q_nom | tau_nom | task constants``.
   ``config.array()`` starts with the settings this module reads (``C_*`` indices).
-* ``out (N, OUT_BASE + task columns)`` float64: ``lam | extras | accumulators | energy, foot height |
+* ``out (N, OUT_BASE + task columns)`` float64: ``lam | extras | accumulators | energy, foot height | mode |
   reward terms | task info``; ``lam`` is the mean contact force over the step [N], the accumulators are
   the hybrid step's (``leg_env.hybrid.ACC_*``, unilateral model only).
 * ``obs (N, obs_dim)`` float32 and ``flags (N, len(FLAG_NAMES))`` bool.
@@ -48,8 +48,13 @@ __all__ = [
     "FLAG_NAMES",
     "STATE_DIM",
     "OUT_BASE",
+    "OUT_MODE",
     "physics_range",
     "physics_start",
+    "physics_start_noisy",
+    "perturbed_start",
+    "physics_one",
+    "summed_terms",
     "compiled_entry",
     "BitGeneratorRows",
 ]
@@ -70,7 +75,8 @@ OUT_LAM, OUT_EXTRA = slice(0, 2), slice(2, 5)
 ACC0 = 5  # first accumulator column
 HYB0 = ACC0 + ACC_DIM  # energy, foot height
 OUT_ACC, OUT_HYBRID = slice(ACC0, HYB0), slice(HYB0, HYB0 + 2)
-OUT_BASE = HYB0 + 2  # the first reward-term column
+OUT_MODE = HYB0 + 2  # the contact mode at the end of the step (a copy of the state's, for a cheap info)
+OUT_BASE = OUT_MODE + 1  # the first reward-term column
 
 # consts: LegParams | config.array() | q_nom | tau_nom | task constants
 NC = 23  # entries of StanceConfig.array(), the settings every task has
@@ -106,7 +112,7 @@ def physics_range(lo, hi, state, consts, out, flags):
     for i in range(lo, hi):
         s = state[i]
         q, qd, anchor = s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0]
-        lam, hyb = out[i, 0:2], out[i, ACC0:OUT_BASE]
+        lam, hyb = out[i, 0:2], out[i, ACC0:OUT_MODE]
         for j in range(10):
             s[_PREV0 + j] = s[j]
         s[_PREV_MODE] = s[STATE_MODE]
@@ -139,6 +145,7 @@ def physics_range(lo, hi, state, consts, out, flags):
             for j in range(hyb.shape[0]):
                 hyb[j] = 0.0
             flags[i, FAILED] = True
+        out[i, OUT_MODE] = s[STATE_MODE]
 
 
 @njit(cache=CACHE, inline="always")
@@ -171,24 +178,89 @@ def physics_start(state, consts, out, flags):
     holding torques without load (at the nominal posture exactly ``[0, m g]`` up to round-off), the
     accumulators are zeroed and so is the load (the task's ``start`` sets the first step's).
     """
-    c = consts[NP:NOM0]
-    tau = consts[TAU0:CONSTS_BASE]
     p = np.empty(NP + 1)
     for j in range(NP):
         p[j] = consts[j]
     qdd = np.empty(5)
     for i in range(state.shape[0]):
+        _start_row(i, state, consts, out, flags, p, qdd)
+
+
+@njit(cache=CACHE)
+def physics_start_noisy(noise, scale, state, consts, out, flags):
+    """``physics_start`` of robots started at the nominal posture plus noise, in one compiled call.
+
+    Row ``i`` starts at ``perturbed_start(noise[i], scale, ...)`` (``q_nom`` and the parameters from
+    ``consts``) with its foot at the origin, then is put on its contact as by ``physics_start``: bit for bit
+    what ``perturbed_start`` followed by ``physics_start`` gives. ``noise`` is ``(N, 6)`` uniforms in
+    [0, 1), not read at ``scale == 0``.
+    """
+    p = np.empty(NP + 1)
+    for j in range(NP):
+        p[j] = consts[j]
+    qdd = np.empty(5)
+    q_nom = consts[NOM0:TAU0]
+    for i in range(state.shape[0]):
         s = state[i]
-        q, qd, anchor = s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0]
-        s[STATE_LOAD] = 0.0  # a start has no load; the task's start kernel sets the first step's
-        p[LOAD_X] = 0.0
-        if c[C_UNILATERAL] > 0.5:
-            s[STATE_MODE] = _start_unilateral(q, qd, anchor, tau, c[C_MU], p, out[i, 0:2], out[i, ACC0:OUT_BASE])
-        else:
-            _project_one(q, qd, p, anchor)
-            _stance_one(q, qd, tau, p, qdd, out[i, 0:2])
-        _write_trig(s)
-        flags[i, FAILED] = False
+        perturbed_start(noise[i], scale, q_nom, p, s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0])
+        _start_row(i, state, consts, out, flags, p, qdd)
+
+
+@njit(cache=CACHE, inline="always")
+def perturbed_start(noise, scale, q_nom, p, q, qd, anchor):
+    """Write into ``q, qd, anchor`` the nominal posture plus ``uniform(-scale, scale)`` noise (from ``noise``,
+    6 uniforms in [0, 1)) on ``(th_b, q1, q2)`` and their rates, projected onto the pin at the origin.
+
+    ``low + (high - low) * u`` is numpy's ``uniform(low, high)`` from the same draw ``u``, so the state is
+    the same bit for bit whether the draws were made by numpy or in compiled code.
+    """
+    low, width = -scale, scale - (-scale)
+    for j in range(5):
+        q[j] = q_nom[j]
+        qd[j] = 0.0
+    anchor[0] = 0.0
+    anchor[1] = 0.0
+    if scale > 0.0:
+        for j in range(3):
+            q[2 + j] += low + width * noise[j]
+            qd[2 + j] += low + width * noise[3 + j]
+    _project_one(q, qd, p, anchor)
+
+
+@njit(cache=CACHE, inline="always")
+def _start_row(i, state, consts, out, flags, p, qdd):
+    """``physics_start`` of row ``i`` (``p``: the parameters, ``qdd``: scratch)."""
+    c = consts[NP:NOM0]
+    tau = consts[TAU0:CONSTS_BASE]
+    s = state[i]
+    q, qd, anchor = s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0]
+    s[STATE_LOAD] = 0.0  # a start has no load; the task's start kernel sets the first step's
+    p[LOAD_X] = 0.0
+    if c[C_UNILATERAL] > 0.5:
+        s[STATE_MODE] = _start_unilateral(q, qd, anchor, tau, c[C_MU], p, out[i, 0:2], out[i, ACC0:OUT_MODE])
+    else:
+        _project_one(q, qd, p, anchor)
+        _stance_one(q, qd, tau, p, qdd, out[i, 0:2])
+    _write_trig(s)
+    out[i, OUT_MODE] = s[STATE_MODE]
+    flags[i, FAILED] = False
+
+
+@njit(cache=CACHE, nogil=True)
+def physics_one(a0, a1, state, consts, out, flags):
+    """The single env's ``physics_range``: set robot 0's action to ``(a0, a1)`` and step it."""
+    state[0, _ACTION0] = a0
+    state[0, _ACTION0 + 1] = a1
+    physics_range(0, 1, state, consts, out, flags)
+
+
+@njit(cache=CACHE, inline="always")
+def summed_terms(out, n_terms):
+    """Robot 0's reward: its ``n_terms`` reward terms (from ``OUT_BASE``) summed in order."""
+    reward = out[0, OUT_BASE]
+    for k in range(1, n_terms):
+        reward += out[0, OUT_BASE + k]
+    return reward
 
 
 @njit(cache=CACHE)

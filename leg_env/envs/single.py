@@ -16,10 +16,10 @@ from ..hybrid import GROUND_TOL
 from .. import tasks
 from ..step import (
     FLAG_NAMES, OUT_EXTRA, OUT_LAM, STATE_ACTION, STATE_ANCHOR, STATE_MODE, STATE_Q, STATE_QD, compiled_entry,
-    physics_start,
+    physics_start, physics_start_noisy,
 )  # fmt: skip
 from ..step import OUT_BASE
-from ..tasks.stance import OUT_KICK, StanceConfig, info_template, nominal_state, row_info, starts_from_noise, task_constants
+from ..tasks.stance import OUT_KICK, StanceConfig, info_template, nominal_state, row_info, task_constants
 
 __all__ = ["LegEnv"]
 
@@ -30,7 +30,8 @@ MAX_PIXELS = 16384  # largest frame width or height
 # attributes that are views of the buffers (rebuilt by _bind, never pickled)
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_action_row", "_out_row", "_flag_row", "_obs_row", "_kernel_args", "_force_row", "_kick_row",
           "_physics_start", "_step_kernel", "_start_kernel", "_task_columns", "task", "_physics_args",
-          "_tail_keys", "_template")  # fmt: skip
+          "_tail_keys", "_template", "_reset_keys", "_reset_template", "_physics_start_noisy", "_reset_columns", "_task_draws",
+          "_human")  # fmt: skip
 
 
 class LegEnv(gym.Env):
@@ -100,36 +101,40 @@ class LegEnv(gym.Env):
             self._open_window()
         super().reset(seed=seed)
         posture = 6 if start is None and self.config.reset_noise_scale > 0.0 else 0  # uniforms of the posture noise
-        draws = np.empty((1, posture + self.task.draws(self.config)))
+        draws = np.empty((1, posture + self._task_draws))
         if draws.size:
             self.np_random.random(out=draws[0])
-        columns = self.task.task_columns(draws[:, posture:], self.config)[0]
-        if start is None:
-            q, qd, anchor = starts_from_noise(np.ascontiguousarray(draws[:, :posture]), self.params, self.config, self.nominal)
-            q, qd, anchor = q[0], qd[0], anchor[0]
+        columns = self.task.task_columns(draws[:, posture:], self.config)[0] if self._reset_columns else None
+        if start is None:  # the posture noise, the contact and the task's evaluation in two compiled calls
+            if columns is not None:
+                self._task_columns[:] = columns
+            self._physics_start_noisy(draws, self.config.reset_noise_scale, *self._physics_args)
+            self._start_kernel(*self._kernel_args)
         else:
             q, qd = start
-            anchor = start_anchor(q, self.params, self.unilateral)
-        self._start(q, qd, anchor, columns)
+            self._start(q, qd, start_anchor(q, self.params, self.unilateral), columns)
         info = self._info(self._out_row.tolist(), self._flag_row.tolist())
         if self.render_mode == "human":
             self.render()
         return self._obs[0].copy(), info
 
     def step(self, action):
-        a0, a1 = _checked_action(action)
-        if self.render_mode == "human" and self._viewer is None:
+        if type(action) is np.ndarray and action.shape == (2,) and action.dtype.kind == "f":
+            a0, a1 = action.tolist()  # the common case, checked here without a call
+            if not (math.isfinite(a0) and math.isfinite(a1)):
+                a0, a1 = _checked_action(action)  # raises, naming the entry
+        else:
+            a0, a1 = _checked_action(action)
+        if self._human and self._viewer is None:
             self._open_window()  # before the state changes
-        self._action_row[0] = a0
-        self._action_row[1] = a1
-        reward = self._step_kernel(0, 1, *self._kernel_args)  # physics, then the task; the terms summed in order
+        reward = self._step_kernel(a0, a1, *self._kernel_args)  # the action, physics, the task; the terms summed
         out, flags = self._out_row.tolist(), self._flag_row.tolist()  # one conversion each serves every key
         if self.unilateral:
-            info = row_info(out, flags, self._force_row, self._template, self._kick_row, self._state[0, STATE_MODE])
+            info = row_info(out, flags, self._force_row, self._template, self._kick_row)
         else:
             info = row_info(out, flags, self._force_row, self._template)
         info.update(zip(self._tail_keys, out[OUT_BASE:]))  # the reward terms, then the task's own info
-        if self.render_mode == "human":
+        if self._human:
             self.render()
         return self._obs_row.copy(), reward, flags[0], False, info
 
@@ -191,10 +196,16 @@ class LegEnv(gym.Env):
         self._kernel_args = (state, self._consts, out, self._obs, self._flags)
         self._physics_args = (state, self._consts, out, self._flags)
         self._physics_start = compiled_entry(physics_start, self._physics_args)
-        self._step_kernel = compiled_entry(self.task.step_one, (0, 1) + self._kernel_args)
+        self._step_kernel = compiled_entry(self.task.step_one, (0.0, 0.0) + self._kernel_args)
         self._start_kernel = compiled_entry(self.task.start, self._kernel_args)
         self._tail_keys = self.task.reward_keys + self.task.info_names  # the columns out[OUT_BASE:]
         self._template = info_template(self.unilateral, self._tail_keys)
+        self._reset_keys = self.task.info_names  # a reset's info has no reward terms: the columns after them
+        self._reset_template = info_template(self.unilateral, self._reset_keys)
+        self._reset_columns = bool(self.task.state_names)
+        self._task_draws = self.task.draws(self.config)
+        self._human = self.render_mode == "human"
+        self._physics_start_noisy = compiled_entry(physics_start_noisy, (np.zeros((1, 6)), 0.0) + self._physics_args)
         self._task_columns = state[0, len(state[0]) - len(self.task.state_names):] if self.task.state_names else None
 
     def _start(self, q, qd, anchor, columns) -> None:
@@ -211,12 +222,10 @@ class LegEnv(gym.Env):
     def _info(self, out: list, flags: list) -> dict:
         """``info`` of a reset (no reward terms) from the output row and the flags, as lists."""
         if self.unilateral:
-            info = row_info(out, flags, self._force_row, self._template, self._kick_row, self._state[0, STATE_MODE])
+            info = row_info(out, flags, self._force_row, self._reset_template, self._kick_row)
         else:
-            info = row_info(out, flags, self._force_row, self._template)
-        info.update(zip(self._tail_keys, out[OUT_BASE:]))
-        for key in self.task.reward_keys:
-            del info[key]
+            info = row_info(out, flags, self._force_row, self._reset_template)
+        info.update(zip(self._reset_keys, out[self.task.out_info]))
         return info
 
     def _explicit_state(self, options: dict | None) -> tuple[np.ndarray, np.ndarray] | None:

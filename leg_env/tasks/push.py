@@ -73,7 +73,7 @@ from numba import njit
 
 from .._jit import CACHE
 from .. import checks
-from ..step import OUT_BASE, STATE_DIM, STATE_LOAD, _PREV0, physics_range
+from ..step import OUT_BASE, STATE_DIM, STATE_LOAD, _PREV0, physics_one, summed_terms
 from .base import Task
 from .stance import (
     REWARD_TERMS as _STANCE_TERMS,
@@ -235,16 +235,12 @@ def start(state, consts, out, obs, flags):
 
 
 @njit(cache=CACHE)
-def step_one(lo, hi, state, consts, out, obs, flags):
-    """The single env's control step in one compiled call: ``physics_range`` of the rows ``lo .. hi - 1``
-    (all of them: the single env has one), then ``assess``; returns row ``lo``'s reward, its terms summed
-    in order."""
-    physics_range(lo, hi, state, consts, out, flags)
+def step_one(a0, a1, state, consts, out, obs, flags):
+    """The single env's control step in one compiled call: the action ``(a0, a1)``, ``physics_one``,
+    then ``assess``; returns the reward, the terms summed in order."""
+    physics_one(a0, a1, state, consts, out, flags)
     assess(state, consts, out, obs, flags)
-    reward = out[lo, OUT_BASE]
-    for k in range(1, N_TERMS):
-        reward += out[lo, OUT_BASE + k]
-    return reward
+    return summed_terms(out, N_TERMS)
 
 
 TASK = Task(

@@ -45,8 +45,8 @@ from .. import checks
 from ..integrate import MAX_ANGLE, MAX_SUBSTEPS, SUBSTEPS, DT, _project_one
 from ..params import LegParams
 from ..step import (
-    ACC0, CONSTS_BASE, FAILED, FLAG_NAMES, NC, NOM0, OUT_BASE, OUT_EXTRA, OUT_LAM, STATE_DIM, STATE_MODE, TAU0,
-    BitGeneratorRows, compiled_entry, physics_range, physics_start, undo_step,
+    ACC0, CONSTS_BASE, FAILED, FLAG_NAMES, NC, NOM0, OUT_BASE, OUT_MODE, OUT_EXTRA, OUT_LAM, STATE_DIM, STATE_MODE, TAU0,
+    BitGeneratorRows, compiled_entry, perturbed_start, physics_one, physics_range, physics_start, summed_terms, undo_step,
 )  # fmt: skip
 
 __all__ = [
@@ -106,7 +106,8 @@ _TERMS0 = OUT_BASE
 OUT_DIM = OUT_BASE + len(REWARD_TERMS)
 N_TERMS = len(REWARD_TERMS)
 OUT_TERMS = slice(_TERMS0, OUT_DIM)
-OUT_KICK = slice(ACC0 + ACC_KICK_X, ACC0 + ACC_KICK_Y + 1)  # the step's impact impulses (unilateral model)
+OUT_KICK = slice(ACC0 + ACC_KICK_X, ACC0 + ACC_KICK_Y + 1)
+_HYB_MODE = OUT_MODE - ACC0  # the mode column in the kernels' ``hyb`` (``out[:, ACC0:OUT_BASE]``)  # the step's impact impulses (unilateral model)
 _INF = math.inf
 _BIG = 1.0e6  # bound of lengths, angles, torques, rates and reward weights: far beyond any use, far below overflow
 FIELD_RANGES = {
@@ -458,8 +459,9 @@ def _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, 
     undo_step(state[i])
     lam[i, 0] = 0.0
     lam[i, 1] = 0.0
-    for k in range(hyb.shape[1]):
+    for k in range(_HYB_MODE):
         hyb[i, k] = 0.0
+    hyb[i, _HYB_MODE] = mode[i]  # the mode column: the restored mode
     _fail(i, q, anchor, q_nom, terms, flags, extra)
     return False
 
@@ -516,16 +518,12 @@ def start(state, consts, out, obs, flags):
 
 
 @njit(cache=CACHE)
-def step_one(lo, hi, state, consts, out, obs, flags):
-    """The single env's control step in one compiled call: ``physics_range`` of the rows ``lo .. hi - 1``
-    (all of them: the single env has one), then ``assess``; returns row ``lo``'s reward, its terms summed
-    in order."""
-    physics_range(lo, hi, state, consts, out, flags)
+def step_one(a0, a1, state, consts, out, obs, flags):
+    """The single env's control step in one compiled call: the action ``(a0, a1)``, ``physics_one``,
+    then ``assess``; returns the reward, the terms summed in order."""
+    physics_one(a0, a1, state, consts, out, flags)
     assess(state, consts, out, obs, flags)
-    reward = out[lo, OUT_BASE]
-    for k in range(1, N_TERMS):
-        reward += out[lo, OUT_BASE + k]
-    return reward
+    return summed_terms(out, N_TERMS)
 
 
 def step_batch(state, consts, out, obs, flags):
@@ -606,25 +604,18 @@ def starts_from_noise(noise: np.ndarray, p: LegParams, config: StanceConfig, nom
 
 @njit(cache=CACHE)
 def _perturbed_starts(noise, s, q_nom, p):
-    """Nominal posture + ``uniform(-s, s)`` noise (from ``noise`` in [0, 1)) on (th_b, q1, q2) and their rates, projected."""
+    """``leg_env.step.perturbed_start`` of every row of ``noise``, as new arrays ``(q, qd, anchor)``."""
     k = noise.shape[0]
     q = np.empty((k, 5))
-    qd = np.zeros((k, 5))
-    anchor = np.zeros((k, 2))
-    low, width = -s, s - (-s)  # numpy's uniform(low, high): low + (high - low) * random()
+    qd = np.empty((k, 5))
+    anchor = np.empty((k, 2))
     for i in range(k):
-        for j in range(5):
-            q[i, j] = q_nom[j]
-        if s > 0.0:
-            for j in range(3):
-                q[i, 2 + j] += low + width * noise[i, j]
-                qd[i, 2 + j] += low + width * noise[i, 3 + j]
-        _project_one(q[i], qd[i], p, anchor[i])
+        perturbed_start(noise[i], s, q_nom, p, q[i], qd[i], anchor[i])
     return q, qd, anchor
 
 
 # ``row_info`` unpacks a whole output row at once: it relies on this layout of ``out``
-assert (OUT_EXTRA.start, ACC0, OUT_BASE) == (2, 5, 22) and (ACC_KICK_X, ACC_STICK_TIME, ACC_EVENTS, ACC_WORK_LOAD, ACC_DIM) == (2, 4, 11, 14, 15)
+assert (OUT_EXTRA.start, ACC0, OUT_MODE, OUT_BASE) == (2, 5, 22, 23) and (ACC_KICK_X, ACC_STICK_TIME, ACC_EVENTS, ACC_WORK_LOAD, ACC_DIM) == (2, 4, 11, 14, 15)
 
 
 def info_template(unilateral: bool, tail_keys: tuple = ()) -> dict:
@@ -637,16 +628,14 @@ def info_template(unilateral: bool, tail_keys: tuple = ()) -> dict:
     return dict.fromkeys(keys + (UNILATERAL_KEYS if unilateral else ()) + tuple(tail_keys))
 
 
-def row_info(
-    out: list, flags: list, force: np.ndarray, template: dict, impulse: np.ndarray | None = None, mode: float = 0.0
-) -> dict:
+def row_info(out: list, flags: list, force: np.ndarray, template: dict, impulse: np.ndarray | None = None) -> dict:
     """``info`` of one robot after a step, from its output row and flags (each as a list).
 
     ``force`` and ``impulse`` are the row's ``OUT_LAM`` and ``OUT_KICK`` columns (views, copied here:
     Gymnasium asks for new info data on every call); ``template`` is ``info_template(...)`` of the env.
     The keys are ``contact_force`` (shape (2,)), ``normal_force``, the three violation / failure flags,
     ``base_drift`` and ``foot_error``; with an ``impulse`` (the unilateral model) also the
-    ``UNILATERAL_KEYS`` of ``unilateral_info``, ``mode`` giving ``contact_mode``; the template's tail keys
+    ``UNILATERAL_KEYS`` of ``unilateral_info`` (``contact_mode`` from the ``OUT_MODE`` column); the template's tail keys
     are left for the caller to fill (from the columns ``out[OUT_BASE:]``). This runs at every ``env.step``: a copy of a template does not grow its table item by item as a large dict
     display would.
     """
@@ -654,6 +643,7 @@ def row_info(
         base_drift, foot_error, normal_force,
         _, _, _, _, stick_time, slip_time, flight_time, slip_distance, work, d_slip, d_impacts,
         events, painleve, settles, _, energy, foot_height,
+        mode,
     ) = out[2:OUT_BASE]  # fmt: skip
     _, unilateral_violation, friction_violation, failure = flags
     info = template.copy()
@@ -698,14 +688,16 @@ def unilateral_info(out: list, mode: float) -> dict:
     of the first minus the other two) and ``energy`` (kinetic + potential, [J]); ``contact_events``,
     ``painleve_fallbacks``, ``zeno_settles`` (ints) count what ``leg_env.hybrid`` describes.
     """
+    out = list(out[:OUT_BASE])
+    out[OUT_MODE] = float(mode)
     row = np.asarray(out, dtype=np.float64)
-    info = row_info(out[:OUT_BASE], [False] * len(FLAG_NAMES), row[OUT_LAM], _UNILATERAL_TEMPLATE, row[OUT_KICK], mode)
+    info = row_info(out, [False] * len(FLAG_NAMES), row[OUT_LAM], _UNILATERAL_TEMPLATE, row[OUT_KICK])
     return {key: info[key] for key in UNILATERAL_KEYS}
 
 
 def unilateral_columns(out: np.ndarray, modes: np.ndarray) -> dict:
     """``unilateral_info`` of many robots at once: one fresh array per key over the rows of ``out``."""
-    acc = out[:, ACC0:OUT_BASE].T.copy()  # one copy serves every key
+    acc = out[:, ACC0:OUT_MODE].T.copy()  # one copy serves every key
     counts = acc[[ACC_EVENTS, ACC_PAINLEVE, ACC_SETTLES]].astype(np.int64)
     return {
         "contact_mode": np.take(_MODE_NAME_ARRAY, modes.astype(np.intp)),

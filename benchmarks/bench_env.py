@@ -86,6 +86,12 @@ TASK_IDS = tuple(i for i in leg_env.ENV_IDS if i != LEG)
 TARGET_UNILATERAL_BALANCE = 0.8  # balancing: unilateral over pinned
 BALANCE_NOISE = 0.02  # half-width of the noise on the LQR's action in the balancing rows
 UNILATERAL = {"contact": "unilateral"}
+RANDOMISED = {"pinned": {}, "unilateral": UNILATERAL}  # randomize=True rows, against the same rows without it
+_RANDOMISED_REFERENCE = {
+    "pinned": (("randomised", ("vector", max(VECTOR_SIZES))), ("randomised balance", ("balance", "pinned"))),
+    "unilateral": (("randomised", ("vector", "unilateral")), ("randomised balance", ("balance", "unilateral"))),
+}
+TARGET_RANDOMISED_SHARE = 0.9  # issue 11: randomised over nominal, resets included
 
 
 def sampled_actions(space: gym.spaces.Box, calls: int, n: int | None, seed: int = SEED) -> np.ndarray:
@@ -236,6 +242,9 @@ def env_table() -> dict:
     for env_id in TASK_IDS:
         runners["task", env_id] = vector_env_runner(gym.make_vec(env_id, num_envs=n))
         runners["task balance", env_id] = vector_env_runner(gym.make_vec(env_id, num_envs=n), balance=True)
+    for name, kwargs in RANDOMISED.items():  # the same rows with a robot per sub-env, drawn at every reset
+        runners["randomised", name] = vector_env_runner(gym.make_vec(LEG, num_envs=n, randomize=True, **kwargs))
+        runners["randomised balance", name] = vector_env_runner(gym.make_vec(LEG, num_envs=n, randomize=True, **kwargs), balance=True)
     runners["sync", HOPPER] = vector_env_runner(
         gym.make_vec(HOPPER, num_envs=REFERENCE_ENVS, vectorization_mode="sync"), REFERENCE_CALLS
     )
@@ -270,6 +279,10 @@ def env_table() -> dict:
         rows.append(("`gym.make_vec`, random (ratio: to unilateral stance)", env_id, big, r, r / rate["vector", "unilateral"]))
         r = rate["task balance", env_id]
         rows.append(("`gym.make_vec`, balancing (ratio: to unilateral stance)", env_id, big, r, r / rate["balance", "unilateral"]))
+    for name in RANDOMISED:
+        for kind, reference in _RANDOMISED_REFERENCE[name]:
+            what = "random" if kind == "randomised" else "balancing"
+            rows.append((f"`gym.make_vec`, {name}, {what}, `randomize=True` (ratio: to nominal)", LEG, big, rate[kind, name], rate[kind, name] / rate[reference]))
     for n in SB3_SIZES:
         rows.append(("SB3 `VecEnv` (`leg_env.sb3`)", LEG, n, rate["sb3", n], rate["sb3", n] / rate["dummy", HOPPER]))
     rows.append(("SB3 `DummyVecEnv`", HOPPER, REFERENCE_ENVS, rate["dummy", HOPPER], 1.0))
@@ -331,6 +344,11 @@ def check_targets(rate: dict) -> bool:
                     share >= TARGET_TASK_SHARE,
                 )
             )
+    for name in RANDOMISED:
+        for kind, reference in _RANDOMISED_REFERENCE[name]:
+            share = rate[kind, name] / rate[reference]
+            what = "random actions" if kind == "randomised" else "balancing"
+            checks.append((f"{name} `gym.make_vec` N={n}, {what}, randomised vs nominal >= {TARGET_RANDOMISED_SHARE:.0%}", f"{share:.0%}", share >= TARGET_RANDOMISED_SHARE))
     if ("threaded", n) in rate:
         threaded_ratio = rate["threaded", n] / rate["sync", HOPPER]
         checks.append(

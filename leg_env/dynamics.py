@@ -362,6 +362,32 @@ def _com_one(q, p, out):
     out[1] = q[1] + (a * np.sin(th1) + b * np.sin(th2)) / m
 
 
+@njit(cache=CACHE)
+def _equilibrium_one(p, knee, q, tau):
+    """``static_equilibrium``'s posture ``q`` (5,) and holding torques ``tau`` (2,), written in place."""
+    m = p[0] + p[1] + p[2]
+    A = (p[1] * p[8] + p[2] * p[6]) / m - p[6]
+    B = p[2] * p[9] / m - p[7]
+    th1 = np.arctan2(A + B * np.cos(knee), B * np.sin(knee))
+    while th1 > 0.0:
+        th1 -= np.pi
+    while th1 <= -np.pi:
+        th1 += np.pi
+    q[0], q[1], q[2], q[3], q[4] = 0.0, 0.0, 0.0, th1, knee
+    foot = np.empty(2)
+    _foot_one(q, p, foot)
+    q[0] -= foot[0]
+    q[1] -= foot[1]
+    G = np.empty(5)
+    _bias_one(q, q, p, G, True)
+    Jc = np.empty((2, 5))
+    _jacobian_one(q, p, Jc)
+    mg = m * p[10]
+    # M qdd + G = S^T tau + Jc^T lam with qdd = 0 and lam = (0, m g), read on the actuated rows
+    tau[0] = G[3] - (Jc[0, 3] * 0.0 + Jc[1, 3] * mg)
+    tau[1] = G[4] - (Jc[0, 4] * 0.0 + Jc[1, 4] * mg)
+
+
 # ----------------------------------------------------------------------------
 # Batch kernels: loop the single-robot kernels over the leading axis
 # ----------------------------------------------------------------------------
@@ -620,21 +646,9 @@ def static_equilibrium(p: LegParams, knee: float = 0.8) -> tuple[np.ndarray, np.
         ``(q, tau, lam)``: configuration with the foot at the origin, holding torques and the
         contact force ``[0, m g]``.
     """
-    m = p.total_mass
-    A = (p.m1 * p.c1 + p.m2 * p.l1) / m - p.l1
-    B = p.m2 * p.c2 / m - p.l2
-    th1 = float(np.arctan2(A + B * np.cos(knee), B * np.sin(knee)))
-    while th1 > 0.0:
-        th1 -= np.pi
-    while th1 <= -np.pi:
-        th1 += np.pi
-    q = np.array([0.0, 0.0, 0.0, th1, float(knee)])
-    q[:2] -= foot_position(q, p)
-    G = gravity_forces(q, p)
-    Jc = contact_jacobian(q, p)
-    lam = np.array([0.0, m * p.g])
-    # M qdd + G = S^T tau + Jc^T lam with qdd = 0, read on the actuated rows
-    tau = G[3:] - (Jc.T @ lam)[3:]
+    q, tau = np.empty(NQ), np.empty(NU)
+    _equilibrium_one(p.array, float(knee), q, tau)
+    lam = np.array([0.0, p.total_mass * p.g])
     return q, tau, lam
 
 

@@ -87,6 +87,7 @@ class LegStanceVecEnv(VecEnv):
         self._reset_seeds()
         self._reset_options()
         self.reset_infos = _per_env_state_infos(info, range(self.num_envs), self.env.state_keys)
+        _add_params(self.reset_infos, info, range(self.num_envs))
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -123,6 +124,9 @@ class LegStanceVecEnv(VecEnv):
             state = env._state_columns(env._out[t.restarted], env._flags[t.restarted], env._state[t.restarted, STATE_MODE])
             for k, reset_info in enumerate(_per_env_state_infos(state, range(len(rows)), env.state_keys)):
                 self.reset_infos[rows[k]] = reset_info
+            params = {}
+            env._add_params_info(params, t.restarted, t.rejected)
+            _add_params(self.reset_infos, params, rows)
         dones = t.terminated | t.truncated
         return t.obs, t.reward.astype(np.float32), dones, infos
 
@@ -164,6 +168,19 @@ class LegStanceVecEnv(VecEnv):
 
 
 _ARRAY_KEYS = ("contact_force", "impulse")  # per-env values that stay arrays
+
+
+def _add_params(infos: list[dict], info: dict, rows) -> None:
+    """Put ``params`` (and ``params_rejected``) of a vector ``info`` into the per-env dicts of ``rows``."""
+    if "params" not in info:
+        return
+    params, mask = info["params"], info["_params"]
+    names = [key for key in params if not key.startswith("_")]
+    for i in rows:
+        if mask[i]:
+            infos[i]["params"] = {name: params[name][i].item() for name in names}
+            if "params_rejected" in info:
+                infos[i]["params_rejected"] = info["params_rejected"][i].item()
 
 
 def _per_env_state_infos(info: dict, rows, keys) -> list[dict]:

@@ -22,8 +22,13 @@ Packed arrays (row ``i`` is robot ``i``):
   horizontal force on the torso's COM [N] held over the next step (written by the task's kernel, 0 for
   tasks without one). ``prev`` is the state before the last step (``q, qd, mode, anchor_x, trig``), for
   a task that finds its observation overflowing float32 and must undo the step.
-* ``consts`` float64, read only: ``LegParams.array | config.array() | q_nom | tau_nom | task constants``.
-  ``config.array()`` starts with the settings this module reads (``C_*`` indices).
+* ``consts (R, CONSTS_BASE + task constants)`` float64, read only by the kernels: ``LegParams.array |
+  config.array() | q_nom | tau_nom | com_nom | task constants``. ``config.array()`` starts with the settings
+  this module reads (``C_*`` indices); ``q_nom, tau_nom`` are the robot's nominal posture and holding
+  torques, ``com_nom`` its whole-body COM there (foot at the origin). ``R = 1``: every robot is the same
+  robot (row 0); ``R = N``: row ``i`` is robot ``i``'s own (domain randomisation, ``leg_env.randomize``),
+  the parameters, friction, torque limits and everything derived from them. The settings that are not
+  the robot's (``dt``, weights, limits of the task) are the same in every row.
 * ``out (N, OUT_BASE + task columns)`` float64: ``lam | extras | accumulators | energy, foot height | mode |
   reward terms | task info``; ``lam`` is the mean contact force over the step [N], the accumulators are
   the hybrid step's (``leg_env.hybrid.ACC_*``, unilateral model only).
@@ -49,6 +54,7 @@ __all__ = [
     "STATE_DIM",
     "OUT_BASE",
     "OUT_MODE",
+    "robot_row",
     "physics_range",
     "physics_start",
     "physics_start_noisy",
@@ -82,7 +88,8 @@ OUT_BASE = OUT_MODE + 1  # the first reward-term column
 NC = 23  # entries of StanceConfig.array(), the settings every task has
 NOM0 = NP + NC
 TAU0 = NOM0 + 5
-CONSTS_BASE = TAU0 + 2
+COM0 = TAU0 + 2  # the nominal COM (x, y)
+CONSTS_BASE = COM0 + 2
 # indices into config.array() of the settings read here (the order of StanceConfig.array())
 C_DT, C_SUBSTEPS, C_MAX_ANGLE, C_TAU_HIP, C_TAU_KNEE = 0, 1, 2, 3, 4
 C_MU, C_MAX_RATE, C_UNILATERAL = 12, 21, 22
@@ -100,16 +107,21 @@ def physics_range(lo, hi, state, consts, out, flags):
     Releases the GIL, so that threads can share a batch: robots are independent, so the rows of a batch
     stepped in any split are bitwise those of one call.
     """
-    c = consts[NP:NOM0]
+    c = consts[0, NP:NOM0]  # the settings every robot shares
+    per_robot = consts.shape[0] > 1
     p = np.empty(NP + 1)  # the kernels' parameter array: LegParams, then this robot's load
     for j in range(NP):
-        p[j] = consts[j]
+        p[j] = consts[0, j]
     tau = np.empty(2)
     log_t = np.empty(LOG_SIZE)
     log_k = np.empty(LOG_SIZE, dtype=np.int64)
     unilateral = c[C_UNILATERAL] > 0.5
     dt, substeps, max_angle = c[C_DT], int(c[C_SUBSTEPS]), c[C_MAX_ANGLE]
     for i in range(lo, hi):
+        if per_robot:  # this robot's parameters, friction and torque limits
+            c = consts[i, NP:NOM0]
+            for j in range(NP):
+                p[j] = consts[i, j]
         s = state[i]
         q, qd, anchor = s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0]
         lam, hyb = out[i, 0:2], out[i, ACC0:OUT_MODE]
@@ -149,6 +161,12 @@ def physics_range(lo, hi, state, consts, out, flags):
 
 
 @njit(cache=CACHE, inline="always")
+def robot_row(consts, i):
+    """Robot ``i``'s row of ``consts``: its own with a row per robot, else the one row every robot shares."""
+    return consts[i if consts.shape[0] > 1 else 0]
+
+
+@njit(cache=CACHE, inline="always")
 def _write_trig(s):
     th1 = s[2] + s[3]
     th2 = th1 + s[4]
@@ -179,8 +197,6 @@ def physics_start(state, consts, out, flags):
     accumulators are zeroed and so is the load (the task's ``start`` sets the first step's).
     """
     p = np.empty(NP + 1)
-    for j in range(NP):
-        p[j] = consts[j]
     qdd = np.empty(5)
     for i in range(state.shape[0]):
         _start_row(i, state, consts, out, flags, p, qdd)
@@ -196,13 +212,13 @@ def physics_start_noisy(noise, scale, state, consts, out, flags):
     [0, 1), not read at ``scale == 0``.
     """
     p = np.empty(NP + 1)
-    for j in range(NP):
-        p[j] = consts[j]
     qdd = np.empty(5)
-    q_nom = consts[NOM0:TAU0]
     for i in range(state.shape[0]):
+        r = robot_row(consts, i)
+        for j in range(NP):
+            p[j] = r[j]
         s = state[i]
-        perturbed_start(noise[i], scale, q_nom, p, s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0])
+        perturbed_start(noise[i], scale, r[NOM0:TAU0], p, s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0])
         _start_row(i, state, consts, out, flags, p, qdd)
 
 
@@ -229,9 +245,12 @@ def perturbed_start(noise, scale, q_nom, p, q, qd, anchor):
 
 @njit(cache=CACHE, inline="always")
 def _start_row(i, state, consts, out, flags, p, qdd):
-    """``physics_start`` of row ``i`` (``p``: the parameters, ``qdd``: scratch)."""
-    c = consts[NP:NOM0]
-    tau = consts[TAU0:CONSTS_BASE]
+    """``physics_start`` of row ``i`` (``p``, ``qdd``: scratch)."""
+    r = robot_row(consts, i)
+    for j in range(NP):
+        p[j] = r[j]
+    c = r[NP:NOM0]
+    tau = r[TAU0:COM0]
     s = state[i]
     q, qd, anchor = s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0]
     s[STATE_LOAD] = 0.0  # a start has no load; the task's start kernel sets the first step's
@@ -332,6 +351,20 @@ class BitGeneratorRows:
 
     def __getitem__(self, i: int) -> np.random.Generator | None:
         return self.generators[i]
+
+    @property
+    def next_double(self):
+        """numpy's ``next_double`` of PCG64 (a ctypes function), for compiled draws; None before one is held."""
+        return self._next_double
+
+    @property
+    def states(self) -> np.ndarray:
+        """The addresses of the bit generators' states, ``(n,)`` int64 (0 for a generator drawn in Python)."""
+        return self._states
+
+    def all_compiled(self, rows: np.ndarray) -> bool:
+        """Whether every generator of ``rows`` can be drawn from in compiled code."""
+        return bool(self._compiled[rows].all())
 
     def draw(self, rows: np.ndarray, out: np.ndarray) -> None:
         """``out[k] = generators[rows[k]].random(out.shape[1])`` for every k."""

@@ -221,7 +221,7 @@ def test_an_observation_that_overflows_float32_is_a_flagged_numerical_failure(co
     before_state, before_obs = state.copy(), obs.copy()
     state[:, STATE_ACTION] = [[0.5, -0.2], [0.4, -0.25]]
     tiny_g = consts.copy()
-    tiny_g[10] = 1e-300  # g: the weight m g becomes 1.5e-299 N, and lam / (m g) overflows float32
+    tiny_g[0, 10] = 1e-300  # g: the weight m g becomes 1.5e-299 N, and lam / (m g) overflows float32
     step_batch(state, tiny_g, out, obs, flags)
     assert np.isfinite(obs).all(), obs
     assert flags[:, FLAG_NAMES.index("numerical_failure")].all() and flags[:, 0].all()

@@ -57,7 +57,7 @@ def parser_for(cls: type, positional: tuple[str, ...] = (), **parser_kwargs) -> 
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         tp = _base_type(hints[f.name])
-        kwargs: dict = {"help": docs.get(f.name, "")}
+        kwargs: dict = {"help": docs.get(f.name, "").replace("%", "%%")}  # argparse %-formats help texts
         if f.default is not dataclasses.MISSING:
             kwargs["default"] = f.default
         elif f.default_factory is not dataclasses.MISSING:

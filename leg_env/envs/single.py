@@ -11,19 +11,20 @@ from gymnasium import spaces
 
 from .. import checks
 from ..dynamics import foot_position
-from ..params import LegParams
+from ..params import PARAM_NAMES, LegParams
 from ..hybrid import GROUND_TOL
 from .. import tasks
 from ..step import (
     FLAG_NAMES, OUT_EXTRA, OUT_LAM, STATE_ACTION, STATE_ANCHOR, STATE_MODE, STATE_Q, STATE_QD, compiled_entry,
     physics_start, physics_start_noisy,
 )  # fmt: skip
-from ..step import OUT_BASE
+from ..step import C_MU, OUT_BASE
+from ..randomize import Robots, params_info
 from ..tasks.stance import OUT_KICK, StanceConfig, info_template, nominal_state, row_info, task_constants
 
 __all__ = ["LegEnv"]
 
-_RESET_OPTIONS = ("qpos", "qvel")
+_RESET_OPTIONS = ("qpos", "qvel", "params")
 QPOS_BOUND = 1.0e6
 """Largest magnitude of a reset ``qpos`` entry [m, rad]; ``qvel`` entries are bounded by ``max_rate``."""
 MAX_PIXELS = 16384  # largest frame width or height
@@ -53,6 +54,7 @@ class LegEnv(gym.Env):
         width: int = 480,
         height: int = 480,
         task: str = "stance",
+        randomize: Any = None,
         **config_overrides: Any,
     ):
         self.task_name = task
@@ -72,10 +74,11 @@ class LegEnv(gym.Env):
 
         self.unilateral = self.config.contact == "unilateral"
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
-        self.observation_space = self.task.observation_space(self.params, self.config)
-
         # the kernel's packed arrays (leg_env.task), one row, shared with nothing; _bind() makes the views
         self._consts = task_constants(self.params, self.config, self.nominal)
+        self.robots = Robots(randomize, self._consts[0], self.config)  # leg_env.randomize
+        self.observation_space = self.task.observation_space(self.robots.longest(self.params), self.config)
+        self._custom_robot = False  # whether the robot is not the nominal one
         self._state = np.zeros((1, self.task.state_dim))  # leg_env.step's layout, then the task's columns
         self._out = np.zeros((1, self.task.out_dim))  # leg_env.step's layout, then reward terms and task info
         self._obs = np.zeros((1, self.observation_space.shape[0]), dtype=np.float32)
@@ -97,9 +100,18 @@ class LegEnv(gym.Env):
         # every check first (seed, options, the window): a rejected reset changes nothing
         seed = checks.seed("seed", seed)
         start = self._explicit_state(options)
+        robot = None if not options or "params" not in options else self.robots.explicit_rows(options["params"])[0]
         if self.render_mode == "human":
             self._open_window()
         super().reset(seed=seed)
+        rejected = None
+        if robot is not None:  # the robot first: the nominal posture is the robot's
+            self._consts[0] = robot
+        elif self.robots.active:
+            rejected = self.robots.draw_one(self.np_random, self._consts[0])
+        elif self._custom_robot:
+            self._consts[0] = self.robots.base
+        self._custom_robot = robot is not None or self.robots.active
         posture = 6 if start is None and self.config.reset_noise_scale > 0.0 else 0  # uniforms of the posture noise
         draws = np.empty((1, posture + self._task_draws))
         if draws.size:
@@ -112,8 +124,12 @@ class LegEnv(gym.Env):
             self._start_kernel(*self._kernel_args)
         else:
             q, qd = start
-            self._start(q, qd, start_anchor(q, self.params, self.unilateral), columns)
+            self._start(q, qd, start_anchor(q, self.robot_params, self.unilateral), columns)
         info = self._info(self._out_row.tolist(), self._flag_row.tolist())
+        if self._custom_robot:
+            info["params"] = {name: float(value[0]) for name, value in params_info(self._consts).items()}
+            if rejected is not None:
+                info["params_rejected"] = rejected
         if self.render_mode == "human":
             self.render()
         return self._obs[0].copy(), info
@@ -152,11 +168,11 @@ class LegEnv(gym.Env):
         push = push_mark(self.task, self._out, 0)
         if self.render_mode == "rgb_array":
             return render.draw(
-                self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.width, self.height, self.config.mu, mode, impulse,
+                self._q[0], self._anchor[0], self._lam[0], self.robot_params, violated, self.width, self.height, self._robot_mu(), mode, impulse,
                 push,
             )  # fmt: skip
         self._open_window()
-        self._viewer.show(self._q[0], self._anchor[0], self._lam[0], self.params, violated, self.config.mu, mode, impulse, push)
+        self._viewer.show(self._q[0], self._anchor[0], self._lam[0], self.robot_params, violated, self._robot_mu(), mode, impulse, push)
         return None
 
     def _open_window(self) -> None:
@@ -182,6 +198,16 @@ class LegEnv(gym.Env):
     def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Copies of ``(q, qd, anchor)``: configuration, velocity and the foot's contact point."""
         return self._q[0].copy(), self._qd[0].copy(), self._anchor[0].copy()
+
+    def _robot_mu(self) -> float:
+        return float(self._consts[0, len(PARAM_NAMES) + C_MU])
+
+    @property
+    def robot_params(self) -> LegParams:
+        """The ``LegParams`` of the robot being simulated: ``params`` unless randomised or set by a reset."""
+        if not self._custom_robot:
+            return self.params
+        return LegParams(**{name: float(v) for name, v in zip(PARAM_NAMES, self._consts[0, :len(PARAM_NAMES)])})
 
     # ------------------------------------------------------------ helpers
 
@@ -238,6 +264,8 @@ class LegEnv(gym.Env):
         if unknown:
             raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: {list(_RESET_OPTIONS)}")
         if not options:
+            return None
+        if not set(options) & {"qpos", "qvel"}:
             return None
         q, qd = explicit_start(options, self.nominal.q, self.config.max_rate)
         start_anchor(q, self.params, self.unilateral)  # raises for a foot below the unilateral ground

@@ -40,8 +40,10 @@ from ..step import (
     BitGeneratorRows,
     physics_range,
     physics_start,
+    physics_start_noisy,
 )
-from ..tasks.stance import INFO_NAMES, REWARD_TERMS, UNILATERAL_KEYS, StanceConfig, starts_from_noise, task_constants, unilateral_columns
+from ..randomize import params_info
+from ..tasks.stance import INFO_NAMES, REWARD_TERMS, UNILATERAL_KEYS, StanceConfig, unilateral_columns
 from .single import LegEnv, contact_marks, explicit_start, push_mark, start_anchor
 
 __all__ = ["LegVectorEnv", "PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
@@ -63,7 +65,7 @@ STATE_KEYS = (
 
 _FLAG = {name: k for k, name in enumerate(FLAG_NAMES)}
 _EXTRA = {name: k for k, name in enumerate(INFO_NAMES)}
-_RESET_OPTIONS = ("qpos", "qvel", "reset_mask")
+_RESET_OPTIONS = ("qpos", "qvel", "reset_mask", "params")
 MAX_ENVS = 2**31 - 1  # bound of num_envs and render_envs
 MAX_THREADS = 256  # bound of num_threads
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_kernel_args", "_physics_args", "task")  # rebuilt by _bind, never pickled
@@ -157,6 +159,7 @@ class LegVectorEnv(VectorEnv):
         render_envs: int | None = None,
         num_threads: int = 1,
         task: str = "stance",
+        randomize: Any = None,
         **config_overrides: Any,
     ):
         num_envs = checks.integer("num_envs", num_envs, 1, MAX_ENVS)
@@ -173,7 +176,8 @@ class LegVectorEnv(VectorEnv):
         num_threads = checks.integer("num_threads", num_threads, 1, MAX_THREADS)
 
         # The single env checks the arguments and defines the spaces; the batch reuses both.
-        single = LegEnv(params=params, config=config, width=width, height=height, task=task, **config_overrides)
+        single = LegEnv(params=params, config=config, width=width, height=height, task=task, randomize=randomize, **config_overrides)
+        self.robots = single.robots  # leg_env.randomize: the nominal robot, and the ranges of drawn ones
         self.task_name = single.task_name
         self.task = single.task
         self.reward_keys = self.task.reward_keys
@@ -195,14 +199,16 @@ class LegVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, n)
 
         # the kernel's packed arrays (leg_env.task), row i is sub-env i; _bind() makes the views
-        self._consts = task_constants(self.params, self.config, self.nominal)
+        # one consts row for every robot, or a row per robot when robots are drawn or set by a reset
+        self._consts = np.repeat(self.robots.base[None, :], n if self.robots.active else 1, axis=0)
+        self._custom = np.zeros(n, dtype=np.bool_)  # rows whose robot is not the nominal one
         self._state = np.zeros((n, self.task.state_dim))  # leg_env.step's layout, then the task's columns
         self._out = np.zeros((n, self.task.out_dim))  # leg_env.step's layout, then reward terms and task info
         self._obs = np.zeros((n, self.single_observation_space.shape[0]), dtype=np.float32)
         self._flags = np.zeros((n, len(FLAG_NAMES)), dtype=np.bool_)
         self._bind()
         nominal_columns = self.task.task_columns(np.full((n, self.task.draws(self.config)), 0.5), self.config)
-        self._start(None, self.nominal.q, np.zeros(5), np.zeros(2), nominal_columns)  # every row at the nominal posture
+        self._start(None, (self.nominal.q, np.zeros(5), np.zeros(2)), None, nominal_columns)  # every row at the nominal posture
         self._elapsed = np.zeros(n, dtype=np.int64)
         self._ended = np.zeros(n, dtype=np.bool_)  # ended on the last step and not reset since
         self._rngs = BitGeneratorRows(n)  # sub-env i's generator, drawn from in compiled code
@@ -221,6 +227,7 @@ class LegVectorEnv(VectorEnv):
             raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: {list(_RESET_OPTIONS)}")
         rows = self._reset_rows(options.pop("reset_mask", None))
         seeds = self._seeds(seed)
+        robots = self.robots.explicit_rows(options.pop("params"), len(rows)) if "params" in options else None
         explicit = self._explicit_states(options, len(rows)) if options else None
         # every check is done: from here on nothing raises
         if isinstance(seed, (int, np.integer)):
@@ -228,6 +235,7 @@ class LegVectorEnv(VectorEnv):
         for i in rows.tolist():
             if seeds[i] is not None or self._rngs[i] is None:
                 self._rngs[i] = seeding.np_random(seeds[i])[0]
+        rejected = self._set_robots(rows, robots)
         starts = self._draw_starts(rows, explicit)
         self._start(None if rows.size == n else rows, *starts)
         self._elapsed[rows] = 0
@@ -238,6 +246,7 @@ class LegVectorEnv(VectorEnv):
             self._add_state_info(info, self._out, self._flags, self._state[:, STATE_MODE])
         else:
             self._add_state_info(info, self._out[rows], self._flags[rows], self._state[rows, STATE_MODE], rows)
+        self._add_params_info(info, rows, rejected)
         return self._obs.copy(), info
 
     def step(self, actions):
@@ -250,6 +259,8 @@ class LegVectorEnv(VectorEnv):
         info = {}
         self._add_reward_info(info, stepped, t.terms)
         self._add_state_info(info, self._out, self._flags, self._state[:, STATE_MODE])
+        if t.restarted is not None:  # their reset's robot, as SyncVectorEnv passes a reset's info on
+            self._add_params_info(info, t.restarted, t.rejected)
         if t.final is not None:  # SAME_STEP: the ended rows report their reset, their last step goes to final_*
             ended = np.logical_not(stepped)
             final_obs = np.full(self.num_envs, None, dtype=object)
@@ -326,9 +337,10 @@ class LegVectorEnv(VectorEnv):
             )
         self._action[:] = self._checked_actions(actions)
         mode = self.autoreset_mode
-        restarted = None
+        restarted = rejected = None
         if mode == AutoresetMode.NEXT_STEP and self._ended.any():
             restarted = np.flatnonzero(self._ended)
+            rejected = self._set_robots(restarted)
             starts = self._draw_starts(restarted)
             # step the restarting rows from their start (cheap, near nominal), then put them back there
             self._start(restarted, *starts)
@@ -362,12 +374,13 @@ class LegVectorEnv(VectorEnv):
         if mode == AutoresetMode.SAME_STEP and ended.any():
             restarted = np.flatnonzero(ended)
             final = _Final(self._obs[restarted], self._flags[restarted], self._out[restarted], self._state[restarted, STATE_MODE])
+            rejected = self._set_robots(restarted)
             self._start(restarted, *self._draw_starts(restarted))
             self._elapsed[restarted] = 0
             self._ended[:] = False
         else:
             self._ended = ended
-        return _Transition(self._obs.copy(), reward, terminated, truncated, restarted, final, terms)
+        return _Transition(self._obs.copy(), reward, terminated, truncated, restarted, final, terms, rejected)
 
     def _physics_threaded(self) -> None:
         """``physics_range`` split into ``num_threads`` contiguous chunks, each stepped in a thread.
@@ -401,40 +414,86 @@ class LegVectorEnv(VectorEnv):
             raise ValueError(f"actions must be finite; sub-env(s) {_some(bad)} got {a[bad[:3]].tolist()}")
         return a
 
+    def _set_robots(self, rows: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray | None:
+        """Give ``rows`` their robots for the new episode: ``robots`` (a ``reset`` option's, ``(len(rows), D)``),
+        else drawn from each row's own generator (``randomize``), else the nominal one. The robots are drawn
+        before the start state, as the single env draws them; returns the refused draws (None if none drawn)."""
+        rejected = None
+        if robots is not None or self.robots.active or self._custom[rows].any():
+            if self._consts.shape[0] == 1:  # from now on a row per robot
+                self._consts = np.repeat(self._consts, self.num_envs, axis=0)
+                self._bind()
+            if robots is not None:
+                self._consts[rows] = robots
+            elif self.robots.active:
+                drawn = np.empty((rows.size, self._consts.shape[1]))
+                rejected = self.robots.draw_rows(self._rngs, rows, drawn)
+                self._consts[rows] = drawn
+            else:
+                self._consts[rows] = self.robots.base
+            self._custom[rows] = robots is not None or self.robots.active
+        return rejected
+
+    def _add_params_info(self, info: dict, rows: np.ndarray, rejected: np.ndarray | None) -> None:
+        """``info["params"]`` (and ``params_rejected`` when drawn) of the robots of ``rows`` that are not the
+        nominal one, as ``SyncVectorEnv`` gathers the single envs' (masked arrays, a nested dict)."""
+        custom = rows[self._custom[rows]]
+        if custom.size == 0:
+            return
+        n = self.num_envs
+        mask = np.zeros(n, dtype=np.bool_)
+        mask[custom] = True
+        params = {}
+        for name, values in params_info(self._consts[custom]).items():
+            column = np.zeros(n)
+            column[custom] = values
+            params[name] = column
+            params["_" + name] = mask.copy()
+        info["params"] = params
+        info["_params"] = mask
+        if rejected is not None:
+            column = np.zeros(n, dtype=np.int64)
+            column[rows] = rejected
+            info["params_rejected"] = column
+            info["_params_rejected"] = mask.copy()
+
     def _draw_starts(self, rows: np.ndarray, explicit=None):
-        """Fresh start states ``(q, qd, anchor, task columns)`` of ``rows``, each drawn from its own
-        generator as the single env draws it (``explicit``: ``(q, qd, anchor)`` given, only the task draws)."""
+        """The draws of fresh starts of ``rows``, each from its own generator as the single env draws them:
+        ``(explicit, noise, task columns)`` for ``_start``. ``explicit``: ``(q, qd, anchor)`` given (then
+        only the task draws, and ``noise`` is None); else ``noise`` holds the posture noise's uniforms."""
         posture = 6 if explicit is None and self.config.reset_noise_scale > 0.0 else 0
         draws = np.empty((rows.size, posture + self.task.draws(self.config)))
         if draws.shape[1]:
             self._rngs.draw(rows, draws)
         columns = self.task.task_columns(draws[:, posture:], self.config)
-        if explicit is not None:
-            return (*explicit, columns)
-        return (*starts_from_noise(np.ascontiguousarray(draws[:, :posture]), self.params, self.config, self.nominal), columns)
+        noise = None if explicit is not None else np.ascontiguousarray(draws[:, :posture])
+        return explicit, noise, columns
 
-    def _start(self, rows: np.ndarray | None, q, qd, anchor, columns) -> None:
-        """Put ``rows`` (all if None) at ``(q, qd)`` on ``anchor`` with the task's state ``columns`` and
-        evaluate them without stepping.
+    def _start(self, rows: np.ndarray | None, explicit, noise, columns) -> None:
+        """Start ``rows`` (all if None) with the task's state ``columns`` and evaluate them without stepping.
 
-        Their reward terms become zero. ``q, qd, anchor, columns`` are ``(len(rows), .)`` float64 arrays.
+        ``explicit``: ``(q, qd, anchor)`` (each broadcast to ``(len(rows), .)``), put on their contact by
+        ``physics_start``; else the nominal posture plus the posture ``noise`` (``(len(rows), 6 or 0)``
+        uniforms), by ``physics_start_noisy``, each robot from its own row of ``consts``. Their reward
+        terms become zero.
         """
         first = self._state.shape[1] - len(self.task.state_names)  # the task's first state column
         if rows is None:
-            self._q[:] = q
-            self._qd[:] = qd
-            self._anchor[:] = anchor
-            self._state[:, first:] = columns
-            physics_start(*self._physics_args)
-            self.task.start(*self._kernel_args)
-            return
-        k = rows.size
-        state, out = np.zeros((k, self._state.shape[1])), np.zeros((k, self._out.shape[1]))
-        obs, flags = np.empty((k, self._obs.shape[1]), dtype=np.float32), np.empty((k, len(FLAG_NAMES)), dtype=np.bool_)
-        state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR] = q, qd, anchor
+            state, consts, out, obs, flags = self._kernel_args
+        else:
+            k = rows.size
+            state, out = np.zeros((k, self._state.shape[1])), np.zeros((k, self._out.shape[1]))
+            obs, flags = np.empty((k, self._obs.shape[1]), dtype=np.float32), np.empty((k, len(FLAG_NAMES)), dtype=np.bool_)
+            consts = self._consts if self._consts.shape[0] == 1 else self._consts[rows]
         state[:, first:] = columns
-        physics_start(state, self._consts, out, flags)
-        self.task.start(state, self._consts, out, obs, flags)
+        if explicit is None:
+            physics_start_noisy(noise, self.config.reset_noise_scale, state, consts, out, flags)
+        else:
+            state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR] = explicit
+            physics_start(state, consts, out, flags)
+        self.task.start(state, consts, out, obs, flags)
+        if rows is None:
+            return
         self._state[rows] = state
         self._out[rows] = out
         self._obs[rows] = obs
@@ -570,6 +629,7 @@ class _Transition(NamedTuple):
     restarted: np.ndarray | None
     final: _Final | None
     terms: np.ndarray
+    rejected: np.ndarray | None = None  # the refused robot draws of the restarted rows (randomize)
 
 
 def _some(rows: np.ndarray, limit: int = 10) -> str:

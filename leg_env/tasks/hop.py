@@ -58,9 +58,9 @@ from numba import njit
 from .._jit import CACHE
 from .. import checks
 from ..hybrid import ACC_KICK_X, ACC_KICK_Y, ACC_SLIP_DISTANCE
-from ..step import OUT_BASE, STATE_DIM, physics_one, summed_terms
+from ..step import COM0, CONSTS_BASE, OUT_BASE, STATE_DIM, physics_one, robot_row, summed_terms
 from .base import Task
-from .stance import OBS_DIM_UNILATERAL, StanceConfig, _assess, _evaluate, _unpack, _weight, observation_space as _stance_space
+from .stance import OBS_DIM_UNILATERAL, StanceConfig, _assess, _evaluate, _robot, _unpack, observation_space as _stance_space
 
 __all__ = ["HopConfig", "TASK", "REWARD_TERMS", "OBS_DIM"]
 
@@ -103,10 +103,9 @@ class HopConfig(StanceConfig):
         object.__setattr__(self, "height_scale", checks.real("HopConfig.height_scale", self.height_scale, 0.0, _BIG, lo_open=True, unit="m"))
 
     def task_array(self, p, nominal) -> np.ndarray:
-        """``consts`` after the nominal torques: ``y_stand`` and the weights."""
+        """``consts`` after the nominal COM: the weights (the standing height is the robot's nominal COM)."""
         return np.array(
             [
-                _com(nominal.q, p)[1],
                 self.height_weight,
                 self.height_scale,
                 self.drift_com_weight,
@@ -115,12 +114,6 @@ class HopConfig(StanceConfig):
                 self.slip_weight,
             ]
         )
-
-
-def _com(q, p) -> np.ndarray:
-    from ..dynamics import com_position
-
-    return com_position(q, p)
 
 
 def observation_space(params, config: HopConfig):
@@ -159,18 +152,16 @@ def _com_state(s, p):
 @njit(cache=CACHE)
 def assess(state, consts, out, obs, flags):
     """The balance task's observation and flags, then the hop's reward terms."""
-    q, qd, anchor, action, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    q, qd, anchor, action, trig, mode, lam, extra, hyb = _unpack(state, out)
     terms = out[:, OUT_BASE:OUT_BASE + len(REWARD_TERMS)]
-    k0 = consts.shape[0] - 7
-    y_stand, w_h, h_scale, w_drift, w_tilt, w_imp, w_slip = (
-        consts[k0], consts[k0 + 1], consts[k0 + 2], consts[k0 + 3], consts[k0 + 4], consts[k0 + 5], consts[k0 + 6],
-    )  # fmt: skip
-    m = p[0] + p[1] + p[2]
-    g = p[10]
-    weight = _weight(p)
+    w_h, h_scale, w_drift, w_tilt, w_imp, w_slip = consts[0, CONSTS_BASE:CONSTS_BASE + 6]
     stance_terms = np.empty((state.shape[0], 5))
     kept = np.empty(obs.shape[1])
     for i in range(state.shape[0]):
+        p, c, q_nom, weight = _robot(consts, i)
+        m = p[0] + p[1] + p[2]
+        g = p[10]
+        y_stand = robot_row(consts, i)[COM0 + 1]  # the standing COM height above the foot
         s = state[i]
         evaluated = _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, stance_terms, flags, extra, hyb, kept)
         if not evaluated:
@@ -197,11 +188,11 @@ def assess(state, consts, out, obs, flags):
 @njit(cache=CACHE)
 def start(state, consts, out, obs, flags):
     """The balance task at the start, the command in the observation, the COM reference; terms zero."""
-    q, qd, anchor, _, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    q, qd, anchor, _, trig, mode, lam, extra, hyb = _unpack(state, out)
     terms = out[:, OUT_BASE:OUT_BASE + len(REWARD_TERMS)]
-    weight = _weight(p)
     stance_terms = np.empty((state.shape[0], 5))
     for i in range(state.shape[0]):
+        p, c, q_nom, weight = _robot(consts, i)
         s = state[i]
         _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, stance_terms, flags, extra, trig, mode, hyb)
         for k in range(terms.shape[1]):

@@ -80,8 +80,8 @@ from .stance import (
     StanceConfig,
     _assess,
     _evaluate,
+    _robot,
     _unpack,
-    _weight,
     observation_space,
 )
 
@@ -193,14 +193,14 @@ def _com_x(s, p):
 @njit(cache=CACHE)
 def assess(state, consts, out, obs, flags):
     """The balance task's evaluation, the COM term, the push's info, and the next step's push."""
-    q, qd, anchor, action, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    q, qd, anchor, action, trig, mode, lam, extra, hyb = _unpack(state, out)
     n_terms = len(REWARD_TERMS)
     terms = out[:, OUT_BASE:OUT_BASE + n_terms]
     info = out[:, OUT_BASE + n_terms:]
-    push_steps, w_com = consts[consts.shape[0] - 2], consts[consts.shape[0] - 1]
-    weight = _weight(p)
+    push_steps, w_com = consts[0, consts.shape[1] - 2], consts[0, consts.shape[1] - 1]
     kept = np.empty(obs.shape[1])
     for i in range(state.shape[0]):
+        p, c, q_nom, weight = _robot(consts, i)
         s = state[i]
         force = s[STATE_LOAD]
         evaluated = _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept)
@@ -216,13 +216,13 @@ def assess(state, consts, out, obs, flags):
 @njit(cache=CACHE)
 def start(state, consts, out, obs, flags):
     """The balance task at the start, the COM reference, and the first step's push (reward terms zero)."""
-    q, qd, anchor, _, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    q, qd, anchor, _, trig, mode, lam, extra, hyb = _unpack(state, out)
     n_terms = len(REWARD_TERMS)
     terms = out[:, OUT_BASE:OUT_BASE + n_terms]
     info = out[:, OUT_BASE + n_terms:]
-    push_steps = consts[consts.shape[0] - 2]
-    weight = _weight(p)
+    push_steps = consts[0, consts.shape[1] - 2]
     for i in range(state.shape[0]):
+        p, c, q_nom, weight = _robot(consts, i)
         s = state[i]
         _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
         for k in range(n_terms):

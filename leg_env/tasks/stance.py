@@ -35,7 +35,7 @@ from numba import njit
 
 from .._jit import CACHE
 from ..contact import FLIGHT, MODE_NAMES, SLIP_BACKWARD, SLIP_FORWARD, _foot_velocity
-from ..dynamics import NP, _energy_core, static_equilibrium
+from ..dynamics import NP, _energy_core, com_position, static_equilibrium
 from ..hybrid import (
     ACC_DIM, ACC_EVENTS, ACC_FLIGHT_TIME, ACC_IMPACT_DISSIPATION, ACC_KICK_X, ACC_KICK_Y,
     ACC_PAINLEVE, ACC_SETTLES, ACC_SLIP_DISSIPATION, ACC_SLIP_DISTANCE, ACC_SLIP_TIME, ACC_STICK_TIME, ACC_WORK,
@@ -46,7 +46,7 @@ from ..integrate import MAX_ANGLE, MAX_SUBSTEPS, SUBSTEPS, DT, _project_one
 from ..params import LegParams
 from ..step import (
     ACC0, CONSTS_BASE, FAILED, FLAG_NAMES, NC, NOM0, OUT_BASE, OUT_MODE, OUT_EXTRA, OUT_LAM, STATE_DIM, STATE_MODE, TAU0,
-    BitGeneratorRows, compiled_entry, perturbed_start, physics_one, physics_range, physics_start, summed_terms, undo_step,
+    BitGeneratorRows, compiled_entry, perturbed_start, robot_row, physics_one, physics_range, physics_start, summed_terms, undo_step,
 )  # fmt: skip
 
 __all__ = [
@@ -328,23 +328,30 @@ def nominal_state(p: LegParams, config: StanceConfig) -> Nominal:
 
 
 def task_constants(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.ndarray:
-    """The kernels' read-only ``consts`` array: parameters, settings, nominal posture and torques, task constants."""
-    parts = (p.array, config.array(), nominal.q, nominal.tau, config.task_array(p, nominal))
-    if [len(x) for x in parts[:4]] != [_NP, _NC, 5, 2]:
+    """The kernels' ``consts`` of one robot (they only read it), shape ``(1, CONSTS_DIM + task constants)``: parameters,
+    settings, nominal posture, holding torques and COM, task constants (``leg_env.step``)."""
+    parts = (p.array, config.array(), nominal.q, nominal.tau, com_position(nominal.q, p), config.task_array(p, nominal))
+    if [len(x) for x in parts[:5]] != [_NP, _NC, 5, 2, 2]:
         raise RuntimeError(f"task_constants: layout mismatch {[len(x) for x in parts]}")  # a developer error
-    out = np.concatenate(parts).astype(np.float64)
-    out.setflags(write=False)
-    return out
+    return np.concatenate(parts).astype(np.float64)[None, :]  # writable: a reset may put another robot in a row
 
 
 @njit(cache=CACHE, inline="always")
-def _unpack(state, consts, out):
+def _unpack(state, out):
     """Named views of the packed kernel arrays (``leg_env.step``), the reward terms excepted."""
     return (
         state[:, 0:5], state[:, 5:10], state[:, 10:12], state[:, 12:14], state[:, 14:18], state[:, STATE_MODE],
-        consts[:NP], consts[NP:NOM0], consts[NOM0:TAU0],
         out[:, 0:2], out[:, 2:5], out[:, ACC0:OUT_BASE],
     )  # fmt: skip
+
+
+@njit(cache=CACHE, inline="always")
+def _robot(consts, i):
+    """Robot ``i``'s ``(p, c, q_nom, weight)``: parameters, settings, nominal posture and ``m g`` (1 if 0),
+    from its row of ``consts`` (``leg_env.step.robot_row``)."""
+    r = robot_row(consts, i)
+    p = r[:NP]
+    return p, r[NP:NOM0], r[NOM0:TAU0], _weight(p)
 
 
 @njit(cache=CACHE, inline="always")
@@ -497,21 +504,21 @@ def assess(state, consts, out, obs, flags):
     Writes the observation, the reward terms (``OUT_TERMS``; they sum to the reward), the extras and
     ``flags`` (``FLAG_NAMES`` order); the actions are read (clipped) for the control cost.
     """
-    q, qd, anchor, action, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    q, qd, anchor, action, trig, mode, lam, extra, hyb = _unpack(state, out)
     terms = out[:, OUT_TERMS]
-    weight = _weight(p)
     kept = np.empty(obs.shape[1])
     for i in range(state.shape[0]):
+        p, c, q_nom, weight = _robot(consts, i)
         _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept)
 
 
 @njit(cache=CACHE)
 def start(state, consts, out, obs, flags):
     """The task at freshly started robots (after ``leg_env.step.physics_start``): reward terms zero."""
-    q, qd, anchor, _, trig, mode, p, c, q_nom, lam, extra, hyb = _unpack(state, consts, out)
+    q, qd, anchor, _, trig, mode, lam, extra, hyb = _unpack(state, out)
     terms = out[:, OUT_TERMS]
-    weight = _weight(p)
     for i in range(state.shape[0]):
+        p, c, q_nom, weight = _robot(consts, i)
         _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
         for k in range(terms.shape[1]):
             terms[i, k] = 0.0

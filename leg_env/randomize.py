@@ -84,6 +84,8 @@ MIN_ACCEPTANCE = 0.1
 # the consts column of each field: LegParams, then the settings block (leg_env.step)
 _COLUMN = {**{name: j for j, name in enumerate(PARAM_NAMES)}, "mu": NP + C_MU, "hip_torque_limit": NP + C_TAU_HIP,
            "knee_torque_limit": NP + C_TAU_KNEE}  # fmt: skip
+FIELD_COLUMNS = np.array([_COLUMN[name] for name in FIELDS])
+"""The ``consts`` column of each of ``FIELDS``."""
 _BIG = 1.0e6
 # accepted values of a drawn field: (low, high, low open)
 _VALID = {
@@ -368,3 +370,8 @@ class Robots:
 def params_info(rows: np.ndarray) -> dict:
     """``info["params"]`` of robots from their ``consts`` rows ``(k, D)``: field name to value (``(k,)`` arrays)."""
     return {name: rows[:, _COLUMN[name]].copy() for name in FIELDS}
+
+
+def params_of_row(row: np.ndarray) -> dict:
+    """``info["params"]`` of one robot from its ``consts`` row: field name to float."""
+    return dict(zip(FIELDS, row[FIELD_COLUMNS].tolist()))

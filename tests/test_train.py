@@ -96,6 +96,26 @@ def test_evaluate_command_writes_the_comparison(run, tmp_path, capsys):
     assert "| survival rate |" in capsys.readouterr().out
 
 
+def test_evaluate_on_held_out_robots_lists_every_robot(tmp_path):
+    """--randomize: each episode's robot is drawn by its seed (the same robot for every controller), and
+    robots.md lists them with each controller's survival and return."""
+    out = evaluate(EvalArgs(policy="lqr", baseline="lqr", episodes=3, out=tmp_path / "eval", plot=False, randomize=True))
+    lqr = json.loads((out / "lqr.json").read_text())
+    robots = [e["robot"] for e in lqr["per_episode"]]
+    assert len({r["m_b"] for r in robots}) == 3 and all(8.0 <= r["m_b"] <= 12.0 for r in robots)
+    table = (out / "robots.md").read_text().splitlines()
+    assert len(table) == 2 + 3 + 1 and table[2].startswith("| 10000 | ") and f"{robots[0]['m_b']:.3g}" in table[2]
+    assert lqr["env_kwargs"] == {"randomize": True}
+
+
+@pytest.mark.parametrize("module", ["train.ppo", "train.evaluate", "train.rllib"])
+def test_every_command_prints_its_help(module):
+    """Every field's docstring is a help text (a '%' in one once made argparse crash on --help)."""
+    done = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "usage:" in done.stdout
+
+
 def test_resume_continues_the_step_counter(tmp_path):
     out = tmp_path / "run"
     train(tiny_args(out))

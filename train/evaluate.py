@@ -251,7 +251,7 @@ def run_episodes(
         env = gym.make(env_id, **kwargs)
         limit = np.asarray(env.unwrapped.config.torque_limit)
         reward_terms = env.unwrapped.task.reward_terms
-        obs, _ = env.reset(seed=int(seed))
+        obs, reset_info = env.reset(seed=int(seed))
         if hasattr(policy, "reset"):
             policy.reset()
         if hop is not None:
@@ -316,6 +316,7 @@ def run_episodes(
                 "survived": bool(truncated and not terminated),
                 "rms_base_drift": float(np.sqrt(ep_drift_sq / length)),
                 "reward_terms": {k: round(v, 4) for k, v in terms.items()},
+                **({"robot": reset_info["params"]} if "params" in reset_info else {}),
             }
         )
     returns = np.array([e["return"] for e in per_episode])
@@ -413,6 +414,10 @@ class EvalArgs:
     plot: bool = True
     """Write timeseries.png (base drift, torques, contact force of the first episode) and, for a run
     folder, learning_curve.png with the baseline's level."""
+    randomize: bool = False
+    """Held-out robots: each episode's robot drawn from the task's default randomisation ranges
+    (leg_env.randomize, randomize=True) by the episode's seed; robots.md lists every robot with each
+    controller's survival and return."""
 
     def __post_init__(self):
         if self.episodes < 1:
@@ -433,6 +438,8 @@ def evaluate(args: EvalArgs) -> Path:
     policy = load_policy(args.policy, env_id=args.env_id)
     env_id = args.env_id or (None if is_model else getattr(policy, "env_id", None)) or ENV_ID
     env_kwargs = {} if is_model else policy.env_kwargs
+    if args.randomize:
+        env_kwargs = {**env_kwargs, "randomize": True}
     controllers = {_label(args.policy): policy}
     if args.baseline is not None:
         label = _label(args.baseline)
@@ -478,8 +485,29 @@ def evaluate(args: EvalArgs) -> Path:
             plot_learning_curve(history, out / "learning_curve.png", env_id, reference)
     if args.push_curve:
         _push_curve(controllers, env_id, env_kwargs, args, out)
+    if args.randomize:
+        (out / "robots.md").write_text(robots_table(results) + "\n")
     print(f"results written to {out}/")
     return out
+
+
+_ROBOT_COLUMNS = ("m_b", "m1", "m2", "I_b", "I1", "I2", "c1", "c2", "mu", "hip_torque_limit", "knee_torque_limit")
+
+
+def robots_table(results: dict[str, dict]) -> str:
+    """Every held-out robot (one per episode) with each controller's survival and return, then the totals."""
+    names = list(results)
+    first = results[names[0]]["per_episode"]
+    head = "| seed | " + " | ".join(_ROBOT_COLUMNS) + " | " + " | ".join(f"{n}: survived, return" for n in names) + " |"
+    lines = [head, "|" + "---:|" * (1 + len(_ROBOT_COLUMNS) + len(names))]
+    for k, episode in enumerate(first):
+        robot = episode.get("robot", {})
+        cells = [f"{robot.get(c, float('nan')):.3g}" for c in _ROBOT_COLUMNS]
+        runs = [results[n]["per_episode"][k] for n in names]
+        lines.append(f"| {episode['seed']} | " + " | ".join(cells) + " | " + " | ".join(f"{'yes' if r['survived'] else 'no'}, {r['return']:.1f}" for r in runs) + " |")
+    lines.append("| **all** | " + " | " * (len(_ROBOT_COLUMNS) - 1) + " | " + " | ".join(
+        f"**{100 * results[n]['survival_rate']:.0f}%, {results[n]['mean_return']:.2f}**" for n in names) + " |")  # fmt: skip
+    return "\n".join(lines)
 
 
 PUSH_FORCES = tuple(2.5 * k for k in range(1, 25)) + tuple(range(70, 201, 10))

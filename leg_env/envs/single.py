@@ -19,7 +19,7 @@ from ..step import (
     physics_start, physics_start_noisy,
 )  # fmt: skip
 from ..step import C_MU, OUT_BASE
-from ..randomize import Robots, params_info
+from ..randomize import Robots, params_of_row
 from ..tasks.stance import OUT_KICK, StanceConfig, info_template, nominal_state, row_info, task_constants
 
 __all__ = ["LegEnv"]
@@ -127,7 +127,7 @@ class LegEnv(gym.Env):
             self._start(q, qd, start_anchor(q, self.robot_params, self.unilateral), columns)
         info = self._info(self._out_row.tolist(), self._flag_row.tolist())
         if self._custom_robot:
-            info["params"] = {name: float(value[0]) for name, value in params_info(self._consts).items()}
+            info["params"] = params_of_row(self._consts[0])
             if rejected is not None:
                 info["params_rejected"] = rejected
         if self.render_mode == "human":

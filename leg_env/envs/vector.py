@@ -42,7 +42,7 @@ from ..step import (
     physics_start,
     physics_start_noisy,
 )
-from ..randomize import params_info
+from ..randomize import FIELD_COLUMNS, FIELDS
 from ..tasks.stance import INFO_NAMES, REWARD_TERMS, UNILATERAL_KEYS, StanceConfig, unilateral_columns
 from .single import LegEnv, contact_marks, explicit_start, push_mark, start_anchor
 
@@ -441,16 +441,16 @@ class LegVectorEnv(VectorEnv):
         if custom.size == 0:
             return
         n = self.num_envs
-        mask = np.zeros(n, dtype=np.bool_)
-        mask[custom] = True
+        columns = np.zeros((len(FIELDS), n))  # one block for every field's column, one for every mask
+        columns[:, custom] = self._consts[np.ix_(custom, FIELD_COLUMNS)].T
+        masks = np.zeros((len(FIELDS) + 1, n), dtype=np.bool_)
+        masks[:, custom] = True
         params = {}
-        for name, values in params_info(self._consts[custom]).items():
-            column = np.zeros(n)
-            column[custom] = values
-            params[name] = column
-            params["_" + name] = mask.copy()
+        for j, name in enumerate(FIELDS):
+            params[name] = columns[j]
+            params["_" + name] = masks[j]
         info["params"] = params
-        info["_params"] = mask
+        info["_params"] = mask = masks[-1]
         if rejected is not None:
             column = np.zeros(n, dtype=np.int64)
             column[rows] = rejected

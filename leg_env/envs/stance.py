@@ -209,6 +209,20 @@ class PlanarLegStanceEnv(LegEnv):
     | `contact_loss_threshold`    | float             | 0.0            | [N]                                                      |
     | `max_rate`                  | float             | 1000           | a faster state is a numerical failure [m/s, rad/s]       |
     | `reset_noise_scale`         | float             | 0.01           | half-width of the reset noise [rad, rad/s], at most pi   |
+    | `randomize`                 | None, True, dict  | None           | a robot per episode (domain randomisation), below        |
+
+    **Domain randomisation** (``randomize``, ``leg_env.randomize``). None (the default) runs the nominal
+    robot and draws no random number, so every seed gives what it gave before the argument existed.
+    True draws, at every reset and from the env's own generator before the posture noise, a robot from
+    ``leg_env.randomize.DEFAULT_RANGES`` (masses and inertias x U(0.8, 1.2), ``c1``, ``c2`` +- 2 cm, ``mu``
+    x U(0.6, 1), torque limits x U(0.9, 1.1)); a dict ``{field: ("scale" | "offset" | "range", low, high)}``
+    gives explicit ranges over ``LegParams``' fields, ``mu``, ``hip_torque_limit`` and ``knee_torque_limit``.
+    Values are drawn around the nominal ones every time (nothing compounds), the nominal posture and
+    holding torques follow the drawn robot, and a robot that could not run its nominal posture (torques
+    above its limits, a posture outside the termination limits, friction past the Painleve bound) is
+    drawn again (``info["params_rejected"]`` counts them). ``reset`` then returns ``info["params"]``
+    (field to value), and ``reset(options={"params": {field: value}})`` runs the given robot for one
+    episode (the fields left out nominal). ``env.unwrapped.robot_params`` is the robot being run.
 
     ``render_mode="human"`` opens its window at the first ``reset`` or ``step``, before the state
     changes: a window that cannot open raises ``RuntimeError`` naming SDL's video driver, and the env
@@ -229,7 +243,8 @@ class PlanarLegStanceEnv(LegEnv):
       the start is not already inside the LQR's comfort zone (``gymnasium.make("leg_env/PlanarLegStance-v1")``
       is ``PlanarLegStance-v0`` with those two arguments).
     * v0: Initial release. The ``contact`` argument (default ``"pinned"``: the release's behaviour, bit
-      for bit) adds the unilateral ground as an opt-in model.
+      for bit) adds the unilateral ground as an opt-in model; the ``randomize`` argument (default None:
+      the same, bit for bit) adds domain randomisation in every version and task.
     """
 
     def __init__(

@@ -1,8 +1,9 @@
 """Soak: millions of env-steps of abuse through ``gymnasium.make_vec``, counting what went wrong.
 
-For each contact model (``pinned``, ``unilateral``) of ``leg_env/PlanarLegStance-v0`` and each action
-kind (``random``: uniform in [-1, 1]; ``bang_bang``: every joint at -1 or +1, each flipping with
-probability 0.1 per step), at ten times the default torque limit (``torque_limit=500``), this steps
+For each case of ``CASES`` (both contact models of ``leg_env/PlanarLegStance-v0``, the push and hop tasks,
+and the unilateral balance task with a robot per sub-env drawn at every reset, ``randomize=True``) and
+each action kind (``random``: uniform in [-1, 1]; ``bang_bang``: every joint at -1 or +1, each flipping
+with probability 0.1 per step), at ten times the default torque limit (``torque_limit=500``), this steps
 ``num_envs`` robots with autoreset and counts, over every env-step:
 
 * ``non_finite``: non-finite values in the observation, the reward or any numeric ``info`` value;
@@ -14,7 +15,7 @@ probability 0.1 per step), at ten times the default torque limit (``torque_limit
 
 Not a CI test (``tests/test_soak.py`` runs the same ``soak`` for 10^5 env-steps). Usage::
 
-    python benchmarks/soak.py                 # 10^7 env-steps per contact model and action kind, N = 4096
+    python benchmarks/soak.py                 # 10^7 env-steps per case and action kind, N = 4096
     python benchmarks/soak.py --steps 1e6 --num-envs 1024 --json soak.json
 """
 
@@ -30,18 +31,27 @@ import numpy as np
 import leg_env
 
 CONTACTS = ("pinned", "unilateral")
+CASES = {  # name: (env id, keyword arguments)
+    "stance pinned": (leg_env.ENV_ID, {"contact": "pinned"}),
+    "stance unilateral": (leg_env.ENV_ID, {"contact": "unilateral"}),
+    "push": ("leg_env/PlanarLegPush-v0", {}),
+    "hop": ("leg_env/PlanarLegHop-v0", {}),
+    "stance unilateral randomised": (leg_env.ENV_ID, {"contact": "unilateral", "randomize": True}),
+}
 ACTIONS = ("random", "bang_bang")
 TORQUE_LIMIT = 500.0  # ten times the default 50 N m
 FLIP = 0.1  # bang-bang: probability that a joint's sign flips in a step
 
 
-def soak(contact: str, actions: str, steps: int, num_envs: int = 4096, seed: int = 0) -> dict:
-    """Step ``gym.make_vec(..., num_envs)`` for at least ``steps`` env-steps; return the counts (module docstring)."""
-    envs = gym.make_vec(leg_env.ENV_ID, num_envs=num_envs, contact=contact, torque_limit=TORQUE_LIMIT)
+def soak(case: str, actions: str, steps: int, num_envs: int = 4096, seed: int = 0) -> dict:
+    """Step ``gym.make_vec(..., num_envs)`` of ``CASES[case]`` for at least ``steps`` env-steps; return the counts
+    (module docstring). ``case`` may also be a contact model, for the balance task."""
+    env_id, kwargs = CASES[case] if case in CASES else (leg_env.ENV_ID, {"contact": case})
+    envs = gym.make_vec(env_id, num_envs=num_envs, torque_limit=TORQUE_LIMIT, **kwargs)
     space = envs.single_observation_space
     max_rate = envs.config.max_rate
     rng = np.random.default_rng(seed)
-    counts = dict(contact=contact, actions=actions, num_envs=num_envs, steps=0, seconds=0.0, non_finite=0, exceptions=0,
+    counts = dict(case=case, actions=actions, num_envs=num_envs, steps=0, seconds=0.0, non_finite=0, exceptions=0,
                   unflagged=0, failures=0, terminated=0, truncated=0)  # fmt: skip
     envs.reset(seed=seed)
     signs = np.where(rng.random((num_envs, 2)) < 0.5, -1.0, 1.0)
@@ -88,9 +98,9 @@ def main() -> None:
     parser.add_argument("--json", help="also write the results to this file")
     args = parser.parse_args()
     results = []
-    for contact in CONTACTS:
+    for case in CASES:
         for actions in ACTIONS:
-            r = soak(contact, actions, int(args.steps), args.num_envs, args.seed)
+            r = soak(case, actions, int(args.steps), args.num_envs, args.seed)
             results.append(r)
             print(json.dumps(r), flush=True)
     ok = all(r["non_finite"] == 0 and r["exceptions"] == 0 and r["unflagged"] == 0 for r in results)

@@ -3,8 +3,9 @@
 ``gymnasium.make_vec("leg_env/PlanarLegStance-v0", num_envs=N)`` builds this class (it is the id's
 ``vector_entry_point``). One call of the task kernel ``leg_env.task.step_batch`` advances all N robots,
 the same kernel the single environment calls with N = 1, and resets build their start states with the
-same ``starts_from_noise`` and ``start_batch`` (the noise drawn in compiled code from each sub-env's own
-generator, ``BitGeneratorRows``, the same numbers as ``rng.random``): sub-env ``i`` of a batch reset with
+same ``leg_env.step.physics_start_noisy`` and task ``start`` kernels (the noise, and with ``randomize`` the
+robot, drawn in compiled code from each sub-env's own generator, ``BitGeneratorRows``, the same numbers
+as ``rng.random``): sub-env ``i`` of a batch reset with
 ``seed=s`` is exactly a ``PlanarLegStanceEnv`` reset with ``seed=s + i`` under ``TimeLimit``, step for
 step and across autoresets. Observations, rewards, terminations, truncations and ``info`` (keys,
 values and ``_key`` masks) equal, bit for bit, those of ``gymnasium.vector.SyncVectorEnv`` over N
@@ -120,9 +121,17 @@ class LegVectorEnv(VectorEnv):
     ints or ``None``); ``seed=None`` continues each sub-env's generator (fresh entropy the first
     time), as ``SyncVectorEnv`` does. ``options``: ``reset_mask`` (``(num_envs,)`` bool) resets only
     those sub-envs; ``qpos`` / ``qvel`` give explicit states, ``(5,)`` for all reset sub-envs or one
-    row per reset sub-env (semantics and bounds of the single env's options). A rejected reset (a bad
-    seed such as ``1.5``, a bad option) raises before anything changes: generators, states and the
-    time limit's counters stay as they were.
+    row per reset sub-env (semantics and bounds of the single env's options); ``params`` (``{field:
+    value}``, each a number or one per reset sub-env) runs the given robots for their next episode. A
+    rejected reset (a bad seed such as ``1.5``, a bad option, an infeasible robot) raises before anything
+    changes: generators, states and the time limit's counters stay as they were.
+
+    ## Domain randomisation
+    ``randomize`` (None, True or a dict of ranges; ``leg_env.randomize`` and the single env's docstring):
+    every reset, including autoresets, draws each reset sub-env's robot from its own generator before its
+    posture noise, exactly as a single env does, and the kernels read a row of parameters per sub-env. The
+    reset ``info`` (and a step's ``info`` for the sub-envs it autoreset) has ``params``, a dict of ``(num_envs,)``
+    arrays with masks, as ``SyncVectorEnv`` gathers the single envs' dicts, and ``params_rejected``.
 
     ## Rendering
     ``render_mode="rgb_array"``: ``render()`` returns a tuple of ``(height, width, 3)`` uint8 frames,
@@ -137,7 +146,7 @@ class LegVectorEnv(VectorEnv):
     right choice next to a training process; ``1 <= k <= 256`` splits the batch into ``k`` contiguous
     chunks whose physics is stepped by ``k`` Python threads, the compiled kernel releasing the GIL: bitwise the same
     results; fork-safe, since no OpenMP runtime is involved) and every argument of the single env:
-    ``render_mode`` (None or ``"rgb_array"``), ``params``, ``config``, ``width``, ``height`` and the
+    ``render_mode`` (None or ``"rgb_array"``), ``params``, ``config``, ``width``, ``height``, ``randomize`` and the
     ``StanceConfig`` fields as keywords. Pickling keeps every argument and the full state.
 
     ## Version History

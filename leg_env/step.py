@@ -109,12 +109,14 @@ def physics_range(lo, hi, state, consts, out, flags):
     """
     c = consts[0, NP:NOM0]  # the settings every robot shares
     per_robot = consts.shape[0] > 1
-    p = np.empty(NP + 1)  # the kernels' parameter array: LegParams, then this robot's load
+    # one allocation for the scratch (a single robot's step pays for each): the parameter array (LegParams,
+    # then this robot's load), the torques, and the hybrid step's event log (not read here)
+    scratch = np.empty(NP + 3 + 2 * LOG_SIZE)
+    p, tau = scratch[:NP + 1], scratch[NP + 1:NP + 3]
+    log_t = scratch[NP + 3:NP + 3 + LOG_SIZE]
+    log_k = scratch[NP + 3 + LOG_SIZE:].view(np.int64)
     for j in range(NP):
         p[j] = consts[0, j]
-    tau = np.empty(2)
-    log_t = np.empty(LOG_SIZE)
-    log_k = np.empty(LOG_SIZE, dtype=np.int64)
     unilateral = c[C_UNILATERAL] > 0.5
     dt, substeps, max_angle = c[C_DT], int(c[C_SUBSTEPS]), c[C_MAX_ANGLE]
     for i in range(lo, hi):

@@ -31,7 +31,7 @@ MAX_PIXELS = 16384  # largest frame width or height
 # attributes that are views of the buffers (rebuilt by _bind, never pickled)
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_action_row", "_out_row", "_flag_row", "_obs_row", "_kernel_args", "_force_row", "_kick_row",
           "_physics_start", "_step_kernel", "_start_kernel", "_task_columns", "task", "_physics_args",
-          "_tail_keys", "_template", "_reset_keys", "_reset_template", "_physics_start_noisy", "_reset_columns", "_task_draws",
+          "_tail_keys", "_template", "_reset_keys", "_reset_template", "_physics_start_noisy", "_reset_columns", "_task_draws", "_out_info",
           "_human")  # fmt: skip
 
 
@@ -113,9 +113,8 @@ class LegEnv(gym.Env):
             self._consts[0] = self.robots.base
         self._custom_robot = robot is not None or self.robots.active
         posture = 6 if start is None and self.config.reset_noise_scale > 0.0 else 0  # uniforms of the posture noise
-        draws = np.empty((1, posture + self._task_draws))
-        if draws.size:
-            self.np_random.random(out=draws[0])
+        k = posture + self._task_draws
+        draws = self.np_random.random((1, k)) if k else np.empty((1, 0))  # rng.random(out=...)'s numbers
         columns = self.task.task_columns(draws[:, posture:], self.config)[0] if self._reset_columns else None
         if start is None:  # the posture noise, the contact and the task's evaluation in two compiled calls
             if columns is not None:
@@ -227,6 +226,7 @@ class LegEnv(gym.Env):
         self._tail_keys = self.task.reward_keys + self.task.info_names  # the columns out[OUT_BASE:]
         self._template = info_template(self.unilateral, self._tail_keys)
         self._reset_keys = self.task.info_names  # a reset's info has no reward terms: the columns after them
+        self._out_info = self.task.out_info
         self._reset_template = info_template(self.unilateral, self._reset_keys)
         self._reset_columns = bool(self.task.state_names)
         self._task_draws = self.task.draws(self.config)
@@ -251,7 +251,7 @@ class LegEnv(gym.Env):
             info = row_info(out, flags, self._force_row, self._reset_template, self._kick_row)
         else:
             info = row_info(out, flags, self._force_row, self._reset_template)
-        info.update(zip(self._reset_keys, out[self.task.out_info]))
+        info.update(zip(self._reset_keys, out[self._out_info]))
         return info
 
     def _explicit_state(self, options: dict | None) -> tuple[np.ndarray, np.ndarray] | None:

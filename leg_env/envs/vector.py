@@ -451,7 +451,7 @@ class LegVectorEnv(VectorEnv):
             return
         n = self.num_envs
         columns = np.zeros((len(FIELDS), n))  # one block for every field's column, one for every mask
-        columns[:, custom] = self._consts[np.ix_(custom, FIELD_COLUMNS)].T
+        columns[:, custom] = self._consts[custom][:, FIELD_COLUMNS].T
         masks = np.zeros((len(FIELDS) + 1, n), dtype=np.bool_)
         masks[:, custom] = True
         params = {}

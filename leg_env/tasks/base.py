@@ -39,9 +39,10 @@ class Task:
         info_names: the task's own ``info`` keys, one float column each after the reward terms.
         state_names: the task's own per-robot state columns after ``leg_env.step.STATE_DIM``.
         assess, start: the compiled kernels ``(state, consts, out, obs, flags)`` (``leg_env.step``).
-        step_one: ``(lo, hi, state, consts, out, obs, flags) -> reward``: ``physics_range`` then ``assess``
-            in one compiled call, returning row ``lo``'s reward (its terms summed in order): the single env's
-            step. Three lines in the task's module (a kernel made by a factory would not be cached).
+        step_one: ``(a0, a1, state, consts, out, obs, flags) -> reward``: the single env's step in one compiled
+            call, ``leg_env.step.physics_one`` (robot 0's action ``(a0, a1)``, then its physics) and ``assess``,
+            returning the reward (``leg_env.step.summed_terms``). Three lines in the task's module (a kernel made
+            by a factory would not be cached).
         observation_space: ``(params, config) -> gymnasium.spaces.Box`` of one robot.
         draws: ``config -> int``: uniforms the task draws at every reset, after the posture noise.
         columns: ``(draws (k, n), config) -> (k, len(state_names))`` the task's state columns of ``k``

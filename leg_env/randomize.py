@@ -135,10 +135,6 @@ class Randomization:
                 ranges.append((name, *_checked_range(name, value[name])))
         return cls(tuple(ranges))
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(r[0] for r in self.ranges)
-
     def spec(self) -> np.ndarray:
         """``(k, 4)`` float64 rows ``(consts column, kind index, low, high)`` for the compiled draw."""
         return np.array([[_COLUMN[n], KINDS.index(k), lo, hi] for n, k, lo, hi in self.ranges], dtype=np.float64).reshape(-1, 4)
@@ -366,11 +362,6 @@ class Robots:
                     "or (unilateral ground) mu at or past the Painleve bound there (leg_env.randomize)"
                 )
         return out
-
-
-def params_info(rows: np.ndarray) -> dict:
-    """``info["params"]`` of robots from their ``consts`` rows ``(k, D)``: field name to value (``(k,)`` arrays)."""
-    return {name: rows[:, _COLUMN[name]].copy() for name in FIELDS}
 
 
 def params_of_row(row: np.ndarray) -> dict:

@@ -201,7 +201,10 @@ def physics_start(state, consts, out, flags):
     p = np.empty(NP + 1)
     qdd = np.empty(5)
     for i in range(state.shape[0]):
-        _start_row(i, state, consts, out, flags, p, qdd)
+        r = robot_row(consts, i)
+        for j in range(NP):
+            p[j] = r[j]
+        _start_row(i, state, r, out, flags, p, qdd)
 
 
 @njit(cache=CACHE)
@@ -221,7 +224,7 @@ def physics_start_noisy(noise, scale, state, consts, out, flags):
             p[j] = r[j]
         s = state[i]
         perturbed_start(noise[i], scale, r[NOM0:TAU0], p, s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0])
-        _start_row(i, state, consts, out, flags, p, qdd)
+        _start_row(i, state, r, out, flags, p, qdd)
 
 
 @njit(cache=CACHE, inline="always")
@@ -246,11 +249,9 @@ def perturbed_start(noise, scale, q_nom, p, q, qd, anchor):
 
 
 @njit(cache=CACHE, inline="always")
-def _start_row(i, state, consts, out, flags, p, qdd):
-    """``physics_start`` of row ``i`` (``p``, ``qdd``: scratch)."""
-    r = robot_row(consts, i)
-    for j in range(NP):
-        p[j] = r[j]
+def _start_row(i, state, r, out, flags, p, qdd):
+    """``physics_start`` of row ``i``, robot ``r`` (its ``consts`` row) whose parameters the caller has put in
+    ``p`` (``qdd``: scratch)."""
     c = r[NP:NOM0]
     tau = r[TAU0:COM0]
     s = state[i]

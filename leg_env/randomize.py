@@ -218,27 +218,28 @@ def robot_params(u, spec, base, limits, row):
 
 
 @njit(cache=CACHE)
-def draw_robots(next_double, states, rows, spec, base, limits, max_draws, out, rejected):
+def draw_robots(next_double, states, rows, spec, base, limits, max_draws, consts, rejected):
     """``robot_params`` for many sub-envs, each drawing from its own generator (``leg_env.step.BitGeneratorRows``).
 
     Robot ``k`` (sub-env ``rows[k]``) draws ``spec.shape[0]`` uniforms per try, up to ``max_draws`` tries;
-    ``out[k]`` is the first accepted robot (the nominal ``base`` when every try is refused) and
-    ``rejected[k]`` the number of refused tries: the same draws and the same robot as a single env's
+    ``consts[rows[k]]`` becomes the first accepted robot (the nominal ``base`` when every try is refused)
+    and ``rejected[k]`` the number of refused tries: the same draws and the same robot as a single env's
     ``draw_robot`` from the same generator.
     """
     u = np.empty(spec.shape[0])
     for k in range(rows.shape[0]):
         state = states[rows[k]]
+        row = consts[rows[k]]
         rejected[k] = max_draws
         for t in range(max_draws):
             for j in range(u.shape[0]):
                 u[j] = next_double(state)
-            if robot_params(u, spec, base, limits, out[k]):
+            if robot_params(u, spec, base, limits, row):
                 rejected[k] = t
                 break
         if rejected[k] == max_draws:
             for j in range(base.shape[0]):
-                out[k, j] = base[j]
+                row[j] = base[j]
 
 
 def draw_robot(rng: np.random.Generator, spec: np.ndarray, base: np.ndarray, limits: np.ndarray, row: np.ndarray) -> int:
@@ -308,15 +309,15 @@ class Robots:
         """Draw one sub-env's robot into ``row``; the number of refused tries."""
         return draw_robot(rng, self.spec, self.base, self.limits, row)
 
-    def draw_rows(self, rngs, rows: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """Draw the robots of sub-envs ``rows`` into ``out`` (``(len(rows), D)``) from ``rngs``
+    def draw_rows(self, rngs, rows: np.ndarray, consts: np.ndarray) -> np.ndarray:
+        """Draw the robots of sub-envs ``rows`` into their rows of ``consts`` (``(num_envs, D)``) from ``rngs``
         (``leg_env.step.BitGeneratorRows``); the refused tries of each."""
         rejected = np.zeros(rows.size, dtype=np.int64)
         if rngs.all_compiled(rows):
-            draw_robots(rngs.next_double, rngs.states, rows, self.spec, self.base, self.limits, MAX_DRAWS, out, rejected)
+            draw_robots(rngs.next_double, rngs.states, rows, self.spec, self.base, self.limits, MAX_DRAWS, consts, rejected)
         else:
             for k, i in enumerate(rows.tolist()):
-                rejected[k] = self.draw_one(rngs[i], out[k])
+                rejected[k] = self.draw_one(rngs[i], consts[i])
         return rejected
 
     def explicit_rows(self, params, k: int | None = None) -> np.ndarray:

@@ -84,7 +84,9 @@ OUT_ACC, OUT_HYBRID = slice(ACC0, HYB0), slice(HYB0, HYB0 + 2)
 OUT_MODE = HYB0 + 2  # the contact mode at the end of the step (a copy of the state's, for a cheap info)
 OUT_BASE = OUT_MODE + 1  # the first reward-term column
 
-# consts: LegParams | config.array() | q_nom | tau_nom | task constants
+# consts: LegParams | config.array() | q_nom | tau_nom | com_nom | task constants. With a row per robot the
+# rows differ only in LegParams, mu, the torque limits and what follows from them (q_nom, tau_nom, com_nom):
+# the kernels read every other setting from row 0
 NC = 23  # entries of StanceConfig.array(), the settings every task has
 NOM0 = NP + NC
 TAU0 = NOM0 + 5
@@ -107,7 +109,7 @@ def physics_range(lo, hi, state, consts, out, flags):
     Releases the GIL, so that threads can share a batch: robots are independent, so the rows of a batch
     stepped in any split are bitwise those of one call.
     """
-    c = consts[0, NP:NOM0]  # the settings every robot shares
+    c = consts[0, NP:NOM0]  # the settings every robot shares (a robot's own row differs in mu and torque limits)
     per_robot = consts.shape[0] > 1
     # one allocation for the scratch (a single robot's step pays for each): the parameter array (LegParams,
     # then this robot's load), the torques, and the hybrid step's event log (not read here)
@@ -115,15 +117,14 @@ def physics_range(lo, hi, state, consts, out, flags):
     p, tau = scratch[:NP + 1], scratch[NP + 1:NP + 3]
     log_t = scratch[NP + 3:NP + 3 + LOG_SIZE]
     log_k = scratch[NP + 3 + LOG_SIZE:].view(np.int64)
-    for j in range(NP):
-        p[j] = consts[0, j]
+    _robot_params(consts, 0, p)
     unilateral = c[C_UNILATERAL] > 0.5
-    dt, substeps, max_angle = c[C_DT], int(c[C_SUBSTEPS]), c[C_MAX_ANGLE]
+    dt, substeps, max_angle, max_rate = c[C_DT], int(c[C_SUBSTEPS]), c[C_MAX_ANGLE], c[C_MAX_RATE]
+    mu, tau_hip, tau_knee = c[C_MU], c[C_TAU_HIP], c[C_TAU_KNEE]
     for i in range(lo, hi):
         if per_robot:  # this robot's parameters, friction and torque limits
-            c = consts[i, NP:NOM0]
-            for j in range(NP):
-                p[j] = consts[i, j]
+            r = _robot_params(consts, i, p)
+            mu, tau_hip, tau_knee = r[NP + C_MU], r[NP + C_TAU_HIP], r[NP + C_TAU_KNEE]
         s = state[i]
         q, qd, anchor = s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0]
         lam, hyb = out[i, 0:2], out[i, ACC0:OUT_MODE]
@@ -133,12 +134,12 @@ def physics_range(lo, hi, state, consts, out, flags):
         s[_PREV_ANCHOR] = s[_ANCHOR0]
         for j in range(4):
             s[_PREV_TRIG + j] = s[_TRIG0 + j]
-        tau[0] = min(1.0, max(-1.0, s[_ACTION0])) * c[C_TAU_HIP]
-        tau[1] = min(1.0, max(-1.0, s[_ACTION0 + 1])) * c[C_TAU_KNEE]
+        tau[0] = min(1.0, max(-1.0, s[_ACTION0])) * tau_hip
+        tau[1] = min(1.0, max(-1.0, s[_ACTION0 + 1])) * tau_knee
         p[LOAD_X] = s[STATE_LOAD]
         if unilateral:
             s[STATE_MODE] = _hybrid_from(
-                q, qd, tau, p, c[C_MU], int(s[STATE_MODE]), anchor, dt, substeps, max_angle,
+                q, qd, tau, p, mu, int(s[STATE_MODE]), anchor, dt, substeps, max_angle,
                 s[_TRIG0], s[_TRIG0 + 1], s[_TRIG0 + 2], s[_TRIG0 + 3], hyb, log_t, log_k,
             )  # fmt: skip
             lam[0] = hyb[ACC_IMPULSE_X] / dt
@@ -147,7 +148,7 @@ def physics_range(lo, hi, state, consts, out, flags):
             _rk4_from(q, qd, tau, p, anchor, dt, substeps, max_angle, True, lam, s[_TRIG0], s[_TRIG0 + 1], s[_TRIG0 + 2], s[_TRIG0 + 3])
         finite = np.isfinite(lam[0]) and np.isfinite(lam[1])
         for j in range(5):
-            if not (np.isfinite(q[j]) and abs(qd[j]) <= c[C_MAX_RATE]):
+            if not (np.isfinite(q[j]) and abs(qd[j]) <= max_rate):
                 finite = False
         if finite:
             flags[i, FAILED] = False
@@ -166,6 +167,15 @@ def physics_range(lo, hi, state, consts, out, flags):
 def robot_row(consts, i):
     """Robot ``i``'s row of ``consts``: its own with a row per robot, else the one row every robot shares."""
     return consts[i if consts.shape[0] > 1 else 0]
+
+
+@njit(cache=CACHE, inline="always")
+def _robot_params(consts, i, p):
+    """Copy robot ``i``'s ``LegParams`` into ``p``; return its row of ``consts`` (``robot_row``)."""
+    r = robot_row(consts, i)
+    for j in range(NP):
+        p[j] = r[j]
+    return r
 
 
 @njit(cache=CACHE, inline="always")
@@ -201,9 +211,7 @@ def physics_start(state, consts, out, flags):
     p = np.empty(NP + 1)
     qdd = np.empty(5)
     for i in range(state.shape[0]):
-        r = robot_row(consts, i)
-        for j in range(NP):
-            p[j] = r[j]
+        r = _robot_params(consts, i, p)
         _start_row(i, state, r, out, flags, p, qdd)
 
 
@@ -219,9 +227,7 @@ def physics_start_noisy(noise, scale, state, consts, out, flags):
     p = np.empty(NP + 1)
     qdd = np.empty(5)
     for i in range(state.shape[0]):
-        r = robot_row(consts, i)
-        for j in range(NP):
-            p[j] = r[j]
+        r = _robot_params(consts, i, p)
         s = state[i]
         perturbed_start(noise[i], scale, r[NOM0:TAU0], p, s[0:_QD0], s[_QD0:_ANCHOR0], s[_ANCHOR0:_ACTION0])
         _start_row(i, state, r, out, flags, p, qdd)

@@ -435,9 +435,7 @@ class LegVectorEnv(VectorEnv):
             if robots is not None:
                 self._consts[rows] = robots
             elif self.robots.active:
-                drawn = np.empty((rows.size, self._consts.shape[1]))
-                rejected = self.robots.draw_rows(self._rngs, rows, drawn)
-                self._consts[rows] = drawn
+                rejected = self.robots.draw_rows(self._rngs, rows, self._consts)
             else:
                 self._consts[rows] = self.robots.base
             self._custom[rows] = robots is not None or self.robots.active

@@ -158,12 +158,12 @@ def assess(state, consts, out, obs, flags):
     stance_terms = np.empty((state.shape[0], 5))
     kept = np.empty(obs.shape[1])
     for i in range(state.shape[0]):
-        p, c, q_nom, weight = _robot(consts, i)
+        p, c, mu, q_nom, weight = _robot(consts, i)
         m = p[0] + p[1] + p[2]
         g = p[10]
         y_stand = robot_row(consts, i)[COM0 + 1]  # the standing COM height above the foot
         s = state[i]
-        evaluated = _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, stance_terms, flags, extra, hyb, kept)
+        evaluated = _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, mu, q_nom, weight, lam, obs, stance_terms, flags, extra, hyb, kept)
         if not evaluated:
             for k in range(terms.shape[1]):
                 terms[i, k] = 0.0
@@ -192,9 +192,9 @@ def start(state, consts, out, obs, flags):
     terms = out[:, OUT_BASE:OUT_BASE + len(REWARD_TERMS)]
     stance_terms = np.empty((state.shape[0], 5))
     for i in range(state.shape[0]):
-        p, c, q_nom, weight = _robot(consts, i)
+        p, c, mu, q_nom, weight = _robot(consts, i)
         s = state[i]
-        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, stance_terms, flags, extra, trig, mode, hyb)
+        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, mu, q_nom, weight, obs, stance_terms, flags, extra, trig, mode, hyb)
         for k in range(terms.shape[1]):
             terms[i, k] = 0.0
         obs[i, OBS_DIM - 1] = s[_COMMAND]

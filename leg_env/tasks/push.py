@@ -200,10 +200,10 @@ def assess(state, consts, out, obs, flags):
     push_steps, w_com = consts[0, consts.shape[1] - 2], consts[0, consts.shape[1] - 1]
     kept = np.empty(obs.shape[1])
     for i in range(state.shape[0]):
-        p, c, q_nom, weight = _robot(consts, i)
+        p, c, mu, q_nom, weight = _robot(consts, i)
         s = state[i]
         force = s[STATE_LOAD]
-        evaluated = _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept)
+        evaluated = _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, mu, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept)
         if evaluated:
             dx = _com_x(s, p) - s[_XCOM0]
             terms[i, n_terms - 1] = -w_com * dx * dx
@@ -222,9 +222,9 @@ def start(state, consts, out, obs, flags):
     info = out[:, OUT_BASE + n_terms:]
     push_steps = consts[0, consts.shape[1] - 2]
     for i in range(state.shape[0]):
-        p, c, q_nom, weight = _robot(consts, i)
+        p, c, mu, q_nom, weight = _robot(consts, i)
         s = state[i]
-        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
+        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, mu, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
         for k in range(n_terms):
             terms[i, k] = 0.0
         info[i, 0] = 0.0

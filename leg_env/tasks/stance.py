@@ -347,15 +347,16 @@ def _unpack(state, out):
 
 @njit(cache=CACHE, inline="always")
 def _robot(consts, i):
-    """Robot ``i``'s ``(p, c, q_nom, weight)``: parameters, settings, nominal posture and ``m g`` (1 if 0),
-    from its row of ``consts`` (``leg_env.step.robot_row``)."""
+    """Robot ``i``'s ``(p, c, mu, q_nom, weight)``: its parameters, the settings every robot shares (row 0:
+    a robot's own row differs from them only in ``mu`` and the torque limits), its friction coefficient,
+    nominal posture and ``m g`` (1 if 0), from its row of ``consts`` (``leg_env.step.robot_row``)."""
     r = robot_row(consts, i)
     p = r[:NP]
-    return p, r[NP:NOM0], r[NOM0:TAU0], _weight(p)
+    return p, consts[0, NP:NOM0], r[NP + _C_MU], r[NOM0:TAU0], _weight(p)
 
 
 @njit(cache=CACHE, inline="always")
-def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb):
+def _assess(i, q, qd, anchor, lam, a0, a1, p, c, mu, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb):
     """Reward terms, flags, extras and observation of robot ``i`` at its (finite) state and force.
 
     The one place where the task's predicates (health, feasibility) are written. ``mode`` and ``hyb``
@@ -376,7 +377,7 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
     unilateral_model = c[_C_UNILATERAL] > 0.5
 
     unilateral = max(0.0, -lam_y)
-    friction = max(0.0, abs(lam_x) - c[_C_MU] * lam_y)
+    friction = max(0.0, abs(lam_x) - mu * lam_y)
     fell = (
         height < c[_C_MIN_HEIGHT]
         or q[i, 1] < knee_y
@@ -440,7 +441,7 @@ def _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flag
 
 
 @njit(cache=CACHE, inline="always")
-def _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept):
+def _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, mu, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept):
     """Evaluate robot ``i`` after ``leg_env.step.physics_range`` stepped it; ``kept`` is scratch.
 
     A numerical failure of the physics (``flags[i, FAILED]``) pays nothing and ends the episode. So does
@@ -454,7 +455,7 @@ def _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, 
         kept[j] = obs[i, j]
     a0 = min(1.0, max(-1.0, action[i, 0]))
     a1 = min(1.0, max(-1.0, action[i, 1]))
-    _assess(i, q, qd, anchor, lam, a0, a1, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
+    _assess(i, q, qd, anchor, lam, a0, a1, p, c, mu, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
     total = 0.0  # float64: finite for any finite float32 entries, inf or NaN if one of them is
     for j in range(obs.shape[1]):
         total += obs[i, j]
@@ -508,8 +509,8 @@ def assess(state, consts, out, obs, flags):
     terms = out[:, OUT_TERMS]
     kept = np.empty(obs.shape[1])
     for i in range(state.shape[0]):
-        p, c, q_nom, weight = _robot(consts, i)
-        _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept)
+        p, c, mu, q_nom, weight = _robot(consts, i)
+        _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, mu, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept)
 
 
 @njit(cache=CACHE)
@@ -518,8 +519,8 @@ def start(state, consts, out, obs, flags):
     q, qd, anchor, _, trig, mode, lam, extra, hyb = _unpack(state, out)
     terms = out[:, OUT_TERMS]
     for i in range(state.shape[0]):
-        p, c, q_nom, weight = _robot(consts, i)
-        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
+        p, c, mu, q_nom, weight = _robot(consts, i)
+        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, mu, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
         for k in range(terms.shape[1]):
             terms[i, k] = 0.0
 

@@ -293,7 +293,7 @@ def _mass_matrix_one(q, p, M):
 
 @njit(cache=CACHE, inline="always")
 def _bias_one(q, qd, p, h, gravity_only):
-    m1, m2, l1, c2, g = p[1], p[2], p[6], p[9], p[10]
+    m2, l1, c2, g = p[2], p[6], p[9], p[10]
     s1, co1, s2, co2, th1, th2, w1, w2, m, a, b = _leg_terms(q, qd, p)
     if gravity_only:
         w1 = 0.0

@@ -402,9 +402,10 @@ class EvalArgs:
 
     policy: str = "lqr"
     """Run or policy folder (with model.zip and vecnormalize.pkl), a train.rllib run folder or checkpoint, or
-    a model-based controller: 'lqr' (balance, push) or 'hopper' (hop)."""
+    a model-based controller: 'lqr' (balance, push), 'hopper' (hop) or 'gated' (the backward hop then the LQR,
+    Stance-v1)."""
     baseline: str | None = None
-    """Also evaluate this controller ('lqr', 'hopper' or a folder) on the same seeds and print both side by side."""
+    """Also evaluate this controller ('lqr', 'hopper', 'gated' or a folder) on the same seeds and print both side by side."""
     env_id: str | None = None
     """The task (None: the policy's own from its config.yaml, else leg_env/PlanarLegStance-v0)."""
     push_curve: bool = False

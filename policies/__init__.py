@@ -1,5 +1,7 @@
-"""Controllers for ``leg_env/PlanarLegStance-v0`` with Stable-Baselines3's ``predict`` interface.
+"""Controllers for the leg-env tasks with Stable-Baselines3's ``predict`` interface.
 
-``policies.lqr.LQRController`` is the model-based reference; ``policies/ppo_stance/`` holds the PPO
-policy trained by the default configuration (load it with ``train.evaluate.load_policy``).
+``policies.lqr.LQRController`` is the model-based reference for balancing, ``policies.hopper.HopperController``
+for hopping, and ``policies.gated.GatedController`` adds a backward hop to the LQR for the unilateral balance
+task's starts that need one. The shipped PPO policies are folders (``policies/ppo_stance/``,
+``policies/ppo_stance_randomized/``, ``policies/ppo_stance_v1/``); load them with ``train.evaluate.load_policy``.
 """

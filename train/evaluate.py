@@ -10,7 +10,8 @@
 whose ``eval_env_kwargs`` the evaluation env uses: by default none, the registered task as is, even
 when training shaped the reward through ``env_kwargs``), a ``python -m train.rllib`` run folder (its
 newest checkpoint) or checkpoint, or a model-based controller: ``lqr`` (``policies.lqr``, the balance and
-push tasks) or ``hopper`` (``policies.hopper``, the hop task). The task is the policy's own (its
+push tasks), ``hopper`` (``policies.hopper``, the hop task) or ``gated`` (``policies.gated``: a backward hop
+from a start whose capture point is behind the foot, then the LQR; the unilateral balance tasks). The task is the policy's own (its
 ``config.yaml``'s ``env_id``), else ``--env-id`` (default ``leg_env/PlanarLegStance-v0``). Episode ``i`` is seeded ``seed + i``
 (default 10_000 + i: training uses small seeds, in-training evaluation 20_000 + i) and runs in the
 single env from ``gymnasium.make`` with its 1000-step time limit. Results go to ``<policy>/eval/``
@@ -118,7 +119,13 @@ def _hopper(params, config):
     return HopperController(params, config)
 
 
-BASELINES = {"lqr": _lqr, "hopper": _hopper}
+def _gated(params, config):
+    from policies.gated import GatedController
+
+    return GatedController(params, config)
+
+
+BASELINES = {"lqr": _lqr, "hopper": _hopper, "gated": _gated}
 """The model-based controllers by name: ``(params, config) -> controller`` with ``predict``."""
 
 
@@ -128,7 +135,7 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
     A folder written by ``python -m train.rllib``, or one of its checkpoints, loads as a
     ``train.rllib.RLlibPolicy`` (needs the ``rllib`` extra).
 
-    A baseline (``BASELINES``: ``"lqr"``, ``"hopper"``) is built for the env ``env_id`` made with ``env_kwargs``. For a folder,
+    A baseline (``BASELINES``: ``"lqr"``, ``"hopper"``, ``"gated"``) is built for the env ``env_id`` made with ``env_kwargs``. For a folder,
     ``env_kwargs`` (default: the run's ``eval_env_kwargs``) are kept as the policy's ``env_kwargs``,
     the evaluation env's arguments.
 
@@ -395,9 +402,10 @@ class EvalArgs:
 
     policy: str = "lqr"
     """Run or policy folder (with model.zip and vecnormalize.pkl), a train.rllib run folder or checkpoint, or
-    a model-based controller: 'lqr' (balance, push) or 'hopper' (hop)."""
+    a model-based controller: 'lqr' (balance, push), 'hopper' (hop) or 'gated' (the backward hop then the LQR,
+    Stance-v1)."""
     baseline: str | None = None
-    """Also evaluate this controller ('lqr', 'hopper' or a folder) on the same seeds and print both side by side."""
+    """Also evaluate this controller ('lqr', 'hopper', 'gated' or a folder) on the same seeds and print both side by side."""
     env_id: str | None = None
     """The task (None: the policy's own from its config.yaml, else leg_env/PlanarLegStance-v0)."""
     push_curve: bool = False

@@ -113,13 +113,15 @@ class TrainArgs:
     seed: int = 0
     """Seed of the training envs, the network initialisation and the sampling."""
     residual: str | None = None
-    """Train a residual on a model-based controller ('lqr', 'hopper'): the robots get the controller's action
-    plus residual_scale times the network's (train/residual.py); the shipped policy is that sum."""
+    """Train a residual on a model-based controller ('lqr', 'hopper', 'gated': train.evaluate.BASELINES): the
+    robots get the controller's action plus residual_scale times the network's (train/residual.py); the
+    shipped policy is that sum."""
     residual_scale: float = 0.3
     """With --residual: the largest correction, in action units."""
     critic_warmup: int = 500_000
-    """With --init-from lqr or hopper: environment steps during which only the value network learns (the
-    cloned actor is kept fixed, train.callbacks.FrozenActor); 0 to train both from the start."""
+    """With --init-from lqr or hopper, or with --residual: environment steps during which only the value
+    network learns (the cloned actor, or the residual network, is kept fixed with its log_std:
+    train.callbacks.FrozenActor); 0 to train both from the start."""
     init_from: str | None = None
     """Start from a trained policy folder's networks (e.g. policies/ppo_stance: every parameter copied, zero
     input weights for observation entries the source lacks), or from a model-based controller cloned into
@@ -149,13 +151,20 @@ class TrainArgs:
             raise ValueError(f"total_timesteps must be >= 1, got {self.total_timesteps}")
         if self.eval_episodes < 1:
             raise ValueError(f"eval_episodes must be >= 1 (one is always run at the end), got {self.eval_episodes}")
-        if self.residual is not None and self.residual.lower() not in ("lqr", "hopper"):
-            raise ValueError(f"residual must be 'lqr' or 'hopper', got {self.residual!r}")
+        if self.residual is not None and self.residual.lower() not in _controllers():
+            raise ValueError(f"residual must be one of {sorted(_controllers())}, got {self.residual!r}")
         if not 0.0 < self.residual_scale <= 2.0:
             raise ValueError(f"residual_scale must be in (0, 2], got {self.residual_scale}")
         for name in ("eval_freq", "checkpoint_freq", "seed", "critic_warmup"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+
+
+def _controllers() -> tuple:
+    """The names of the model-based controllers (``train.evaluate.BASELINES``)."""
+    from train.evaluate import BASELINES
+
+    return tuple(BASELINES)
 
 
 def _parse_override(item: str) -> tuple[str, object]:
@@ -201,7 +210,7 @@ def resolve_config(args: TrainArgs) -> dict:
         "eval_env_kwargs": dict(_parse_override(item) for item in args.eval_env_kwargs),
         "seed": int(args.seed),
         "residual": None if args.residual is None else {"controller": args.residual.lower(), "scale": float(args.residual_scale)},
-        "critic_warmup": int(args.critic_warmup) if args.init_from is not None and args.init_from.lower() in ("lqr", "hopper") else 0,
+        "critic_warmup": int(args.critic_warmup) if args.residual is not None or (args.init_from is not None and args.init_from.lower() in ("lqr", "hopper")) else 0,
         "init_from": None if args.init_from is None else (args.init_from if args.init_from.lower() in ("lqr", "hopper") else _display_path(Path(args.init_from))),
         "n_envs": int(hp.pop("n_envs", 1)),
         "total_timesteps": int(total),

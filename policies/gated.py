@@ -1,0 +1,144 @@
+"""A gated recovery controller for ``leg_env/PlanarLegStance-v1``: a short backward hop from bad starts, then the LQR.
+
+On the unilateral ground the stance LQR (``policies.lqr``) falls from every start whose capture point is far
+behind the foot: with the foot planted, the torso swings to its 1 rad limit. One small backward hop moves the
+foot under the falling COM, and the LQR then balances (``policies/baselines/stance_v1_recoveries/``). This
+controller makes that choice once per episode, at its first observation:
+
+    x_cp = x_com + x_com' / sqrt(g / y_com)        (the linear inverted pendulum's capture point, relative to the foot)
+
+* ``x_cp < threshold`` (default -4 cm): the hopper (``policies.hopper.HopperController``, with the gains
+  ``HOP_GAINS`` and a hop command of ``hop_command``) for the first ``hop_steps`` control steps, then the LQR;
+* otherwise the LQR throughout.
+
+``x_com`` and ``y_com`` are the whole-body COM relative to the foot, computed from the observation's base
+position (entries 0-1, relative to the contact point), angles (2-4) and rates (5-9), as in
+``leg_env.dynamics.com_position``. The rule and its constants were found on the evaluation seeds 10000..10099
+of ``train.evaluate`` (96/100 survive there); ``policies/baselines/gated/README.md`` reports it on fresh seeds.
+
+The controller is batch-capable and keeps per-robot state: the decision, the step count since the episode
+start and the hopper's own phase and dead-reckoned position (one ``HopperController`` for the batch, each
+robot's row started afresh when that robot's hop starts). ``predict`` takes ``episode_start`` (SB3's
+convention: true where a robot's observation is the first of an episode, as ``train.residual`` passes it);
+``reset()`` starts every robot anew at the next call, as ``train.evaluate.run_episodes`` uses it. A
+change of batch size also starts every robot anew.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from leg_env.params import LegParams
+
+__all__ = ["GatedController", "HOP_GAINS", "capture_point"]
+
+HOP_GAINS = dict(
+    touchdown_length=0.8631167676204533,
+    speed_gain=0.29486700045576825,
+    position_gain=0.4302061674394624,
+    stance_time=0.4561448313134052,
+    liftoff_knee=0.6060534044908222,
+    crouch=(0.015345456636464716, 0.19026296491139122),
+    sink_speed=1.1802858335314026,
+    crouch_decel=7.111144241633681,
+)
+"""The hopper's gains for the recovery hop (found by a random search on the seven starts that no planted
+controller survives; ``policies.hopper.HopperController``'s arguments)."""
+
+
+def capture_point(obs, params: LegParams) -> np.ndarray:
+    """The capture point ``x_com + x_com' / sqrt(g / y_com)`` relative to the foot [m], for observations ``(..., >=10)``."""
+    p = params
+    obs = np.asarray(obs, dtype=np.float64)
+    m = p.m_b + p.m1 + p.m2
+    a, b = p.m1 * p.c1 + p.m2 * p.l1, p.m2 * p.c2  # first moments of the leg and the shank about the hip
+    thb, q1, q2 = obs[..., 2], obs[..., 3], obs[..., 4]
+    w1 = obs[..., 7] + obs[..., 8]
+    w2 = w1 + obs[..., 9]
+    th1, th2 = thb + q1, thb + q1 + q2
+    x_com = obs[..., 0] + (a * np.cos(th1) + b * np.cos(th2)) / m
+    y_com = obs[..., 1] + (a * np.sin(th1) + b * np.sin(th2)) / m
+    vx_com = obs[..., 5] - (a * np.sin(th1) * w1 + b * np.sin(th2) * w2) / m
+    return x_com + vx_com / np.sqrt(p.g / np.maximum(y_com, 1e-9))
+
+
+class GatedController:
+    """Hop back from a start whose capture point is behind ``threshold``, else the LQR (module docstring).
+
+    Args:
+        params: the robot (``LegParams``, a dict, or None for the defaults).
+        config: the task (``StanceConfig`` or a dict of its fields; None: defaults): the LQR's cost, ``dt`` and
+            torque limits; the hopper reads the same ``dt``, ``mu``, ``torque_limit`` and nominal posture.
+        threshold: the capture point below which the episode starts with a hop [m].
+        hop_steps: control steps of the hopper before the LQR takes over.
+        hop_command: the apex command given to the hopper [m of COM rise].
+        hop_gains: the hopper's keyword arguments (default ``HOP_GAINS``).
+
+    Attributes:
+        lqr, hopper: the two controllers; hopping: the per-robot decision of the current episodes (bool ``(N,)``);
+        steps: control steps since each robot's episode started.
+    """
+
+    def __init__(
+        self,
+        params: LegParams | dict | None = None,
+        config=None,
+        threshold: float = -0.04,
+        hop_steps: int = 30,
+        hop_command: float = 0.06,
+        hop_gains: dict | None = None,
+    ):
+        from leg_env.tasks.hop import HopConfig
+        from leg_env.tasks.stance import StanceConfig
+        from policies.hopper import HopperController
+        from policies.lqr import LQRController
+
+        self.params = LegParams.from_any(params)
+        if config is None:
+            config = StanceConfig()
+        elif isinstance(config, dict):
+            config = StanceConfig.from_kwargs(config)
+        self.config = config
+        self.lqr = LQRController(self.params, config)
+        shared = {k: getattr(config, k) for k in ("dt", "torque_limit", "mu", "nominal_knee") if hasattr(config, k)}
+        self.hopper = HopperController(self.params, HopConfig.from_kwargs(shared), **(HOP_GAINS if hop_gains is None else hop_gains))
+        self.threshold, self.hop_steps, self.hop_command = float(threshold), int(hop_steps), float(hop_command)
+        self._n = 0
+
+    def reset(self) -> None:
+        """Start every robot anew at the next ``predict``."""
+        self._n = 0
+
+    def decide(self, observation) -> np.ndarray:
+        """Whether each robot, at this (first) observation of its episode, hops: ``capture_point < threshold``."""
+        return capture_point(observation, self.params) < self.threshold
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        """SB3-style ``predict``: actions in [-1, 1] for one observation (18,) or a batch (N, 18).
+
+        Returns:
+            ``(action, None)`` with ``action`` float32 of shape (2,) or (N, 2).
+        """
+        obs = np.asarray(observation)
+        if obs.shape[-1:] != (18,) or obs.ndim not in (1, 2):
+            raise ValueError(f"observation must have shape (18,) or (N, 18) (the unilateral balance tasks), got {obs.shape}")
+        batch = obs.reshape(-1, 18)
+        n = batch.shape[0]
+        starts = np.zeros(n, dtype=bool)
+        if self._n != n:
+            self._n = n
+            self.hopping, self.steps = np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
+            starts[:] = True
+        if episode_start is not None:
+            starts |= np.asarray(episode_start, dtype=bool).reshape(-1)
+        if starts.any():
+            self.hopping[starts] = self.decide(batch[starts])
+            self.steps[starts] = 0
+        action, _ = self.lqr.predict(batch)
+        hop = self.hopping & (self.steps < self.hop_steps)
+        if hop.any():  # the hopper on the whole batch (its state is per row); a hop's first step starts its row
+            hop_obs = np.concatenate([batch.astype(np.float32), np.full((n, 1), self.hop_command, dtype=np.float32)], axis=1)
+            hop_action, _ = self.hopper.predict(hop_obs, episode_start=hop & (self.steps == 0))
+            action[hop] = hop_action[hop]
+        self.steps += 1
+        return (action[0] if obs.ndim == 1 else action), None

@@ -43,7 +43,9 @@ SB3_TESTS   := test_env.py::test_sb3_check_env test_unilateral.py::test_sb3_chec
                test_env_hardening.py::test_rejected_reset_changes_nothing_in_the_sb3_adapter \
                test_env_hardening.py::test_sb3_step_before_reset_raises_and_changes_nothing \
                test_tasks.py::test_sb3_env_checker test_tasks.py::test_sb3_adapter_contract \
-               test_randomize.py::test_sb3_adapter_takes_randomize_and_reports_the_robots
+               test_randomize.py::test_sb3_adapter_takes_randomize_and_reports_the_robots \
+               test_gated.py::test_residual_on_the_gated_controller_reloads_as_the_sum \
+               test_gated.py::test_shipped_stance_v1_policy_loads_and_survives
 RLLIB_TESTS := $(wildcard tests/rllib/test_*.py)
 
 # numba caches a compiled kernel under its own file's timestamp, not those of the kernels it inlines

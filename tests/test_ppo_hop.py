@@ -13,7 +13,7 @@ from train.residual import ResidualPolicy
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "ppo_hop"
 ENV_ID = "leg_env/PlanarLegHop-v0"
-SEEDS = [10_000, 10_001, 10_002]  # evaluation seeds (never used in training)
+SEEDS = [10_000, 10_001, 10_055]  # evaluation seeds (never used in training); the hopper alone falls on the last two
 
 
 def test_shipped_hop_policy_loads_as_the_hopper_plus_a_learnt_correction():
@@ -28,7 +28,6 @@ def test_shipped_hop_policy_loads_as_the_hopper_plus_a_learnt_correction():
     obs, _ = envs.reset(seed=10_000)
     correction, _ = policy.network.predict(obs, deterministic=True)
     assert np.asarray(correction).shape == (8, 2)
-    assert np.max(np.abs(correction)) > 1e-3  # the network does more than the hopper alone
     policy.controller.reset()
     action, _ = policy.predict(obs)
     base, _ = HopperController().predict(obs)
@@ -43,3 +42,6 @@ def test_shipped_hop_policy_hops_at_the_command():
     assert summary["mean_abs_apex_error"] < 0.03
     assert summary["max_drift_10s"] < 0.10
     assert summary["unilateral_violation_frac"] == 0.0
+    # the learnt correction is what keeps these robots up: the hopper alone falls on 10001 and 10055
+    alone, _ = run_episodes(HopperController(), SEEDS[1:], env_id=ENV_ID)
+    assert alone["survival_rate"] == 0.0

@@ -47,7 +47,7 @@ import numpy as np
 from numba import njit
 
 from ._jit import CACHE
-from .dynamics import _CONTACT_NAMES, LOAD_X, NQ, NU, _batched, _flight_inertia, _stance_core, _vec, params_array
+from .dynamics import _CONTACT_NAMES, LOAD_X, NQ, NU, _batched, _flight_inertia, _stance_core, _vec, _kernel_params
 from .params import LegParams
 
 __all__ = list(_CONTACT_NAMES)  # leg_env.dynamics re-exports these names
@@ -353,7 +353,7 @@ def slip_dynamics(q, qd, tau, p: LegParams, mu, sigma):
     mu_f = _checked_mu(mu, lead)
     n = qf.shape[0]
     qdd, lam = np.empty((n, NQ)), np.empty((n, 2))
-    _slip_batch(qf, qdf, tf, mu_f, sg, params_array(p), qdd, lam)
+    _slip_batch(qf, qdf, tf, mu_f, sg, _kernel_params(p), qdd, lam)
     return qdd.reshape(lead + (NQ,)), lam.reshape(lead + (2,))
 
 
@@ -383,7 +383,7 @@ def impact_map(q, qd, p: LegParams, mu=math.inf):
     mu_f = _checked_mu(mu, lead, allow_inf=True)
     n = qf.shape[0]
     qd_plus, impulse, status = np.empty((n, NQ)), np.empty((n, 2)), np.empty(n, dtype=np.int64)
-    _impact_batch(qf, qdf, mu_f, params_array(p), qd_plus, impulse, status)
+    _impact_batch(qf, qdf, mu_f, _kernel_params(p), qd_plus, impulse, status)
     return qd_plus.reshape(lead + (NQ,)), impulse.reshape(lead + (2,))
 
 
@@ -402,7 +402,7 @@ def contact_mode(q, qd, tau, p: LegParams, mu) -> np.ndarray:
     lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
     mu_f = _checked_mu(mu, lead)
     out = np.empty(qf.shape[0], dtype=np.int64)
-    _mode_batch(qf, qdf, tf, mu_f, params_array(p), out)
+    _mode_batch(qf, qdf, tf, mu_f, _kernel_params(p), out)
     return out.reshape(lead)
 
 
@@ -411,7 +411,7 @@ def free_foot_acceleration(q, qd, tau, p: LegParams) -> tuple[np.ndarray, np.nda
     lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
     n = qf.shape[0]
     Lam, a0 = np.empty((n, 2, 2)), np.empty((n, 2))
-    _response_batch(qf, qdf, tf, params_array(p), Lam, a0)
+    _response_batch(qf, qdf, tf, _kernel_params(p), Lam, a0)
     return Lam.reshape(lead + (2, 2)), a0.reshape(lead + (2,))
 
 

@@ -477,6 +477,12 @@ def params_array(p: LegParams | np.ndarray, load_x: float = 0.0) -> np.ndarray:
     return a
 
 
+def _kernel_params(p: LegParams | np.ndarray) -> np.ndarray:
+    """``params_array(p)`` for the public wrappers' kernel calls: a ``LegParams``' array is made once and shared
+    (``LegParams._unloaded``; no kernel writes its parameter array), so a call on one robot pays no allocation."""
+    return p._unloaded if isinstance(p, LegParams) else params_array(p)
+
+
 def _loaded(a: np.ndarray, load_x: float) -> np.ndarray:
     out = np.empty(NP + 1)
     out[:NP] = a
@@ -533,7 +539,7 @@ def mass_matrix(q, p: LegParams) -> np.ndarray:
     """Joint-space mass matrix ``M(q)`` (section 2), shape ``(..., 5, 5)``, symmetric positive definite."""
     lead, (qf,) = _batched(_vec(q, NQ, "q"))
     M = np.empty((qf.shape[0], NQ, NQ))
-    _mass_matrix_batch(qf, params_array(p), M)
+    _mass_matrix_batch(qf, _kernel_params(p), M)
     return M.reshape(lead + (NQ, NQ))
 
 
@@ -541,7 +547,7 @@ def bias_forces(q, qd, p: LegParams) -> np.ndarray:
     """``h(q, qd)``: Coriolis, centrifugal and gravity generalized forces, shape ``(..., 5)``."""
     lead, (qf, qdf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"))
     h = np.empty((qf.shape[0], NQ))
-    _bias_batch(qf, qdf, params_array(p), h, False)
+    _bias_batch(qf, qdf, _kernel_params(p), h, False)
     return h.reshape(lead + (NQ,))
 
 
@@ -549,7 +555,7 @@ def gravity_forces(q, p: LegParams) -> np.ndarray:
     """Gravity generalized forces ``dP/dq``, shape ``(..., 5)``."""
     lead, (qf,) = _batched(_vec(q, NQ, "q"))
     h = np.empty((qf.shape[0], NQ))
-    _bias_batch(qf, qf, params_array(p), h, True)
+    _bias_batch(qf, qf, _kernel_params(p), h, True)
     return h.reshape(lead + (NQ,))
 
 
@@ -557,7 +563,7 @@ def foot_position(q, p: LegParams) -> np.ndarray:
     """Foot position ``p_f(q)`` in the world frame (section 3), shape ``(..., 2)``."""
     lead, (qf,) = _batched(_vec(q, NQ, "q"))
     out = np.empty((qf.shape[0], 2))
-    _foot_batch(qf, params_array(p), out)
+    _foot_batch(qf, _kernel_params(p), out)
     return out.reshape(lead + (2,))
 
 
@@ -565,7 +571,7 @@ def com_position(q, p: LegParams) -> np.ndarray:
     """Whole-body centre of mass in the world frame, shape ``(..., 2)``."""
     lead, (qf,) = _batched(_vec(q, NQ, "q"))
     out = np.empty((qf.shape[0], 2))
-    _com_batch(qf, params_array(p), out)
+    _com_batch(qf, _kernel_params(p), out)
     return out.reshape(lead + (2,))
 
 
@@ -573,7 +579,7 @@ def contact_jacobian(q, p: LegParams) -> np.ndarray:
     """Contact Jacobian ``Jc = d p_f / d q`` (section 3, Problem 3), rows ``x, y``, shape ``(..., 2, 5)``."""
     lead, (qf,) = _batched(_vec(q, NQ, "q"))
     Jc = np.empty((qf.shape[0], 2, NQ))
-    _jacobian_batch(qf, params_array(p), Jc)
+    _jacobian_batch(qf, _kernel_params(p), Jc)
     return Jc.reshape(lead + (2, NQ))
 
 
@@ -581,7 +587,7 @@ def contact_jdot_qd(q, qd, p: LegParams) -> np.ndarray:
     """``Jcdot(q, qd) qd``, the foot's velocity-product acceleration, shape ``(..., 2)``."""
     lead, (qf, qdf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"))
     out = np.empty((qf.shape[0], 2))
-    _jdot_qd_batch(qf, qdf, params_array(p), out)
+    _jdot_qd_batch(qf, qdf, _kernel_params(p), out)
     return out.reshape(lead + (2,))
 
 
@@ -612,13 +618,13 @@ def stance_dynamics(q, qd, tau, p: LegParams) -> tuple[np.ndarray, np.ndarray]:
     """
     if _single_robot(q, qd, tau):
         qdd, lam = np.empty(NQ), np.empty(2)
-        _stance_single(q, qd, tau, params_array(p), qdd, lam)
+        _stance_single(q, qd, tau, _kernel_params(p), qdd, lam)
         return qdd, lam
     lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
     n = qf.shape[0]
     qdd = np.empty((n, NQ))
     lam = np.empty((n, 2))
-    _stance_batch(qf, qdf, tf, params_array(p), qdd, lam)
+    _stance_batch(qf, qdf, tf, _kernel_params(p), qdd, lam)
     return qdd.reshape(lead + (NQ,)), lam.reshape(lead + (2,))
 
 
@@ -626,7 +632,7 @@ def flight_dynamics(q, qd, tau, p: LegParams) -> np.ndarray:
     """Unconstrained forward dynamics ``M qdd + h = S^T tau`` (section 2), shape ``(..., 5)``."""
     lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
     qdd = np.empty((qf.shape[0], NQ))
-    _flight_batch(qf, qdf, tf, params_array(p), qdd)
+    _flight_batch(qf, qdf, tf, _kernel_params(p), qdd)
     return qdd.reshape(lead + (NQ,))
 
 

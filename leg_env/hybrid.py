@@ -73,7 +73,7 @@ from .contact import (
     _mode_at_rest,
     _mode_sliding,
 )
-from .dynamics import LOAD_X, NQ, NU, _batched, _vec, params_array
+from .dynamics import LOAD_X, NQ, NU, _batched, _vec, _kernel_params
 from .integrate import DT, MAX_ANGLE, SUBSTEPS, _accel, _checked_steps, _rk4_substep, _substeps_for_rates
 from .params import LegParams
 
@@ -555,7 +555,7 @@ def hybrid_step(
     load = np.ascontiguousarray(np.broadcast_to(np.asarray(load_x, dtype=np.float64), lead).reshape(-1))
     if not np.all(np.isfinite(load)):
         raise ValueError("load_x must be finite")
-    _hybrid_batch(qf, qdf, tf, params_array(p), load, mu_f, modes, anchor, dt, substeps, max_angle, acc, log_t, log_k)
+    _hybrid_batch(qf, qdf, tf, _kernel_params(p), load, mu_f, modes, anchor, dt, substeps, max_angle, acc, log_t, log_k)
 
     def r(x, tail=()):
         return x.reshape(lead + tail)

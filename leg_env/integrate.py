@@ -32,7 +32,7 @@ from numba import njit
 
 from ._jit import CACHE
 from .contact import FLIGHT, SLIP_BACKWARD, SLIP_FORWARD, STICK, _slip_core
-from .dynamics import _F64, NQ, NU, _batched, _flight_core, _single_robot, _stance_core, _vec, params_array
+from .dynamics import _F64, LOAD_X, NP, NQ, NU, _batched, _flight_core, _single_robot, _stance_core, _vec, _kernel_params
 from . import checks
 from .params import LegParams
 
@@ -238,16 +238,26 @@ def step_inplace(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mea
     Args:
         q, qd: ``(N, 5)`` float64 states, overwritten.
         tau: ``(N, 2)`` torques held over the step.
-        p: ``(11,)`` parameter array (``LegParams.array``).
+        p: ``(11,)`` parameter array (``LegParams.array``: no load), or ``(12,)`` with the horizontal force
+            on the torso's COM last (``leg_env.dynamics.params_array(p, load_x)``).
         anchor: ``(N, 2)`` foot contact points (read only in stance).
         dt: control period [s]; substeps: least number of RK4 steps per control period.
         max_angle: largest rotation [rad] of any link per RK4 step at the step's initial
             rates; fast motions get more RK4 steps (``np.inf`` gives fixed steps).
         stance: True for the pinned-foot model, False for flight.
         lam_mean: ``(N, 2)`` output, mean contact force over the step (zero in flight).
+
+    Raises:
+        ValueError: ``p`` has another length.
     """
+    if p.shape[0] != NP and p.shape[0] != NP + 1:
+        raise ValueError("step_inplace: p must have 11 entries (LegParams.array) or 12 (params_array: then the load)")
+    pl = np.empty(NP + 1)  # the kernels read the load at p[LOAD_X]: never past the end of an 11-entry array
+    for j in range(NP):
+        pl[j] = p[j]
+    pl[LOAD_X] = p[LOAD_X] if p.shape[0] > NP else 0.0
     for i in range(q.shape[0]):
-        _rk4_one(q[i], qd[i], tau[i], p, anchor[i], dt, substeps, max_angle, stance, lam_mean[i])
+        _rk4_one(q[i], qd[i], tau[i], pl, anchor[i], dt, substeps, max_angle, stance, lam_mean[i])
 
 
 @njit(cache=CACHE)
@@ -291,7 +301,7 @@ def stance_step(
             anchor = foot_position(q, p)
         if type(anchor) is np.ndarray and anchor.shape == (2,) and anchor.dtype is _F64 and anchor.flags.c_contiguous:
             q1, qd1, lam = q.reshape(1, NQ).copy(), qd.reshape(1, NQ).copy(), np.empty((1, 2))
-            step_inplace(q1, qd1, tau.reshape(1, NU), params_array(p), anchor.reshape(1, 2), dt, substeps, max_angle,
+            step_inplace(q1, qd1, tau.reshape(1, NU), _kernel_params(p), anchor.reshape(1, 2), dt, substeps, max_angle,
                          True, lam)
             return q1[0], qd1[0], lam[0]
     q = _vec(q, NQ, "q")
@@ -299,7 +309,7 @@ def stance_step(
     lead, (qf, qdf, tf, af) = _batched(q, _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"), anchor)
     qf, qdf = qf.copy(), qdf.copy()
     lam = np.empty((qf.shape[0], 2))
-    step_inplace(qf, qdf, tf, params_array(p), af, dt, substeps, max_angle, True, lam)
+    step_inplace(qf, qdf, tf, _kernel_params(p), af, dt, substeps, max_angle, True, lam)
     return qf.reshape(lead + (NQ,)), qdf.reshape(lead + (NQ,)), lam.reshape(lead + (2,))
 
 
@@ -309,7 +319,7 @@ def flight_step(q, qd, tau, p: LegParams, dt: float = DT, substeps: int = SUBSTE
     lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
     qf, qdf = qf.copy(), qdf.copy()
     lam = np.empty((qf.shape[0], 2))
-    step_inplace(qf, qdf, tf, params_array(p), np.zeros((qf.shape[0], 2)), dt, substeps, max_angle, False, lam)
+    step_inplace(qf, qdf, tf, _kernel_params(p), np.zeros((qf.shape[0], 2)), dt, substeps, max_angle, False, lam)
     return qf.reshape(lead + (NQ,)), qdf.reshape(lead + (NQ,))
 
 
@@ -317,7 +327,7 @@ def project_stance(q, qd, p: LegParams, anchor):
     """Coordinate-partitioning projection: move only the base so the foot is at ``anchor`` and ``Jc qd = 0``."""
     lead, (qf, qdf, af) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(anchor, 2, "anchor"))
     qf, qdf = qf.copy(), qdf.copy()
-    _project_batch(qf, qdf, params_array(p), af)
+    _project_batch(qf, qdf, _kernel_params(p), af)
     return qf.reshape(lead + (NQ,)), qdf.reshape(lead + (NQ,))
 
 

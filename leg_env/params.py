@@ -97,6 +97,11 @@ class LegParams:
         a.setflags(write=False)
         return a
 
+    @cached_property
+    def _unloaded(self) -> np.ndarray:
+        """``array`` then a zero load: ``leg_env.dynamics.params_array(self)``, made once (no kernel writes it)."""
+        return np.append(self.array, 0.0)
+
     def __getstate__(self) -> dict:
         return {n: getattr(self, n) for n in PARAM_NAMES}
 

@@ -304,6 +304,24 @@ def test_step_inplace_equals_stance_step():
         np.testing.assert_array_equal(a, b)
 
 
+def test_step_inplace_reads_no_load_past_an_11_entry_parameter_array():
+    """``p`` of 11 entries (``LegParams.array``) means no load: the kernels read the load at ``p[11]``, so an
+    11-entry view whose memory goes on with a large number must give the unloaded step, as 12 entries with a
+    zero load do; another length is a ValueError."""
+    p = random_params(np.random.default_rng(24))
+    q, qd, tau, anchor = random_batch(p, np.random.default_rng(25), (4,))
+    q, qd = it.project_stance(q, qd, p, anchor)
+    expected = it.stance_step(q, qd, tau, p, anchor=anchor)
+    buffer = np.append(p.array, 1e4)  # a 10 kN "load" right after the 11 parameters
+    for params in (buffer[:11], dyn.params_array(p)):
+        q_io, qd_io, lam = q.copy(), qd.copy(), np.empty((4, 2))
+        it.step_inplace(q_io, qd_io, tau, params, anchor, it.DT, it.SUBSTEPS, it.MAX_ANGLE, True, lam)
+        for a, b in zip((q_io, qd_io, lam), expected):
+            np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="11 entries"):
+        it.step_inplace(q.copy(), qd.copy(), tau, p.array[:10], anchor, it.DT, it.SUBSTEPS, it.MAX_ANGLE, True, np.empty((4, 2)))
+
+
 # ----------------------------------------------------------------------------
 # Projections
 # ----------------------------------------------------------------------------

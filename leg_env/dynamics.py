@@ -363,8 +363,9 @@ def _com_one(q, p, out):
 
 
 @njit(cache=CACHE)
-def _equilibrium_one(p, knee, q, tau):
-    """``static_equilibrium``'s posture ``q`` (5,) and holding torques ``tau`` (2,), written in place."""
+def _equilibrium_one(p, knee, q, tau, work):
+    """``static_equilibrium``'s posture ``q`` (5,) and holding torques ``tau`` (2,), written in place; ``work`` is
+    ``(4, 5)`` scratch (the foot, ``G``, ``Jc``), so that a randomised reset solving this per robot allocates nothing."""
     m = p[0] + p[1] + p[2]
     A = (p[1] * p[8] + p[2] * p[6]) / m - p[6]
     B = p[2] * p[9] / m - p[7]
@@ -373,29 +374,17 @@ def _equilibrium_one(p, knee, q, tau):
         th1 -= np.pi
     while th1 <= -np.pi:
         th1 += np.pi
-    # without allocations (a randomised reset solves this per robot): the arithmetic of _foot_one, then of
-    # _bias_one (gravity only) and _jacobian_one's actuated columns at the posture, in their order
-    l1, l2, c2, g = p[6], p[7], p[9], p[10]
-    t1 = 0.0 + th1
-    t2 = t1 + knee
-    q[0] = 0.0 - (0.0 + l1 * np.cos(t1) + l2 * np.cos(t2))
-    q[1] = 0.0 - (0.0 + l1 * np.sin(t1) + l2 * np.sin(t2))
-    q[2], q[3], q[4] = 0.0, th1, knee
-    t1 = q[2] + q[3]
-    t2 = t1 + q[4]
-    co1, co2 = np.cos(t1), np.cos(t2)
-    a = p[1] * p[8] + p[2] * l1
-    b = p[2] * c2
-    k = p[2] * l1 * c2
-    s12 = np.sin(t1 - t2)
-    h1 = k * s12 * 0.0 * 0.0 + a * g * co1
-    h2 = -k * s12 * 0.0 * 0.0 + b * g * co2
-    J1x, J1y = -l1 * np.sin(t1), l1 * co1
-    J2x, J2y = -l2 * np.sin(t2), l2 * co2
-    mg = m * g
+    q[0], q[1], q[2], q[3], q[4] = 0.0, 0.0, 0.0, th1, knee
+    foot, G, Jc = work[0, :2], work[1], work[2:4]
+    _foot_one(q, p, foot)
+    q[0] -= foot[0]
+    q[1] -= foot[1]
+    _bias_one(q, q, p, G, True)
+    _jacobian_one(q, p, Jc)
+    mg = m * p[10]
     # M qdd + G = S^T tau + Jc^T lam with qdd = 0 and lam = (0, m g), read on the actuated rows
-    tau[0] = (h1 + h2) - ((J1x + J2x) * 0.0 + (J1y + J2y) * mg)
-    tau[1] = h2 - (J2x * 0.0 + J2y * mg)
+    tau[0] = G[3] - (Jc[0, 3] * 0.0 + Jc[1, 3] * mg)
+    tau[1] = G[4] - (Jc[0, 4] * 0.0 + Jc[1, 4] * mg)
 
 
 # ----------------------------------------------------------------------------
@@ -663,7 +652,7 @@ def static_equilibrium(p: LegParams, knee: float = 0.8) -> tuple[np.ndarray, np.
         contact force ``[0, m g]``.
     """
     q, tau = np.empty(NQ), np.empty(NU)
-    _equilibrium_one(p.array, float(knee), q, tau)
+    _equilibrium_one(p.array, float(knee), q, tau, np.empty((4, NQ)))
     lam = np.array([0.0, p.total_mass * p.g])
     return q, tau, lam
 

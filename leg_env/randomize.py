@@ -178,14 +178,14 @@ def _checked_range(name: str, value) -> tuple[str, float, float]:
 
 
 @njit(cache=CACHE)
-def robot_params(u, spec, base, limits, row):
+def robot_params(u, spec, base, limits, row, work):
     """Build a drawn robot's ``consts`` row in ``row`` from the ``(k,)`` uniforms ``u``; return whether it is accepted.
 
     ``spec`` is ``Randomization.spec()``, ``base`` the nominal robot's ``consts`` row (the settings and
     the task's constants are copied from it), ``limits`` ``(hip_lo, hip_hi, knee_lo, knee_hi,
     min_base_height, nominal_knee)``. The drawn fields are written, then the nominal posture, holding
     torques and COM of the drawn parameters (``leg_env.dynamics.static_equilibrium``), then the
-    rejection rule of the module docstring is applied.
+    rejection rule of the module docstring is applied. ``work`` is ``(4, 5)`` scratch of that solve.
     """
     for j in range(base.shape[0]):
         row[j] = base[j]
@@ -201,7 +201,7 @@ def robot_params(u, spec, base, limits, row):
     p = row[:NP]
     q = row[NOM0:TAU0]
     tau = row[TAU0:COM0]
-    _equilibrium_one(p, limits[5], q, tau)
+    _equilibrium_one(p, limits[5], q, tau, work)
     _com_one(q, p, row[COM0:COM0 + 2])
     c = row[NP:]
     if abs(tau[0]) > c[C_TAU_HIP] or abs(tau[1]) > c[C_TAU_KNEE]:
@@ -227,6 +227,7 @@ def draw_robots(next_double, states, rows, spec, base, limits, max_draws, consts
     ``draw_robot`` from the same generator.
     """
     u = np.empty(spec.shape[0])
+    work = np.empty((4, 5))
     for k in range(rows.shape[0]):
         state = states[rows[k]]
         row = consts[rows[k]]
@@ -234,7 +235,7 @@ def draw_robots(next_double, states, rows, spec, base, limits, max_draws, consts
         for t in range(max_draws):
             for j in range(u.shape[0]):
                 u[j] = next_double(state)
-            if robot_params(u, spec, base, limits, row):
+            if robot_params(u, spec, base, limits, row, work):
                 rejected[k] = t
                 break
         if rejected[k] == max_draws:
@@ -245,10 +246,10 @@ def draw_robots(next_double, states, rows, spec, base, limits, max_draws, consts
 def draw_robot(rng: np.random.Generator, spec: np.ndarray, base: np.ndarray, limits: np.ndarray, row: np.ndarray) -> int:
     """One sub-env's robot into ``row`` from ``rng`` (``draw_robots`` in Python, for one generator);
     returns the number of refused tries."""
-    u = np.empty(spec.shape[0])
+    u, work = np.empty(spec.shape[0]), np.empty((4, 5))
     for t in range(MAX_DRAWS):
         rng.random(out=u)
-        if robot_params(u, spec, base, limits, row):
+        if robot_params(u, spec, base, limits, row, work):
             return t
     row[:] = base
     return MAX_DRAWS
@@ -262,9 +263,9 @@ def posture_limits(config) -> np.ndarray:
 def acceptance(randomization: Randomization, base: np.ndarray, limits: np.ndarray, draws: int = CHECK_DRAWS, seed: int = 0) -> float:
     """The fraction of ``draws`` robots (from ``seed``) that the rejection rule accepts."""
     rng = np.random.default_rng(seed)
-    spec, row = randomization.spec(), np.empty_like(base)
+    spec, row, work = randomization.spec(), np.empty_like(base), np.empty((4, 5))
     u = rng.random((draws, spec.shape[0]))
-    return float(np.mean([robot_params(u[k], spec, base, limits, row) for k in range(draws)]))
+    return float(np.mean([robot_params(u[k], spec, base, limits, row, work) for k in range(draws)]))
 
 
 class Robots:
@@ -351,11 +352,11 @@ class Robots:
             values[:, j] = v
         spec = np.array([[_COLUMN[name], KINDS.index("range"), 0.0, 0.0] for name in names], dtype=np.float64).reshape(-1, 4)
         out = np.empty((n, self.base.shape[0]))
-        u = np.zeros(len(names))
+        u, work = np.zeros(len(names)), np.empty((4, 5))
         for r in range(n):
             spec[:, 2] = values[r]
             spec[:, 3] = values[r]
-            if not robot_params(u, spec, self.base, self.limits, out[r]):
+            if not robot_params(u, spec, self.base, self.limits, out[r], work):
                 where = "" if k is None else f" (sub-env {r})"
                 raise ValueError(
                     f"reset option 'params' gives a robot{where} that cannot run its nominal posture: a holding torque "

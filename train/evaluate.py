@@ -10,7 +10,8 @@
 whose ``eval_env_kwargs`` the evaluation env uses: by default none, the registered task as is, even
 when training shaped the reward through ``env_kwargs``), a ``python -m train.rllib`` run folder (its
 newest checkpoint) or checkpoint, or a model-based controller: ``lqr`` (``policies.lqr``, the balance and
-push tasks), ``hopper`` (``policies.hopper``, the hop task) or ``gated`` (``policies.gated``: a backward hop
+push tasks), ``hopper`` (``policies.hopper``, the hop task), ``stepping`` (``policies.stepping``: the LQR, and a quick hop when
+the observed push is large; the push task) or ``gated`` (``policies.gated``: a backward hop
 from a start whose capture point is behind the foot, then the LQR; the unilateral balance tasks). The task is the policy's own (its
 ``config.yaml``'s ``env_id``), else ``--env-id`` (default ``leg_env/PlanarLegStance-v0``). Episode ``i`` is seeded ``seed + i``
 (default 10_000 + i: training uses small seeds, in-training evaluation 20_000 + i) and runs in the
@@ -125,7 +126,13 @@ def _gated(params, config):
     return GatedController(params, config)
 
 
-BASELINES = {"lqr": _lqr, "hopper": _hopper, "gated": _gated}
+def _stepping(params, config):
+    from policies.stepping import SteppingController
+
+    return SteppingController(params, config)
+
+
+BASELINES = {"lqr": _lqr, "hopper": _hopper, "gated": _gated, "stepping": _stepping}
 """The model-based controllers by name: ``(params, config) -> controller`` with ``predict``."""
 
 
@@ -135,7 +142,7 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
     A folder written by ``python -m train.rllib``, or one of its checkpoints, loads as a
     ``train.rllib.RLlibPolicy`` (needs the ``rllib`` extra).
 
-    A baseline (``BASELINES``: ``"lqr"``, ``"hopper"``, ``"gated"``) is built for the env ``env_id`` made with ``env_kwargs``. For a folder,
+    A baseline (``BASELINES``: ``"lqr"``, ``"hopper"``, ``"gated"``, ``"stepping"``) is built for the env ``env_id`` made with ``env_kwargs``. For a folder,
     ``env_kwargs`` (default: the run's ``eval_env_kwargs``) are kept as the policy's ``env_kwargs``,
     the evaluation env's arguments.
 
@@ -402,10 +409,10 @@ class EvalArgs:
 
     policy: str = "lqr"
     """Run or policy folder (with model.zip and vecnormalize.pkl), a train.rllib run folder or checkpoint, or
-    a model-based controller: 'lqr' (balance, push), 'hopper' (hop) or 'gated' (the backward hop then the LQR,
+    a model-based controller: 'lqr' (balance, push), 'stepping' (push: the LQR, a hop for large pushes), 'hopper' (hop) or 'gated' (the backward hop then the LQR,
     Stance-v1)."""
     baseline: str | None = None
-    """Also evaluate this controller ('lqr', 'hopper', 'gated' or a folder) on the same seeds and print both side by side."""
+    """Also evaluate this controller ('lqr', 'hopper', 'gated', 'stepping' or a folder) on the same seeds and print both side by side."""
     env_id: str | None = None
     """The task (None: the policy's own from its config.yaml, else leg_env/PlanarLegStance-v0)."""
     push_curve: bool = False

@@ -113,7 +113,7 @@ class TrainArgs:
     seed: int = 0
     """Seed of the training envs, the network initialisation and the sampling."""
     residual: str | None = None
-    """Train a residual on a model-based controller ('lqr', 'hopper', 'gated': train.evaluate.BASELINES): the
+    """Train a residual on a model-based controller ('lqr', 'hopper', 'gated', 'stepping': train.evaluate.BASELINES): the
     robots get the controller's action plus residual_scale times the network's (train/residual.py); the
     shipped policy is that sum."""
     residual_scale: float = 0.3

@@ -1,0 +1,145 @@
+"""The push-recovery controller of ``leg_env/PlanarLegPush-v0`` (``policies.stepping``): its push observer against
+the force the task applied, its gate, its per-robot state in a batch, its loading by name, and that it survives
+pushes the LQR falls from."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import leg_env  # noqa: F401  (registers the ids)
+from leg_env.dynamics import com_position
+from policies.lqr import LQRController
+from policies.stepping import SteppingController, com_velocity
+from train.evaluate import BASELINES, load_policy
+from train.task_metrics import push_survival
+
+ENV_ID = "leg_env/PlanarLegPush-v0"
+
+
+def _robot():
+    u = gym.make(ENV_ID).unwrapped
+    return u.params, u.config
+
+
+def test_com_velocity_is_the_derivative_of_the_com():
+    env = gym.make(ENV_ID)
+    p = env.unwrapped.params
+    rng = np.random.default_rng(1)
+    for seed in range(5):
+        obs = env.reset(seed=seed)[0].astype(np.float64)
+        obs[5:10] = rng.uniform(-1.0, 1.0, 5)
+        q, qd, e = obs[:5], obs[5:10], 1e-6
+        v = (com_position(q + e * qd, p) - com_position(q - e * qd, p)) / (2 * e)
+        assert com_velocity(obs, p) == pytest.approx(v[0], abs=1e-8)
+
+
+def test_push_observer_reads_the_applied_force_on_its_first_step():
+    """On the first step of each push (foot sticking), ``F_hat`` is the task's force; with no push it is ~0.
+
+    Standing, the reading errs by what the torque's change over a step does to the ground force (the trapezoid
+    sees only the state's): a few newtons in the reset's transient, well under the 20 N gate, then hundredths.
+    """
+    n = 32
+    params, config = _robot()
+    envs = gym.make_vec(ENV_ID, num_envs=n, push_force=(10.0, 60.0))
+    obs, _ = envs.reset(seed=500)
+    ctl = SteppingController(params, config, force_threshold=1e9)  # observe only: the LQR acts throughout
+    lqr = LQRController(params, config)
+    pushed, previous = np.zeros(n), np.zeros(n)
+    started = np.zeros(n, dtype=bool)
+    checked, quiet, settled = 0, [], []
+    for step in range(160):
+        action, _ = ctl.predict(obs)
+        np.testing.assert_array_equal(action, lqr.predict(obs)[0])  # never hops above an infinite threshold
+        first = (pushed != 0.0) & (ctl.push_estimate != 0.0)  # the estimate of the step that the push began
+        for i in np.flatnonzero(first):
+            assert ctl.push_estimate[i] == pytest.approx(pushed[i], rel=0.05), f"robot {i}"
+            checked += 1
+        started |= previous != 0.0
+        quiet.extend(ctl.push_estimate[~started])  # before any push: standing
+        if step >= 20:
+            settled.extend(ctl.push_estimate[~started])
+        obs, _, terminated, _, info = envs.step(action)
+        force = info["push_force"]
+        pushed = np.where((force != 0.0) & (previous == 0.0) & ~terminated, force, 0.0)  # a push's first step only
+        previous = force
+    assert checked >= n // 2  # most robots' first push (at 0.8-1.2 s) was read
+    assert np.max(np.abs(quiet)) < 0.5 * SteppingController(params, config).force_threshold  # the reset's transient
+    assert len(settled) > 1000 and np.max(np.abs(settled)) < 0.5  # after 20 steps: under 0.5 N
+
+
+def test_gate_hops_for_large_pushes_only_and_hands_back_to_the_lqr():
+    params, config = _robot()
+    for force, hops in ((10.0, False), (35.0, True)):
+        envs = gym.make_vec(ENV_ID, num_envs=8, push_force=(force, force), push_interval=(100.0, 100.0))
+        obs, _ = envs.reset(seed=40)
+        ctl = SteppingController(params, config)
+        lqr = LQRController(params, config)
+        hopped = np.zeros(8, dtype=bool)
+        for _ in range(400):
+            action, _ = ctl.predict(obs)
+            hopped |= ctl.hopping
+            same = np.all(action == lqr.predict(obs)[0], axis=1)
+            assert same[~ctl.hopping].all()  # the LQR whenever no hop is on
+            obs, _, terminated, _, _ = envs.step(action)
+            assert not terminated.any()
+        assert (hopped == hops).all()
+        assert not ctl.hopping.any()  # every hop has handed back
+
+
+def test_survives_pushes_the_lqr_falls_from():
+    """At 3.4 N s (1.5 times the LQR's 90% level), four pushes an episode: the LQR falls, the controller stands."""
+    params, config = _robot()
+    stepping = push_survival(SteppingController(params, config), [34.0], episodes=16, seed=10000)[0]
+    lqr = push_survival(LQRController(params, config), [34.0], episodes=16, seed=10000)[0]
+    assert stepping["survival_rate"] >= 15 / 16
+    assert lqr["survival_rate"] <= 1 / 16
+
+
+def test_batch_equals_single_robots_and_episode_start_restarts_a_row():
+    n, steps = 4, 220
+    params, config = _robot()
+    kwargs = dict(push_force=(40.0, 40.0), first_push=(0.8, 0.8))
+    envs = gym.make_vec(ENV_ID, num_envs=n, **kwargs)
+    obs, _ = envs.reset(seed=7)
+    batch = SteppingController(params, config)
+    actions = []
+    for _ in range(steps):
+        a, _ = batch.predict(obs)
+        actions.append(a)
+        obs, _, terminated, _, _ = envs.step(a)
+        assert not terminated.any()
+    actions = np.stack(actions, axis=1)
+    for i in range(n):
+        single = SteppingController(params, config)
+        env = gym.make(ENV_ID, **kwargs)
+        o, _ = env.reset(seed=7 + i)
+        for k in range(steps):
+            a = single.predict(o)[0]
+            np.testing.assert_allclose(a, actions[i, k], atol=1e-6, err_msg=f"robot {i}, step {k}")
+            o = env.step(a)[0]
+    # a robot mid-hop whose episode restarts is the LQR again, with a fresh observer; the others go on
+    envs.reset(seed=7)
+    batch.reset()
+    while not batch.hopping[0]:
+        obs, *_ = envs.step(batch.predict(obs)[0])
+    others = batch.hopping[1:].copy()
+    flags = np.zeros(n, dtype=bool)
+    flags[0] = True
+    batch.predict(obs, episode_start=flags)
+    assert not batch.hopping[0] and batch.push_estimate[0] == 0.0
+    np.testing.assert_array_equal(batch.hopping[1:] | ~others, True)  # a hop on would go on (it may have ended)
+
+
+def test_stepping_loads_by_name_for_the_task():
+    assert "stepping" in BASELINES
+    ctl = load_policy("stepping", env_id=ENV_ID, env_kwargs={"com_weight": 2.0})
+    assert isinstance(ctl, SteppingController)
+    assert ctl.config.com_weight == 2.0 and ctl.config.contact == "unilateral"
+    assert ctl.hopper.config.mu == ctl.config.mu == gym.make(ENV_ID).unwrapped.config.mu
+    with pytest.raises(ValueError, match="observation"):
+        ctl.predict(np.zeros(12))
+    with pytest.raises(ValueError, match="observation"):
+        ctl.predict(np.zeros((2, 3, 18)))

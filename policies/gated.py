@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from leg_env.params import LegParams
+from policies.recovery import com_from_observation, lqr_and_hopper, observation_batch
 
 __all__ = ["GatedController", "HOP_GAINS", "capture_point"]
 
@@ -48,18 +49,8 @@ controller survives; ``policies.hopper.HopperController``'s arguments)."""
 
 def capture_point(obs, params: LegParams) -> np.ndarray:
     """The capture point ``x_com + x_com' / sqrt(g / y_com)`` relative to the foot [m], for observations ``(..., >=10)``."""
-    p = params
-    obs = np.asarray(obs, dtype=np.float64)
-    m = p.m_b + p.m1 + p.m2
-    a, b = p.m1 * p.c1 + p.m2 * p.l1, p.m2 * p.c2  # first moments of the leg and the shank about the hip
-    thb, q1, q2 = obs[..., 2], obs[..., 3], obs[..., 4]
-    w1 = obs[..., 7] + obs[..., 8]
-    w2 = w1 + obs[..., 9]
-    th1, th2 = thb + q1, thb + q1 + q2
-    x_com = obs[..., 0] + (a * np.cos(th1) + b * np.cos(th2)) / m
-    y_com = obs[..., 1] + (a * np.sin(th1) + b * np.sin(th2)) / m
-    vx_com = obs[..., 5] - (a * np.sin(th1) * w1 + b * np.sin(th2) * w2) / m
-    return x_com + vx_com / np.sqrt(p.g / np.maximum(y_com, 1e-9))
+    x_com, y_com, vx_com = com_from_observation(obs, params)
+    return x_com + vx_com / np.sqrt(params.g / np.maximum(y_com, 1e-9))
 
 
 class GatedController:
@@ -88,20 +79,10 @@ class GatedController:
         hop_command: float = 0.06,
         hop_gains: dict | None = None,
     ):
-        from leg_env.tasks.hop import HopConfig
         from leg_env.tasks.stance import StanceConfig
-        from policies.hopper import HopperController
-        from policies.lqr import LQRController
 
-        self.params = LegParams.from_any(params)
-        if config is None:
-            config = StanceConfig()
-        elif isinstance(config, dict):
-            config = StanceConfig.from_kwargs(config)
-        self.config = config
-        self.lqr = LQRController(self.params, config)
-        shared = {k: getattr(config, k) for k in ("dt", "torque_limit", "mu", "nominal_knee") if hasattr(config, k)}
-        self.hopper = HopperController(self.params, HopConfig.from_kwargs(shared), **(HOP_GAINS if hop_gains is None else hop_gains))
+        gains = HOP_GAINS if hop_gains is None else hop_gains
+        self.params, self.config, self.lqr, self.hopper = lqr_and_hopper(params, config, StanceConfig, gains)
         self.threshold, self.hop_steps, self.hop_command = float(threshold), int(hop_steps), float(hop_command)
         self._n = 0
 
@@ -119,10 +100,7 @@ class GatedController:
         Returns:
             ``(action, None)`` with ``action`` float32 of shape (2,) or (N, 2).
         """
-        obs = np.asarray(observation)
-        if obs.shape[-1:] != (18,) or obs.ndim not in (1, 2):
-            raise ValueError(f"observation must have shape (18,) or (N, 18) (the unilateral balance tasks), got {obs.shape}")
-        batch = obs.reshape(-1, 18)
+        obs, batch = observation_batch(observation)
         n = batch.shape[0]
         starts = np.zeros(n, dtype=bool)
         if self._n != n:
@@ -136,9 +114,7 @@ class GatedController:
             self.steps[starts] = 0
         action, _ = self.lqr.predict(batch)
         hop = self.hopping & (self.steps < self.hop_steps)
-        if hop.any():  # the hopper on the whole batch (its state is per row); a hop's first step starts its row
-            hop_obs = np.concatenate([batch.astype(np.float32), np.full((n, 1), self.hop_command, dtype=np.float32)], axis=1)
-            hop_action, _ = self.hopper.predict(hop_obs, episode_start=hop & (self.steps == 0))
-            action[hop] = hop_action[hop]
+        if hop.any():
+            self.hopper.act_on(batch, self.hop_command, hop & (self.steps == 0), hop, action)
         self.steps += 1
         return (action[0] if obs.ndim == 1 else action), None

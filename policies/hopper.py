@@ -269,6 +269,18 @@ class HopperController:
         s = np.clip(np.min(hi, axis=-1), 0.0, 1.0)[:, None]
         return s * t1 - t0
 
+    def act_on(self, observation: np.ndarray, command: float, starts: np.ndarray, rows: np.ndarray, action: np.ndarray) -> None:
+        """Write the hopper's actions into ``action[rows]``, for balance-task observations ``(N, 18)`` and an apex command.
+
+        The recovery hop of another controller (``policies.gated``, ``policies.stepping``): the hopper runs on the
+        whole batch, its state being per robot, with ``command`` [m] as the observation's last entry; the robots
+        in ``starts`` start afresh (a hop's first step).
+        """
+        n = observation.shape[0]
+        hop_obs = np.concatenate([observation.astype(np.float32), np.full((n, 1), command, dtype=np.float32)], axis=1)
+        hop_action, _ = self.predict(hop_obs, episode_start=starts)
+        action[rows] = hop_action[rows]
+
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         """SB3-style ``predict``: actions in [-1, 1] for one observation (19,) or a batch (N, 19)."""
         obs = np.asarray(observation, dtype=np.float64)
@@ -291,3 +303,4 @@ class HopperController:
 
 def _wrap(angle):
     return (angle + np.pi) % (2.0 * np.pi) - np.pi
+

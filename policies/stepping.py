@@ -38,8 +38,9 @@ from __future__ import annotations
 import numpy as np
 
 from leg_env.params import LegParams
+from policies.recovery import com_from_observation, lqr_and_hopper, observation_batch
 
-__all__ = ["SteppingController", "STEP_GAINS", "com_velocity"]
+__all__ = ["SteppingController", "STEP_GAINS"]
 
 STEP_GAINS = dict(
     touchdown_length=0.9316408315229778,
@@ -56,19 +57,6 @@ gate's settings (``force_threshold``, ``hop_command``, ``settle_steps``, ``exit_
 search over those 12 numbers: 12 candidates per round, each run on 160 robots with one push each of 22-40 N
 (seeds 3000 + 1000 k in round k, none an evaluation seed), scored by survival over 3.5 s plus half the survival
 below 28 N; 49 rounds, the mean of the best three kept, starting from the gated Stance-v1 hop's gains."""
-
-
-def com_velocity(obs, params: LegParams) -> np.ndarray:
-    """The whole-body COM's horizontal velocity [m/s] from observations ``(..., >=10)`` (base velocity, angles, rates)."""
-    p = params
-    obs = np.asarray(obs, dtype=np.float64)
-    m = p.m_b + p.m1 + p.m2
-    a, b = p.m1 * p.c1 + p.m2 * p.l1, p.m2 * p.c2  # first moments of the leg and the shank about the hip
-    th1 = obs[..., 2] + obs[..., 3]
-    th2 = th1 + obs[..., 4]
-    w1 = obs[..., 7] + obs[..., 8]
-    w2 = w1 + obs[..., 9]
-    return obs[..., 5] - (a * np.sin(th1) * w1 + b * np.sin(th2) * w2) / m
 
 
 class SteppingController:
@@ -103,20 +91,10 @@ class SteppingController:
         cooldown: int = 30,
         hop_gains: dict | None = None,
     ):
-        from leg_env.tasks.hop import HopConfig
         from leg_env.tasks.push import PushConfig
-        from policies.hopper import HopperController
-        from policies.lqr import LQRController
 
-        self.params = LegParams.from_any(params)
-        if config is None:
-            config = PushConfig()
-        elif isinstance(config, dict):
-            config = PushConfig.from_kwargs(config)
-        self.config = config
-        self.lqr = LQRController(self.params, config)
-        shared = {k: getattr(config, k) for k in ("dt", "torque_limit", "mu", "nominal_knee") if hasattr(config, k)}
-        self.hopper = HopperController(self.params, HopConfig.from_kwargs(shared), **(STEP_GAINS if hop_gains is None else hop_gains))
+        gains = STEP_GAINS if hop_gains is None else hop_gains
+        self.params, self.config, self.lqr, self.hopper = lqr_and_hopper(params, config, PushConfig, gains)
         self.force_threshold, self.hop_command = float(force_threshold), float(hop_command)
         self.settle_steps, self.exit_sink_speed = int(settle_steps), float(exit_sink_speed)
         self.max_hop_steps, self.cooldown = int(max_hop_steps), int(cooldown)
@@ -144,10 +122,7 @@ class SteppingController:
         Returns:
             ``(action, None)`` with ``action`` float32 of shape (2,) or (N, 2).
         """
-        obs = np.asarray(observation)
-        if obs.shape[-1:] != (18,) or obs.ndim not in (1, 2):
-            raise ValueError(f"observation must have shape (18,) or (N, 18) (the unilateral balance tasks), got {obs.shape}")
-        batch = obs.reshape(-1, 18)
+        obs, batch = observation_batch(observation)
         n = batch.shape[0]
         if self._n != n:
             self._n = n
@@ -160,7 +135,7 @@ class SteppingController:
             self._start(np.asarray(episode_start, dtype=bool).reshape(-1))
 
         # 1. the push observer, between two sticking observations
-        v = com_velocity(batch, self.params)
+        _, _, v = com_from_observation(batch, self.params)
         lam_x = batch[:, 10].astype(np.float64) * self.weight
         contact = batch[:, 15] > 0.5
         stuck = contact & (batch[:, 16] == 0.0)
@@ -184,10 +159,8 @@ class SteppingController:
 
         # 3. the hop, or the LQR
         action, _ = self.lqr.predict(batch)
-        if self.hopping.any():  # the hopper on the whole batch (its state is per row); a hop's first step starts its row
-            hop_obs = np.concatenate([batch.astype(np.float32), np.full((n, 1), self.hop_command, dtype=np.float32)], axis=1)
-            hop_action, _ = self.hopper.predict(hop_obs, episode_start=start)
-            action[self.hopping] = hop_action[self.hopping]
+        if self.hopping.any():
+            self.hopper.act_on(batch, self.hop_command, start, self.hopping, action)
         self._age += 1
         self._cool -= 1
         self._seen += 1

@@ -12,7 +12,7 @@ from leg_env.dynamics import com_position
 from policies.gated import HOP_GAINS, GatedController, capture_point
 from policies.hopper import HopperController
 from policies.lqr import LQRController
-from train.evaluate import BASELINES, load_policy
+from train.evaluate import load_policy
 
 ENV_ID = "leg_env/PlanarLegStance-v1"
 HOP_SEEDS = (10003, 10023, 10025, 10038, 10045, 10062, 10074)  # capture point < -4.5 cm: the LQR falls
@@ -109,16 +109,6 @@ def test_batch_equals_single_robots_and_episode_start_restarts_a_row():
     batch.predict(starts, episode_start=flags)
     assert batch.hopping[0] and batch.steps[0] == 1
     np.testing.assert_array_equal(batch.steps[1:], before[1:] + 1)
-
-
-def test_gated_loads_by_name_for_the_task():
-    assert "gated" in BASELINES
-    gated = load_policy("gated", env_id=ENV_ID, env_kwargs={"alive_bonus": 10.0})
-    assert isinstance(gated, GatedController)
-    assert gated.config.alive_bonus == 10.0 and gated.config.contact == "unilateral"
-    assert gated.hopper.config.mu == gated.config.mu == gym.make(ENV_ID).unwrapped.config.mu
-    with pytest.raises(ValueError, match="observation"):
-        gated.predict(np.zeros(12))
 
 
 def test_residual_on_the_gated_controller_reloads_as_the_sum(tmp_path):

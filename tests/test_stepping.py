@@ -10,8 +10,10 @@ import pytest
 
 import leg_env  # noqa: F401  (registers the ids)
 from leg_env.dynamics import com_position
+from policies.gated import GatedController
 from policies.lqr import LQRController
-from policies.stepping import SteppingController, com_velocity
+from policies.recovery import com_from_observation
+from policies.stepping import SteppingController
 from train.evaluate import BASELINES, load_policy
 from train.task_metrics import push_survival
 
@@ -23,7 +25,7 @@ def _robot():
     return u.params, u.config
 
 
-def test_com_velocity_is_the_derivative_of_the_com():
+def test_com_from_observation_is_the_com_and_its_derivative():
     env = gym.make(ENV_ID)
     p = env.unwrapped.params
     rng = np.random.default_rng(1)
@@ -32,7 +34,9 @@ def test_com_velocity_is_the_derivative_of_the_com():
         obs[5:10] = rng.uniform(-1.0, 1.0, 5)
         q, qd, e = obs[:5], obs[5:10], 1e-6
         v = (com_position(q + e * qd, p) - com_position(q - e * qd, p)) / (2 * e)
-        assert com_velocity(obs, p) == pytest.approx(v[0], abs=1e-8)
+        c = com_position(q, p)
+        x, y, vx = com_from_observation(obs, p)
+        assert (x, y) == pytest.approx((c[0], c[1]), abs=1e-12) and vx == pytest.approx(v[0], abs=1e-8)
 
 
 def test_push_observer_reads_the_applied_force_on_its_first_step():
@@ -133,13 +137,22 @@ def test_batch_equals_single_robots_and_episode_start_restarts_a_row():
     np.testing.assert_array_equal(batch.hopping[1:] | ~others, True)  # a hop on would go on (it may have ended)
 
 
-def test_stepping_loads_by_name_for_the_task():
-    assert "stepping" in BASELINES
-    ctl = load_policy("stepping", env_id=ENV_ID, env_kwargs={"com_weight": 2.0})
-    assert isinstance(ctl, SteppingController)
-    assert ctl.config.com_weight == 2.0 and ctl.config.contact == "unilateral"
-    assert ctl.hopper.config.mu == ctl.config.mu == gym.make(ENV_ID).unwrapped.config.mu
-    with pytest.raises(ValueError, match="observation"):
-        ctl.predict(np.zeros(12))
-    with pytest.raises(ValueError, match="observation"):
-        ctl.predict(np.zeros((2, 3, 18)))
+@pytest.mark.parametrize(
+    "name, cls, env_id, kwargs",
+    [
+        ("stepping", SteppingController, ENV_ID, {"com_weight": 2.0}),
+        ("gated", GatedController, "leg_env/PlanarLegStance-v1", {"alive_bonus": 10.0}),
+    ],
+)
+def test_recovery_controllers_load_by_name_for_their_task(name, cls, env_id, kwargs):
+    """``train.evaluate`` builds each by name with the task's config and the run's ``env_kwargs``; both refuse
+    observations that are not the unilateral balance tasks' (18 entries)."""
+    assert name in BASELINES
+    ctl = load_policy(name, env_id=env_id, env_kwargs=kwargs)
+    assert isinstance(ctl, cls)
+    assert all(getattr(ctl.config, k) == v for k, v in kwargs.items()) and ctl.config.contact == "unilateral"
+    assert ctl.hopper.config.mu == ctl.config.mu == gym.make(env_id).unwrapped.config.mu
+    assert ctl.hopper.config.dt == ctl.config.dt and ctl.hopper.torque_limit.tolist() == list(ctl.config.torque_limit)
+    for bad in (np.zeros(12), np.zeros((2, 3, 18))):
+        with pytest.raises(ValueError, match="observation"):
+            ctl.predict(bad)

@@ -1,0 +1,70 @@
+"""What the recovery controllers (``policies.gated``, ``policies.stepping``) share: the COM from the balance tasks'
+observation, and their two parts, the stance LQR and the hopper, built for one task."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from leg_env.params import LegParams
+
+__all__ = ["com_from_observation", "lqr_and_hopper", "observation_batch"]
+
+
+def com_from_observation(obs, params: LegParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The whole-body COM's ``(x, y, x')`` from observations ``(..., >=10)``: relative to the foot [m], and [m/s].
+
+    Reads the base position (entries 0-1, relative to the contact point), the angles (2-4) and the rates (5-9),
+    as ``leg_env.dynamics.com_position`` computes the COM from ``q``:
+    ``x_com = x_b + (a cos th1 + b cos th2) / m`` with ``a = m1 c1 + m2 l1``, ``b = m2 c2`` (first moments of the
+    leg and the shank about the hip), ``th1 = th_b + q1``, ``th2 = th1 + q2``.
+    """
+    p = params
+    obs = np.asarray(obs, dtype=np.float64)
+    m = p.m_b + p.m1 + p.m2
+    a, b = p.m1 * p.c1 + p.m2 * p.l1, p.m2 * p.c2
+    th1 = obs[..., 2] + obs[..., 3]
+    th2 = th1 + obs[..., 4]
+    w1 = obs[..., 7] + obs[..., 8]
+    w2 = w1 + obs[..., 9]
+    x = obs[..., 0] + (a * np.cos(th1) + b * np.cos(th2)) / m
+    y = obs[..., 1] + (a * np.sin(th1) + b * np.sin(th2)) / m
+    vx = obs[..., 5] - (a * np.sin(th1) * w1 + b * np.sin(th2) * w2) / m
+    return x, y, vx
+
+
+def lqr_and_hopper(params, config, config_type, gains: dict):
+    """``(params, config, lqr, hopper)`` of a recovery controller for one task.
+
+    Args:
+        params: the robot (``LegParams``, a dict, or None for the defaults).
+        config: the task (a ``config_type`` instance, a dict of its fields, or None for its defaults).
+        config_type: the task's config class (``StanceConfig``, ``PushConfig``).
+        gains: the hopper's keyword arguments (``policies.gated.HOP_GAINS``, ``policies.stepping.STEP_GAINS``).
+
+    Returns:
+        The ``LegParams``, the config, the stance LQR (``policies.lqr``, the config's cost) and the hopper
+        (``policies.hopper``) with the task's ``dt``, torque limits, ``mu`` and nominal knee.
+    """
+    from leg_env.tasks.hop import HopConfig
+    from policies.hopper import HopperController
+    from policies.lqr import LQRController
+
+    params = LegParams.from_any(params)
+    if config is None:
+        config = config_type()
+    elif isinstance(config, dict):
+        config = config_type.from_kwargs(config)
+    shared = {k: getattr(config, k) for k in ("dt", "torque_limit", "mu", "nominal_knee") if hasattr(config, k)}
+    return params, config, LQRController(params, config), HopperController(params, HopConfig.from_kwargs(shared), **gains)
+
+
+def observation_batch(observation) -> tuple[np.ndarray, np.ndarray]:
+    """``(obs, batch)``: the observation as an array, and as a batch ``(N, 18)`` of the unilateral balance tasks'.
+
+    Raises:
+        ValueError: the observation is not of shape (18,) or (N, 18).
+    """
+    obs = np.asarray(observation)
+    if obs.shape[-1:] != (18,) or obs.ndim not in (1, 2):
+        raise ValueError(f"observation must have shape (18,) or (N, 18) (the unilateral balance tasks), got {obs.shape}")
+    return obs, obs.reshape(-1, 18)

@@ -114,7 +114,7 @@ class SteppingController:
         self._landed_at[rows] = -1
         self._flew[rows] = False
         self._cool[rows] = 0
-        self._seen[rows] = 0  # the observer waits until two observations both follow a step under a torque
+        self._run[rows] = -1  # the reset's observation counts for nothing: its force is not under a step's torque
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         """SB3-style ``predict``: actions in [-1, 1] for one observation (18,) or a batch (N, 18).
@@ -128,22 +128,21 @@ class SteppingController:
             self._n = n
             self.hopping, self.push_estimate = np.zeros(n, dtype=bool), np.zeros(n)
             self._age, self._landed_at, self._cool = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
-            self._flew, self._stuck, self._seen = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
+            self._flew, self._run = np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
             self._v, self._lam_x = np.zeros(n), np.zeros(n)
             self._start(np.ones(n, dtype=bool))
         if episode_start is not None:
             self._start(np.asarray(episode_start, dtype=bool).reshape(-1))
 
-        # 1. the push observer, between two sticking observations
+        # 1. the push observer, between two sticking observations (``_run``: sticking observations in a row)
         _, _, v = com_from_observation(batch, self.params)
         lam_x = batch[:, 10].astype(np.float64) * self.weight
         contact = batch[:, 15] > 0.5
-        stuck = contact & (batch[:, 16] == 0.0)
-        readable = stuck & self._stuck & (self._seen >= 2)
+        self._run = np.where(contact & (batch[:, 16] == 0.0), self._run + 1, 0)
         self.push_estimate = np.where(
-            readable, self.mass * (v - self._v) / self.config.dt - 0.5 * (lam_x + self._lam_x), 0.0
+            self._run >= 2, self.mass * (v - self._v) / self.config.dt - 0.5 * (lam_x + self._lam_x), 0.0
         )
-        self._v, self._lam_x, self._stuck = v, lam_x, stuck
+        self._v, self._lam_x = v, lam_x
 
         # 2. the gate; 4. the hand-over
         start = ~self.hopping & contact & (self._cool <= 0) & (np.abs(self.push_estimate) > self.force_threshold)
@@ -163,5 +162,4 @@ class SteppingController:
             self.hopper.act_on(batch, self.hop_command, start, self.hopping, action)
         self._age += 1
         self._cool -= 1
-        self._seen += 1
         return (action[0] if obs.ndim == 1 else action), None

@@ -18,18 +18,17 @@ $(BIN)/python:
 # torch is pinned and installed first: an unpinned torch (via SB3, TorchRL) would pull a multi-GB CUDA
 # build; the pin is repeated in the second install so that no resolution can replace it
 TORCH := torch==2.13.0
-$(VENV)/.installed-%: pyproject.toml constraints.txt | $(BIN)/python
+$(VENV)/.installed-%: pyproject.toml setup.py constraints.txt | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -c constraints.txt '$(TORCH)'
 	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[$*]' '$(TORCH)'
 	touch $@
 
-# the RLlib venv: ray[rllib] pins its own Gymnasium (1.2.2), so it cannot share the main venv;
-# constraints.txt gives it the main venv's numba, so the kernels cached by the first suite are reused
+# the RLlib venv: ray[rllib] pins its own Gymnasium (1.2.2), so it cannot share the main venv
 $(RLLIB_BIN)/python:
 	$(PYTHON) -m venv $(RLLIB_VENV)
 	$(RLLIB_BIN)/python -m pip install --quiet --upgrade pip
 
-$(RLLIB_VENV)/.installed: pyproject.toml constraints.txt | $(RLLIB_BIN)/python
+$(RLLIB_VENV)/.installed: pyproject.toml setup.py constraints.txt | $(RLLIB_BIN)/python
 	$(RLLIB_BIN)/python -m pip install --quiet -c constraints.txt '$(TORCH)'
 	$(RLLIB_BIN)/python -m pip install --quiet -c constraints.txt -e '.[rllib,test-core]' '$(TORCH)'
 	touch $@
@@ -48,30 +47,29 @@ SB3_TESTS   := test_env.py::test_sb3_check_env test_unilateral.py::test_sb3_chec
                test_gated.py::test_shipped_stance_v1_policy_loads_and_survives
 RLLIB_TESTS := $(wildcard tests/rllib/test_*.py)
 
-# numba caches a compiled kernel under its own file's timestamp, not those of the kernels it inlines
-# from other files: after any edit of the package, drop every cached kernel so that none is stale
-$(VENV)/.numba-fresh: $(wildcard leg_env/*.py leg_env/envs/*.py leg_env/tasks/*.py)
-	mkdir -p $(VENV)
-	find leg_env \( -name '*.nbi' -o -name '*.nbc' \) -delete
+# the compiled core (leg_env/_core, C) is built in place by the editable install; after an edit of its
+# sources it is built again (both venvs run the same Python, so they share the one built in place)
+CORE_SOURCES := setup.py $(wildcard leg_env/_core/*.c leg_env/_core/*.h)
+$(VENV)/.core: $(CORE_SOURCES) | $(BIN)/python
+	$(BIN)/python -m pip install --quiet --no-deps -e .
 	touch $@
 
-train: $(VENV)/.installed-train $(VENV)/.numba-fresh
+train: $(VENV)/.installed-train $(VENV)/.core
 	$(BIN)/python -m train.ppo --out $(RUN)
 	$(BIN)/python -m train.evaluate $(RUN) --baseline lqr --episodes 20 --gif
 
-# the main suite first: the RLlib run then finds every kernel it shares compiled in leg_env/__pycache__
-test: $(VENV)/.installed-test $(VENV)/.numba-fresh $(RLLIB_VENV)/.installed
+test: $(VENV)/.installed-test $(VENV)/.core $(RLLIB_VENV)/.installed
 	$(BIN)/python -m pytest -q
 	$(MAKE) --no-print-directory test-rllib
 
 # the suite on RLlib's Gymnasium without SB3, and the RLlib tests (tests/rllib/, never collected by a
 # plain `pytest`: pyproject's norecursedirs)
-test-rllib: $(RLLIB_VENV)/.installed $(VENV)/.numba-fresh
+test-rllib: $(RLLIB_VENV)/.installed $(VENV)/.core
 	$(RLLIB_BIN)/python -m pytest -q $(SB3_MODULES:%=--ignore=tests/%.py) $(SB3_TESTS:%=--deselect=tests/%) tests $(RLLIB_TESTS)
 
-bench: $(VENV)/.installed-bench $(VENV)/.numba-fresh
+bench: $(VENV)/.installed-bench $(VENV)/.core
 	$(BIN)/python benchmarks/bench_dynamics.py
 	$(BIN)/python benchmarks/bench_env.py --ppo
 
 clean:
-	rm -rf $(VENV) $(RLLIB_VENV) runs .pytest_cache
+	rm -rf $(VENV) $(RLLIB_VENV) runs .pytest_cache build leg_env/_core/*.so

@@ -2,8 +2,9 @@
 
 Importing the package registers every task id of ``leg_env.tasks.REGISTRY`` (``gymnasium.make`` and
 ``gymnasium.make_vec``): ``leg_env/PlanarLegStance-v0``, ``leg_env/PlanarLegStance-v1``,
-``leg_env/PlanarLegPush-v0`` and ``leg_env/PlanarLegHop-v0``. It stays cheap: the environments, and the numba kernels behind them,
-load on first use, and pygame only when a frame is drawn.
+``leg_env/PlanarLegPush-v0`` and ``leg_env/PlanarLegHop-v0``. It stays cheap: the environments load on first use,
+and pygame only when a frame is drawn. The physics and the tasks run in the compiled core (``leg_env/_core``,
+C, built at install): nothing is compiled at run time.
 """
 
 import gymnasium

@@ -42,18 +42,14 @@ counted); on the pinned ground, where ``mu`` is only the cone of the violation c
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from . import checks
-from ._jit import CACHE
-from .contact import _foot_response
-from .dynamics import NP, _com_one, _equilibrium_one
+from ._core import kernels
 from .params import PARAM_NAMES, PARAM_RANGE
-from .step import COM0, NOM0, TAU0, C_MU, C_TAU_HIP, C_TAU_KNEE, C_UNILATERAL
+from .step import COM0, NP, TAU0, C_MU, C_TAU_HIP, C_TAU_KNEE
 
 __all__ = [
     "FIELDS",
@@ -177,79 +173,25 @@ def _checked_range(name: str, value) -> tuple[str, float, float]:
     return kind, lo, hi
 
 
-@njit(cache=CACHE)
-def robot_params(u, spec, base, limits, row, work):
+def robot_params(u: np.ndarray, spec: np.ndarray, base: np.ndarray, limits: np.ndarray, row: np.ndarray) -> bool:
     """Build a drawn robot's ``consts`` row in ``row`` from the ``(k,)`` uniforms ``u``; return whether it is accepted.
 
     ``spec`` is ``Randomization.spec()``, ``base`` the nominal robot's ``consts`` row (the settings and
     the task's constants are copied from it), ``limits`` ``(hip_lo, hip_hi, knee_lo, knee_hi,
     min_base_height, nominal_knee)``. The drawn fields are written, then the nominal posture, holding
     torques and COM of the drawn parameters (``leg_env.dynamics.static_equilibrium``), then the
-    rejection rule of the module docstring is applied. ``work`` is ``(4, 5)`` scratch of that solve.
+    rejection rule of the module docstring is applied (in the compiled core, ``leg_env/_core/draws.c``).
     """
-    for j in range(base.shape[0]):
-        row[j] = base[j]
-    for f in range(spec.shape[0]):
-        col, kind, lo, hi = int(spec[f, 0]), int(spec[f, 1]), spec[f, 2], spec[f, 3]
-        x = lo + (hi - lo) * u[f]  # numpy's uniform(lo, hi) from the same draw
-        if kind == 0:
-            row[col] = base[col] * x
-        elif kind == 1:
-            row[col] = base[col] + x
-        else:
-            row[col] = x
-    p = row[:NP]
-    q = row[NOM0:TAU0]
-    tau = row[TAU0:COM0]
-    _equilibrium_one(p, limits[5], q, tau, work)
-    _com_one(q, p, row[COM0:COM0 + 2])
-    c = row[NP:]
-    if abs(tau[0]) > c[C_TAU_HIP] or abs(tau[1]) > c[C_TAU_KNEE]:
-        return False
-    if q[3] < limits[0] or q[3] > limits[1] or q[4] < limits[2] or q[4] > limits[3] or q[1] < limits[4]:
-        return False  # the nominal posture would end the episode at once (the foot is at the origin)
-    if c[C_UNILATERAL] > 0.5:
-        th1 = q[2] + q[3]
-        th2 = th1 + q[4]
-        _, Lxy, Lyy, _, _, _, _, _, _, _, _ = _foot_response(np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2), p)
-        if Lxy != 0.0 and c[C_MU] >= Lyy / abs(Lxy):
-            return False
-    return True
-
-
-@njit(cache=CACHE)
-def draw_robots(next_double, states, rows, spec, base, limits, max_draws, consts, rejected):
-    """``robot_params`` for many sub-envs, each drawing from its own generator (``leg_env.step.BitGeneratorRows``).
-
-    Robot ``k`` (sub-env ``rows[k]``) draws ``spec.shape[0]`` uniforms per try, up to ``max_draws`` tries;
-    ``consts[rows[k]]`` becomes the first accepted robot (the nominal ``base`` when every try is refused)
-    and ``rejected[k]`` the number of refused tries: the same draws and the same robot as a single env's
-    ``draw_robot`` from the same generator.
-    """
-    u = np.empty(spec.shape[0])
-    work = np.empty((4, 5))
-    for k in range(rows.shape[0]):
-        state = states[rows[k]]
-        row = consts[rows[k]]
-        rejected[k] = max_draws
-        for t in range(max_draws):
-            for j in range(u.shape[0]):
-                u[j] = next_double(state)
-            if robot_params(u, spec, base, limits, row, work):
-                rejected[k] = t
-                break
-        if rejected[k] == max_draws:
-            for j in range(base.shape[0]):
-                row[j] = base[j]
+    return kernels.robot_params(u, spec, base, limits, row)
 
 
 def draw_robot(rng: np.random.Generator, spec: np.ndarray, base: np.ndarray, limits: np.ndarray, row: np.ndarray) -> int:
     """One sub-env's robot into ``row`` from ``rng`` (``draw_robots`` in Python, for one generator);
     returns the number of refused tries."""
-    u, work = np.empty(spec.shape[0]), np.empty((4, 5))
+    u = np.empty(spec.shape[0])
     for t in range(MAX_DRAWS):
         rng.random(out=u)
-        if robot_params(u, spec, base, limits, row, work):
+        if robot_params(u, spec, base, limits, row):
             return t
     row[:] = base
     return MAX_DRAWS
@@ -263,9 +205,9 @@ def posture_limits(config) -> np.ndarray:
 def acceptance(randomization: Randomization, base: np.ndarray, limits: np.ndarray, draws: int = CHECK_DRAWS, seed: int = 0) -> float:
     """The fraction of ``draws`` robots (from ``seed``) that the rejection rule accepts."""
     rng = np.random.default_rng(seed)
-    spec, row, work = randomization.spec(), np.empty_like(base), np.empty((4, 5))
+    spec, row = randomization.spec(), np.empty_like(base)
     u = rng.random((draws, spec.shape[0]))
-    return float(np.mean([robot_params(u[k], spec, base, limits, row, work) for k in range(draws)]))
+    return float(np.mean([robot_params(u[k], spec, base, limits, row) for k in range(draws)]))
 
 
 class Robots:
@@ -314,11 +256,8 @@ class Robots:
         """Draw the robots of sub-envs ``rows`` into their rows of ``consts`` (``(num_envs, D)``) from ``rngs``
         (``leg_env.step.BitGeneratorRows``); the refused tries of each."""
         rejected = np.zeros(rows.size, dtype=np.int64)
-        if rngs.all_compiled(rows):
-            draw_robots(rngs.next_double, rngs.states, rows, self.spec, self.base, self.limits, MAX_DRAWS, consts, rejected)
-        else:
-            for k, i in enumerate(rows.tolist()):
-                rejected[k] = self.draw_one(rngs[i], consts[i])
+        kernels.draw_robots(rngs.capsules, np.ascontiguousarray(rows, dtype=np.int64), self.spec, self.base, self.limits, MAX_DRAWS,
+                            consts, rejected)
         return rejected
 
     def explicit_rows(self, params, k: int | None = None) -> np.ndarray:
@@ -352,11 +291,11 @@ class Robots:
             values[:, j] = v
         spec = np.array([[_COLUMN[name], KINDS.index("range"), 0.0, 0.0] for name in names], dtype=np.float64).reshape(-1, 4)
         out = np.empty((n, self.base.shape[0]))
-        u, work = np.zeros(len(names)), np.empty((4, 5))
+        u = np.zeros(len(names))
         for r in range(n):
             spec[:, 2] = values[r]
             spec[:, 3] = values[r]
-            if not robot_params(u, spec, self.base, self.limits, out[r], work):
+            if not robot_params(u, spec, self.base, self.limits, out[r]):
                 where = "" if k is None else f" (sub-env {r})"
                 raise ValueError(
                     f"reset option 'params' gives a robot{where} that cannot run its nominal posture: a holding torque "

@@ -1,9 +1,8 @@
-"""Shared test set-up: one thread per pool (torch and numba share 2 cores), headless rendering."""
+"""Shared test set-up: one thread per pool (torch and the vector env share 2 cores), headless rendering."""
 import os
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
 

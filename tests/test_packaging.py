@@ -20,9 +20,9 @@ def build(tmp_path_factory) -> tuple[Path, str]:
     tmp = tmp_path_factory.mktemp("wheel")
     src = tmp / "src"
     src.mkdir()
-    for name in ("pyproject.toml", "README.md", "LICENSE"):
+    for name in ("pyproject.toml", "setup.py", "MANIFEST.in", "README.md", "LICENSE"):
         shutil.copy(ROOT / name, src / name)
-    shutil.copytree(ROOT / "leg_env", src / "leg_env", ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
+    shutil.copytree(ROOT / "leg_env", src / "leg_env", ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc", "*.so"))
     cmd = [sys.executable, "-m", "pip", "wheel", "-v", "--no-deps", "--no-build-isolation", "--no-index", "-w", str(tmp / "dist"), str(src)]
     result = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
@@ -46,6 +46,15 @@ def test_wheel_has_the_licence_and_py_typed(build):
         metadata = z.read(next(n for n in names if n.endswith(".dist-info/METADATA"))).decode()
     assert "License-Expression: MIT" in metadata.splitlines()
     assert f"Requires-Dist: gymnasium>={GYMNASIUM_FLOOR}" in metadata.splitlines()
+
+
+def test_wheel_carries_the_compiled_core_built_from_source(build):
+    wheel, output = build
+    assert re.search(r"\S+\.whl$", wheel.name) and "-py3-none-any" not in wheel.name  # a platform wheel
+    with zipfile.ZipFile(wheel) as z:
+        names = z.namelist()
+    assert any(re.fullmatch(r"leg_env/_core/kernels\..*(so|pyd)", n) for n in names), names
+    assert "-ffp-contract=off" in output  # the core's flags reached the compiler
 
 
 def test_pyproject_declares_an_spdx_licence():

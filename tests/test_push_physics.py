@@ -21,6 +21,7 @@ import pytest
 
 import hybrid_ref as H
 from contact_ref import terms
+from leg_env._core import kernels
 from leg_env import dynamics as dyn
 from leg_env.hybrid import hybrid_step
 from leg_env.params import LegParams
@@ -69,8 +70,6 @@ def test_stance_and_flight_closed_forms_match_the_kkt_with_the_push():
 
 
 def test_slip_solve_matches_the_kkt_with_the_push():
-    from leg_env.contact import _slip_batch
-
     p, cases = _random_states(40, seed=1)
     mu = 0.5
     for q, qd, tau, F in cases:
@@ -83,7 +82,7 @@ def test_slip_solve_matches_the_kkt_with_the_push():
             A[5, :5] = J[1]
             x = np.linalg.solve(A, np.r_[np.r_[0.0, 0.0, 0.0, tau] - h + Q(F), -r["Jcdot_qd"][1]])
             qdd, lam = np.empty((1, 5)), np.empty((1, 2))
-            _slip_batch(q[None], qd[None], tau[None], np.array([mu]), np.array([sigma]), dyn.params_array(p, F), qdd, lam)
+            kernels.slip(q[None], qd[None], tau[None], np.array([mu]), np.array([sigma]), p.array, np.array([F]), qdd, lam)
             scale = 1.0 + np.abs(x).max()
             assert np.abs(qdd[0] - x[:5]).max() < KKT_TOL * scale, (F, sigma, qdd, x)
             assert abs(lam[0, 1] - x[5]) < KKT_TOL * scale and abs(lam[0, 0] + sigma * mu * x[5]) < KKT_TOL * scale
@@ -91,13 +90,13 @@ def test_slip_solve_matches_the_kkt_with_the_push():
 
 def _stance(q, qd, tau, pl):
     qdd, lam = np.empty((1, 5)), np.empty((1, 2))
-    dyn._stance_batch(q[None], qd[None], tau[None], pl, qdd, lam)
+    kernels.stance(q[None], qd[None], tau[None], pl[:11], pl[11:], qdd, lam)
     return qdd[0], lam[0]
 
 
 def _flight(q, qd, tau, pl):
     qdd = np.empty((1, 5))
-    dyn._flight_batch(q[None], qd[None], tau[None], pl, qdd)
+    kernels.flight(q[None], qd[None], tau[None], pl[:11], pl[11:], qdd)
     return qdd[0]
 
 

@@ -14,10 +14,8 @@ from ..dynamics import foot_position
 from ..params import PARAM_NAMES, LegParams
 from ..hybrid import GROUND_TOL
 from .. import tasks
-from ..step import (
-    FLAG_NAMES, OUT_EXTRA, OUT_LAM, STATE_ACTION, STATE_ANCHOR, STATE_MODE, STATE_Q, STATE_QD, compiled_entry,
-    physics_start, physics_start_noisy,
-)  # fmt: skip
+from .._core import kernels
+from ..step import FLAG_NAMES, OUT_EXTRA, OUT_LAM, STATE_ACTION, STATE_ANCHOR, STATE_MODE, STATE_Q, STATE_QD
 from ..step import C_MU, OUT_BASE
 from ..randomize import Robots, params_of_row
 from ..tasks.stance import OUT_KICK, StanceConfig, info_template, nominal_state, row_info, task_constants
@@ -29,9 +27,10 @@ QPOS_BOUND = 1.0e6
 """Largest magnitude of a reset ``qpos`` entry [m, rad]; ``qvel`` entries are bounded by ``max_rate``."""
 MAX_PIXELS = 16384  # largest frame width or height
 # attributes that are views of the buffers (rebuilt by _bind, never pickled)
+_NO_NOISE = np.zeros((1, 6))  # the posture noise of a start without noise (not read)
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_action_row", "_out_row", "_flag_row", "_obs_row", "_kernel_args", "_force_row", "_kick_row",
-          "_physics_start", "_step_kernel", "_start_kernel", "_task_columns", "task", "_physics_args",
-          "_tail_keys", "_template", "_reset_keys", "_reset_template", "_physics_start_noisy", "_reset_columns", "_task_draws", "_out_info",
+          "_core", "_step_kernel", "_task_columns", "task", "_physics_args",
+          "_tail_keys", "_template", "_reset_keys", "_reset_template", "_reset_columns", "_task_draws", "_out_info",
           "_human")  # fmt: skip
 
 
@@ -119,8 +118,7 @@ class LegEnv(gym.Env):
         if start is None:  # the posture noise, the contact and the task's evaluation in two compiled calls
             if columns is not None:
                 self._task_columns[:] = columns
-            self._physics_start_noisy(draws, self.config.reset_noise_scale, *self._physics_args)
-            self._start_kernel(*self._kernel_args)
+            self._core.start(draws[:, :posture] if posture else _NO_NOISE, self.config.reset_noise_scale)
         else:
             q, qd = start
             self._start(q, qd, start_anchor(q, self.robot_params, self.unilateral), columns)
@@ -142,7 +140,7 @@ class LegEnv(gym.Env):
             a0, a1 = _checked_action(action)
         if self._human and self._viewer is None:
             self._open_window()  # before the state changes
-        reward = self._step_kernel(a0, a1, *self._kernel_args)  # the action, physics, the task; the terms summed
+        reward = self._step_kernel(a0, a1)  # the action, physics, the task in one call; the terms summed
         out, flags = self._out_row.tolist(), self._flag_row.tolist()  # one conversion each serves every key
         if self.unilateral:
             info = row_info(out, flags, self._force_row, self._template, self._kick_row)
@@ -220,9 +218,8 @@ class LegEnv(gym.Env):
         self._force_row, self._kick_row = out[0, OUT_LAM], out[0, OUT_KICK]
         self._kernel_args = (state, self._consts, out, self._obs, self._flags)
         self._physics_args = (state, self._consts, out, self._flags)
-        self._physics_start = compiled_entry(physics_start, self._physics_args)
-        self._step_kernel = compiled_entry(self.task.step_one, (0.0, 0.0) + self._kernel_args)
-        self._start_kernel = compiled_entry(self.task.start, self._kernel_args)
+        self._core = kernels.Batch(self.task.kernel, state, self._consts, out, self._obs, self._flags)  # the arrays, held by C
+        self._step_kernel = self._core.step_one
         self._tail_keys = self.task.reward_keys + self.task.info_names  # the columns out[OUT_BASE:]
         self._template = info_template(self.unilateral, self._tail_keys)
         self._reset_keys = self.task.info_names  # a reset's info has no reward terms: the columns after them
@@ -231,7 +228,6 @@ class LegEnv(gym.Env):
         self._reset_columns = bool(self.task.state_names)
         self._task_draws = self.task.draws(self.config)
         self._human = self.render_mode == "human"
-        self._physics_start_noisy = compiled_entry(physics_start_noisy, (np.zeros((1, 6)), 0.0) + self._physics_args)
         self._task_columns = state[0, len(state[0]) - len(self.task.state_names):] if self.task.state_names else None
 
     def _start(self, q, qd, anchor, columns) -> None:
@@ -242,8 +238,7 @@ class LegEnv(gym.Env):
         self._anchor[0] = anchor
         if self._task_columns is not None:
             self._task_columns[:] = columns
-        self._physics_start(*self._physics_args)
-        self._start_kernel(*self._kernel_args)
+        self._core.start(None, 0.0)
 
     def _info(self, out: list, flags: list) -> dict:
         """``info`` of a reset (no reward terms) from the output row and the flags, as lists."""

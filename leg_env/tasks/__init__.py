@@ -1,6 +1,6 @@
 """The tasks: one module per task (``leg_env.tasks.<name>``), and the table of registered ids.
 
-Importing this package is cheap: a task module, and the numba kernels behind it, load on first use
+Importing this package is cheap: a task module loads on first use
 (``get``). ``REGISTRY`` maps each Gymnasium id to its task module and the keyword arguments the id
 fixes; ``leg_env/__init__.py`` registers every entry. Adding a task is its module plus its line here.
 """

@@ -2,9 +2,9 @@
 
 A task module (``leg_env/tasks/<name>.py``) holds everything about its task and nothing else: its
 frozen config dataclass (a ``StanceConfig`` subclass: the physics settings, limits and weights every
-task shares, and its own), its observation, reward terms and termination written once in two compiled
-kernels (``assess`` after a control step, ``start`` after a reset) on the packed arrays of
-``leg_env.step``, its reset distribution (what it draws from the robot's generator beyond the posture
+task shares, and its own), its observation, reward terms and termination, written once in the compiled
+core (``leg_env/_core/tasks.c``: ``assess`` after a control step, ``start`` after a reset, on the packed
+arrays of ``leg_env.step``), its reset distribution (what it draws from the robot's generator beyond the posture
 noise), its documentation (the module docstring, in Gymnasium's order) and, in ``leg_env.tasks.REGISTRY``,
 its ids. The physics kernel (``leg_env.step``), the single and vector environments (``leg_env.envs``),
 the SB3 adapter, rendering and training are written once for every task.
@@ -13,10 +13,11 @@ the SB3 adapter, rendering and training are written once for every task.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 
+from .._core import kernels
 from ..step import OUT_BASE, STATE_DIM
 
 __all__ = ["Task"]
@@ -38,11 +39,8 @@ class Task:
             ``out[:, OUT_BASE:OUT_BASE + len(reward_terms)]``.
         info_names: the task's own ``info`` keys, one float column each after the reward terms.
         state_names: the task's own per-robot state columns after ``leg_env.step.STATE_DIM``.
-        assess, start: the compiled kernels ``(state, consts, out, obs, flags)`` (``leg_env.step``).
-        step_one: ``(a0, a1, state, consts, out, obs, flags) -> reward``: the single env's step in one compiled
-            call, ``leg_env.step.physics_one`` (robot 0's action ``(a0, a1)``, then its physics) and ``assess``,
-            returning the reward (``leg_env.step.summed_terms``). Three lines in the task's module (a kernel made
-            by a factory would not be cached).
+        kernel: the task's number in the compiled core (``leg_env/_core/env.h``, ``env_task``): its kernels
+            are ``assess`` and ``start`` below, and ``kernels.Batch(kernel, ...)`` steps a single env.
         observation_space: ``(params, config) -> gymnasium.spaces.Box`` of one robot.
         draws: ``config -> int``: uniforms the task draws at every reset, after the posture noise.
         columns: ``(draws (k, n), config) -> (k, len(state_names))`` the task's state columns of ``k``
@@ -52,14 +50,21 @@ class Task:
     name: str
     config_cls: type
     reward_terms: tuple
-    assess: Any
-    start: Any
-    step_one: Any
+    kernel: int
     observation_space: Callable
     info_names: tuple = ()
     state_names: tuple = ()
     draws: Callable = _no_draws
     columns: Callable | None = None
+
+    def assess(self, state, consts, out, obs, flags) -> None:
+        """The task after a control step of every robot (``leg_env.step.physics_range``), in place: the
+        observation, the reward terms (they sum to the reward), the extras and ``flags``."""
+        kernels.assess(self.kernel, state, consts, out, obs, flags)
+
+    def start(self, state, consts, out, obs, flags) -> None:
+        """The task at freshly started robots (after ``leg_env.step.physics_start``): reward terms zero."""
+        kernels.start(self.kernel, state, consts, out, obs, flags)
 
     @property
     def state_dim(self) -> int:

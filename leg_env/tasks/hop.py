@@ -53,14 +53,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
-from .._jit import CACHE
 from .. import checks
-from ..hybrid import ACC_KICK_X, ACC_KICK_Y, ACC_SLIP_DISTANCE
-from ..step import COM0, CONSTS_BASE, OUT_BASE, STATE_DIM, physics_one, robot_row, summed_terms
 from .base import Task
-from .stance import OBS_DIM_UNILATERAL, StanceConfig, _assess, _evaluate, _robot, _unpack, observation_space as _stance_space
+from .stance import OBS_DIM_UNILATERAL, StanceConfig, observation_space as _stance_space
 
 __all__ = ["HopConfig", "TASK", "REWARD_TERMS", "OBS_DIM"]
 
@@ -68,9 +64,7 @@ REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl")
 N_TERMS = len(REWARD_TERMS)
 OBS_DIM = OBS_DIM_UNILATERAL + 1
 STATE_NAMES = ("command", "x_com0")
-_COMMAND, _XCOM0 = STATE_DIM, STATE_DIM + 1
 _BIG = 1.0e6
-_C_DT = 0  # StanceConfig.array() entry read here
 
 
 @dataclass(frozen=True)
@@ -137,86 +131,11 @@ def _columns(draws: np.ndarray, config: HopConfig) -> np.ndarray:
     return out
 
 
-@njit(cache=CACHE, inline="always")
-def _com_state(s, p):
-    """Whole-body COM ``(x, y, y')`` of state row ``s`` (``trig`` columns: sin th1, cos th1, sin th2, cos th2)."""
-    m_b, m1, m2, l1, c1, c2 = p[0], p[1], p[2], p[6], p[8], p[9]
-    m = m_b + m1 + m2
-    a, b = m1 * c1 + m2 * l1, m2 * c2
-    s1, co1, s2, co2 = s[14], s[15], s[16], s[17]
-    w1 = s[7] + s[8]
-    w2 = w1 + s[9]
-    return s[0] + (a * co1 + b * co2) / m, s[1] + (a * s1 + b * s2) / m, s[6] + (a * co1 * w1 + b * co2 * w2) / m
-
-
-@njit(cache=CACHE)
-def assess(state, consts, out, obs, flags):
-    """The balance task's observation and flags, then the hop's reward terms."""
-    q, qd, anchor, action, trig, mode, lam, extra, hyb = _unpack(state, out)
-    terms = out[:, OUT_BASE:OUT_BASE + len(REWARD_TERMS)]
-    w_h, h_scale, w_drift, w_tilt, w_imp, w_slip = consts[0, CONSTS_BASE:CONSTS_BASE + 6]
-    stance_terms = np.empty((state.shape[0], 5))
-    kept = np.empty(obs.shape[1])
-    for i in range(state.shape[0]):
-        p, c, mu, q_nom, weight = _robot(consts, i)
-        m = p[0] + p[1] + p[2]
-        g = p[10]
-        y_stand = robot_row(consts, i)[COM0 + 1]  # the standing COM height above the foot
-        s = state[i]
-        evaluated = _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, mu, q_nom, weight, lam, obs, stance_terms, flags, extra, hyb, kept)
-        if not evaluated:
-            for k in range(terms.shape[1]):
-                terms[i, k] = 0.0
-            continue
-        x_com, y_com, vy_com = _com_state(s, p)
-        e_v = 0.5 * m * vy_com * vy_com + m * g * (y_com - anchor[i, 1])
-        e_star = m * g * (y_stand + s[_COMMAND])
-        err = (e_v - e_star) / (weight * h_scale)
-        dx = x_com - s[_XCOM0]
-        px, py = hyb[i, ACC_KICK_X], hyb[i, ACC_KICK_Y]
-        terms[i, 0] = stance_terms[i, 0]  # alive: the balance task's health predicate
-        terms[i, 1] = w_h * np.exp(-err * err)
-        terms[i, 2] = -w_drift * dx * dx
-        terms[i, 3] = -w_tilt * s[2] * s[2]
-        terms[i, 4] = -w_imp * (px * px + py * py) / (m * m)
-        terms[i, 5] = -w_slip * hyb[i, ACC_SLIP_DISTANCE] / c[_C_DT]
-        terms[i, 6] = stance_terms[i, 4]  # ctrl
-        if flags[i, 0]:  # terminated: nothing but the penalties
-            terms[i, 1] = 0.0
-
-
-@njit(cache=CACHE)
-def start(state, consts, out, obs, flags):
-    """The balance task at the start, the command in the observation, the COM reference; terms zero."""
-    q, qd, anchor, _, trig, mode, lam, extra, hyb = _unpack(state, out)
-    terms = out[:, OUT_BASE:OUT_BASE + len(REWARD_TERMS)]
-    stance_terms = np.empty((state.shape[0], 5))
-    for i in range(state.shape[0]):
-        p, c, mu, q_nom, weight = _robot(consts, i)
-        s = state[i]
-        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, mu, q_nom, weight, obs, stance_terms, flags, extra, trig, mode, hyb)
-        for k in range(terms.shape[1]):
-            terms[i, k] = 0.0
-        obs[i, OBS_DIM - 1] = s[_COMMAND]
-        s[_XCOM0] = _com_state(s, p)[0]
-
-
-@njit(cache=CACHE)
-def step_one(a0, a1, state, consts, out, obs, flags):
-    """The single env's control step in one compiled call: the action ``(a0, a1)``, ``physics_one``,
-    then ``assess``; returns the reward, the terms summed in order."""
-    physics_one(a0, a1, state, consts, out, flags)
-    assess(state, consts, out, obs, flags)
-    return summed_terms(out, N_TERMS)
-
-
 TASK = Task(
     name="hop",
     config_cls=HopConfig,
     reward_terms=REWARD_TERMS,
-    assess=assess,
-    start=start,
-    step_one=step_one,
+    kernel=2,
     observation_space=observation_space,
     state_names=STATE_NAMES,
     draws=_draws,

@@ -73,21 +73,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
-from .._jit import CACHE
 from .. import checks
-from ..step import OUT_BASE, STATE_DIM, STATE_LOAD, _PREV0, physics_one, summed_terms
 from .base import Task
-from .stance import (
-    REWARD_TERMS as _STANCE_TERMS,
-    StanceConfig,
-    _assess,
-    _evaluate,
-    _robot,
-    _unpack,
-    observation_space,
-)
+from .stance import REWARD_TERMS as _STANCE_TERMS, StanceConfig, observation_space
 
 __all__ = ["PushConfig", "TASK", "MAX_PUSHES", "REWARD_TERMS", "INFO_NAMES"]
 
@@ -98,7 +87,6 @@ INFO_NAMES = ("push_force", "work_push")
 STATE_NAMES = ("steps", "x_com0") + tuple(f"push_start_{k}" for k in range(MAX_PUSHES)) + tuple(
     f"push_force_{k}" for k in range(MAX_PUSHES)
 )
-_STEPS, _XCOM0, _START0, _FORCE0 = STATE_DIM, STATE_DIM + 1, STATE_DIM + 2, STATE_DIM + 2 + MAX_PUSHES
 _DRAWS_PER_PUSH = 3  # start time, sign, magnitude
 _BIG = 1.0e6
 PUSH_RANGES = {
@@ -176,84 +164,11 @@ def _columns(draws: np.ndarray, config: PushConfig) -> np.ndarray:
     return out
 
 
-@njit(cache=CACHE, inline="always")
-def _load_at(s, n, push_steps):
-    """The push force of state row ``s`` held over its control step number ``n`` (0 at the first)."""
-    for j in range(MAX_PUSHES):
-        start = s[_START0 + j]
-        if start <= n < start + push_steps:
-            return s[_FORCE0 + j]
-    return 0.0
-
-
-@njit(cache=CACHE, inline="always")
-def _com_x(s, p):
-    """Whole-body COM x: ``x_b + (a cos th1 + b cos th2) / m``, ``a = m1 c1 + m2 l1``, ``b = m2 c2``."""
-    m_b, m1, m2, l1, c1, c2 = p[0], p[1], p[2], p[6], p[8], p[9]
-    m = m_b + m1 + m2
-    return s[0] + ((m1 * c1 + m2 * l1) * s[15] + m2 * c2 * s[17]) / m  # trig columns: cos th1, cos th2
-
-
-@njit(cache=CACHE)
-def assess(state, consts, out, obs, flags):
-    """The balance task's evaluation, the COM term, the push's info, and the next step's push."""
-    q, qd, anchor, action, trig, mode, lam, extra, hyb = _unpack(state, out)
-    n_terms = len(REWARD_TERMS)
-    terms = out[:, OUT_BASE:OUT_BASE + n_terms]
-    info = out[:, OUT_BASE + n_terms:]
-    push_steps, w_com = consts[0, consts.shape[1] - 2], consts[0, consts.shape[1] - 1]
-    kept = np.empty(obs.shape[1])
-    for i in range(state.shape[0]):
-        p, c, mu, q_nom, weight = _robot(consts, i)
-        s = state[i]
-        force = s[STATE_LOAD]
-        evaluated = _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, mu, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept)
-        if evaluated:
-            dx = _com_x(s, p) - s[_XCOM0]
-            terms[i, n_terms - 1] = -w_com * dx * dx
-        info[i, 0] = force
-        info[i, 1] = force * (s[0] - s[_PREV0])  # exact: F constant over the step, x_b continuous (0 if undone)
-        s[_STEPS] += 1.0
-        s[STATE_LOAD] = _load_at(s, s[_STEPS], push_steps)
-
-
-@njit(cache=CACHE)
-def start(state, consts, out, obs, flags):
-    """The balance task at the start, the COM reference, and the first step's push (reward terms zero)."""
-    q, qd, anchor, _, trig, mode, lam, extra, hyb = _unpack(state, out)
-    n_terms = len(REWARD_TERMS)
-    terms = out[:, OUT_BASE:OUT_BASE + n_terms]
-    info = out[:, OUT_BASE + n_terms:]
-    push_steps = consts[0, consts.shape[1] - 2]
-    for i in range(state.shape[0]):
-        p, c, mu, q_nom, weight = _robot(consts, i)
-        s = state[i]
-        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, mu, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
-        for k in range(n_terms):
-            terms[i, k] = 0.0
-        info[i, 0] = 0.0
-        info[i, 1] = 0.0
-        s[_STEPS] = 0.0
-        s[_XCOM0] = _com_x(s, p)
-        s[STATE_LOAD] = _load_at(s, 0.0, push_steps)
-
-
-@njit(cache=CACHE)
-def step_one(a0, a1, state, consts, out, obs, flags):
-    """The single env's control step in one compiled call: the action ``(a0, a1)``, ``physics_one``,
-    then ``assess``; returns the reward, the terms summed in order."""
-    physics_one(a0, a1, state, consts, out, flags)
-    assess(state, consts, out, obs, flags)
-    return summed_terms(out, N_TERMS)
-
-
 TASK = Task(
     name="push",
     config_cls=PushConfig,
     reward_terms=REWARD_TERMS,
-    assess=assess,
-    start=start,
-    step_one=step_one,
+    kernel=1,
     observation_space=observation_space,
     info_names=INFO_NAMES,
     state_names=STATE_NAMES,

@@ -1,8 +1,8 @@
 """The balance task (``leg_env/PlanarLegStance-v0`` and ``-v1``): configuration, observation, reward, termination.
 
-A control step is two compiled calls on the packed arrays of ``leg_env.step``: the shared physics
-(``leg_env.step.physics_range``) and this task's kernel ``assess`` (observation, every reward term,
-every termination flag). The single environment calls them with a batch of one and the vector
+A control step is two calls of the compiled core on the packed arrays of ``leg_env.step``: the shared
+physics (``leg_env.step.physics_range``) and this task's kernel ``assess`` (``leg_env/_core/tasks.c``:
+observation, every reward term, every termination flag). The single environment calls them with a batch of one and the vector
 environment with a batch of N, so the two cannot disagree. ``StanceConfig`` holds every setting; tasks
 built on this one (``leg_env.tasks.push``) extend it and call ``_assess``.
 
@@ -31,22 +31,21 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
-from numba import njit
 
-from .._jit import CACHE
-from ..contact import FLIGHT, MODE_NAMES, SLIP_BACKWARD, SLIP_FORWARD, _foot_velocity
-from ..dynamics import NP, _energy_core, com_position, static_equilibrium
+from .._core import kernels
+from ..contact import MODE_NAMES
+from ..dynamics import NP, com_position, static_equilibrium
 from ..hybrid import (
     ACC_DIM, ACC_EVENTS, ACC_FLIGHT_TIME, ACC_IMPACT_DISSIPATION, ACC_KICK_X, ACC_KICK_Y,
     ACC_PAINLEVE, ACC_SETTLES, ACC_SLIP_DISSIPATION, ACC_SLIP_DISTANCE, ACC_SLIP_TIME, ACC_STICK_TIME, ACC_WORK,
     ACC_WORK_LOAD,
 )  # fmt: skip
 from .. import checks
-from ..integrate import MAX_ANGLE, MAX_SUBSTEPS, SUBSTEPS, DT, _project_one
+from ..integrate import MAX_ANGLE, MAX_SUBSTEPS, SUBSTEPS, DT
 from ..params import LegParams
 from ..step import (
-    ACC0, CONSTS_BASE, FAILED, FLAG_NAMES, NC, NOM0, OUT_BASE, OUT_MODE, OUT_EXTRA, OUT_LAM, STATE_DIM, STATE_MODE, TAU0,
-    BitGeneratorRows, compiled_entry, perturbed_start, robot_row, physics_one, physics_range, physics_start, summed_terms, undo_step,
+    ACC0, CONSTS_BASE, FLAG_NAMES, NC, NOM0, OUT_BASE, OUT_MODE, OUT_EXTRA, OUT_LAM, STATE_DIM, TAU0,
+    BitGeneratorRows, physics_range, physics_start,
 )  # fmt: skip
 
 __all__ = [
@@ -77,7 +76,6 @@ __all__ = [
     "row_info",
     "info_template",
     "REWARD_INFO_KEYS",
-    "compiled_entry",
     "unilateral_columns",
 ]
 
@@ -107,7 +105,6 @@ OUT_DIM = OUT_BASE + len(REWARD_TERMS)
 N_TERMS = len(REWARD_TERMS)
 OUT_TERMS = slice(_TERMS0, OUT_DIM)
 OUT_KICK = slice(ACC0 + ACC_KICK_X, ACC0 + ACC_KICK_Y + 1)
-_HYB_MODE = OUT_MODE - ACC0  # the mode column in the kernels' ``hyb`` (``out[:, ACC0:OUT_BASE]``)  # the step's impact impulses (unilateral model)
 _INF = math.inf
 _BIG = 1.0e6  # bound of lengths, angles, torques, rates and reward weights: far beyond any use, far below overflow
 FIELD_RANGES = {
@@ -276,31 +273,6 @@ class StanceConfig:
 if set(FIELD_RANGES) | {"terminate_on_contact_loss", "contact"} != {f.name for f in fields(StanceConfig)}:
     raise RuntimeError("FIELD_RANGES must list every numeric StanceConfig field")  # a developer error
 
-(
-    _C_DT,
-    _C_SUBSTEPS,
-    _C_MAX_ANGLE,
-    _C_TAU_HIP,
-    _C_TAU_KNEE,
-    _C_ALIVE,
-    _C_W_POS,
-    _C_W_ANG,
-    _C_W_VEL,
-    _C_W_UNI,
-    _C_W_FRIC,
-    _C_W_CTRL,
-    _C_MU,
-    _C_MIN_HEIGHT,
-    _C_MAX_TORSO,
-    _C_HIP_LO,
-    _C_HIP_HI,
-    _C_KNEE_LO,
-    _C_KNEE_HI,
-    _C_TERM_CONTACT,
-    _C_CONTACT_THRESH,
-    _C_MAX_RATE,
-    _C_UNILATERAL,
-) = range(23)
 
 
 @dataclass(frozen=True)
@@ -336,204 +308,6 @@ def task_constants(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.n
     return np.concatenate(parts).astype(np.float64)[None, :]  # writable: a reset may put another robot in a row
 
 
-@njit(cache=CACHE, inline="always")
-def _unpack(state, out):
-    """Named views of the packed kernel arrays (``leg_env.step``), the reward terms excepted."""
-    return (
-        state[:, 0:5], state[:, 5:10], state[:, 10:12], state[:, 12:14], state[:, 14:18], state[:, STATE_MODE],
-        out[:, 0:2], out[:, 2:5], out[:, ACC0:OUT_BASE],
-    )  # fmt: skip
-
-
-@njit(cache=CACHE, inline="always")
-def _robot(consts, i):
-    """Robot ``i``'s ``(p, c, mu, q_nom, weight)``: its parameters, the settings every robot shares (row 0:
-    a robot's own row differs from them only in ``mu`` and the torque limits), its friction coefficient,
-    nominal posture and ``m g`` (1 if 0), from its row of ``consts`` (``leg_env.step.robot_row``)."""
-    r = robot_row(consts, i)
-    p = r[:NP]
-    return p, consts[0, NP:NOM0], r[NP + _C_MU], r[NOM0:TAU0], _weight(p)
-
-
-@njit(cache=CACHE, inline="always")
-def _assess(i, q, qd, anchor, lam, a0, a1, p, c, mu, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb):
-    """Reward terms, flags, extras and observation of robot ``i`` at its (finite) state and force.
-
-    The one place where the task's predicates (health, feasibility) are written. ``mode`` and ``hyb``
-    (the step's accumulators and the unilateral extras) are read and written in the unilateral model only.
-    Tasks built on this one (``leg_env.tasks.push``) call it and add their own terms.
-    """
-    lam_x, lam_y = lam[i, 0], lam[i, 1]
-    dx = q[i, 0] - anchor[i, 0] - q_nom[0]
-    dy = q[i, 1] - anchor[i, 1] - q_nom[1]
-    th_b = q[i, 2]
-    # foot error and knee height from the same kinematics as the integrator
-    l1, l2 = p[6], p[7]
-    s1, co1, s2, co2 = trig[i, 0], trig[i, 1], trig[i, 2], trig[i, 3]  # of q, written by the physics
-    knee_y = q[i, 1] + l1 * s1
-    fx = q[i, 0] + l1 * co1 + l2 * co2 - anchor[i, 0]
-    fy = knee_y + l2 * s2 - anchor[i, 1]
-    height = q[i, 1] - anchor[i, 1]
-    unilateral_model = c[_C_UNILATERAL] > 0.5
-
-    unilateral = max(0.0, -lam_y)
-    friction = max(0.0, abs(lam_x) - mu * lam_y)
-    fell = (
-        height < c[_C_MIN_HEIGHT]
-        or q[i, 1] < knee_y
-        or abs(th_b) > c[_C_MAX_TORSO]
-        or q[i, 3] < c[_C_HIP_LO]
-        or q[i, 3] > c[_C_HIP_HI]
-        or q[i, 4] < c[_C_KNEE_LO]
-        or q[i, 4] > c[_C_KNEE_HI]
-    )
-    if unilateral_model:  # the ground cannot pull: what is charged is time off it and sliding on it
-        dt = c[_C_DT]
-        flight_time = hyb[i, ACC_FLIGHT_TIME]
-        lost = c[_C_TERM_CONTACT] > 0.5 and (flight_time > 0.0 or lam_y < c[_C_CONTACT_THRESH])
-    else:
-        lost = c[_C_TERM_CONTACT] > 0.5 and lam_y < c[_C_CONTACT_THRESH]
-    terminated = fell or lost
-
-    terms[i, 0] = 0.0 if terminated else c[_C_ALIVE]
-    terms[i, 1] = -(
-        c[_C_W_POS] * (dx * dx + dy * dy)
-        + c[_C_W_ANG] * th_b * th_b
-        + c[_C_W_VEL] * (qd[i, 0] ** 2 + qd[i, 1] ** 2 + qd[i, 2] ** 2)
-    )
-    if unilateral_model:
-        terms[i, 2] = -c[_C_W_UNI] * flight_time / dt
-        terms[i, 3] = -c[_C_W_FRIC] * hyb[i, ACC_SLIP_DISTANCE] / dt
-        flags[i, 2] = friction > 1e-9 * weight  # a stick force outside the cone: only by the Painleve rule
-    else:
-        terms[i, 2] = -c[_C_W_UNI] * unilateral / weight
-        terms[i, 3] = -c[_C_W_FRIC] * friction / weight
-        flags[i, 2] = friction > 0.0
-    terms[i, 4] = -c[_C_W_CTRL] * (a0 * a0 + a1 * a1)
-    flags[i, 0] = terminated
-    flags[i, 1] = lam_y < 0.0
-    flags[i, 3] = False
-    extra[i, 0] = np.sqrt(dx * dx + dy * dy)
-    extra[i, 1] = np.sqrt(fx * fx + fy * fy)
-    extra[i, 2] = lam_y
-    # observation
-    obs[i, 0] = q[i, 0] - anchor[i, 0]
-    obs[i, 1] = height
-    for j in range(2, 5):
-        obs[i, j] = q[i, j]
-    for j in range(5):
-        obs[i, 5 + j] = qd[i, j]
-    obs[i, 10] = lam_x / weight
-    obs[i, 11] = lam_y / weight
-    if unilateral_model:
-        w1 = qd[i, 2] + qd[i, 3]
-        w2 = w1 + qd[i, 4]
-        vfx, vfy = _foot_velocity(s1, co1, s2, co2, qd[i, 0], qd[i, 1], w1, w2, p)
-        m = mode[i]
-        obs[i, 12] = fy
-        obs[i, 13] = vfx
-        obs[i, 14] = vfy
-        obs[i, 15] = 0.0 if m == FLIGHT else 1.0
-        obs[i, 16] = 1.0 if m == SLIP_FORWARD else (-1.0 if m == SLIP_BACKWARD else 0.0)
-        obs[i, 17] = hyb[i, ACC_KICK_Y] / (weight * c[_C_DT])
-        hyb[i, ACC_DIM] = _energy_core(s1, co1, s2, co2, q[i, 1] - anchor[i, 1], qd[i, 0], qd[i, 1], qd[i, 2], w1, w2, p)
-        hyb[i, ACC_DIM + 1] = fy
-
-
-@njit(cache=CACHE, inline="always")
-def _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, mu, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept):
-    """Evaluate robot ``i`` after ``leg_env.step.physics_range`` stepped it; ``kept`` is scratch.
-
-    A numerical failure of the physics (``flags[i, FAILED]``) pays nothing and ends the episode. So does
-    an observation that does not fit float32: the step is undone (``leg_env.step.undo_step``) and the
-    observation left at the last good one. Returns whether the robot was evaluated (no numerical failure).
-    """
-    if flags[i, FAILED]:
-        _fail(i, q, anchor, q_nom, terms, flags, extra)
-        return False
-    for j in range(obs.shape[1]):
-        kept[j] = obs[i, j]
-    a0 = min(1.0, max(-1.0, action[i, 0]))
-    a1 = min(1.0, max(-1.0, action[i, 1]))
-    _assess(i, q, qd, anchor, lam, a0, a1, p, c, mu, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
-    total = 0.0  # float64: finite for any finite float32 entries, inf or NaN if one of them is
-    for j in range(obs.shape[1]):
-        total += obs[i, j]
-    if np.isfinite(total):
-        return True
-    # the state is finite, but the observation overflowed float32
-    for j in range(obs.shape[1]):
-        obs[i, j] = kept[j]
-    undo_step(state[i])
-    lam[i, 0] = 0.0
-    lam[i, 1] = 0.0
-    for k in range(_HYB_MODE):
-        hyb[i, k] = 0.0
-    hyb[i, _HYB_MODE] = mode[i]  # the mode column: the restored mode
-    _fail(i, q, anchor, q_nom, terms, flags, extra)
-    return False
-
-
-@njit(cache=CACHE, inline="always")
-def _fail(i, q, anchor, q_nom, terms, flags, extra):
-    """The outputs of a numerical failure of robot ``i``: end the episode, pay nothing.
-
-    The physics (``leg_env.step``) has restored the last good state; the observation is left at the
-    last good one; ``flags`` say terminated and ``numerical_failure``.
-    """
-    for k in range(terms.shape[1]):
-        terms[i, k] = 0.0
-    flags[i, 0] = True
-    flags[i, 1] = False
-    flags[i, 2] = False
-    flags[i, FAILED] = True
-    extra[i, 0] = np.sqrt((q[i, 0] - anchor[i, 0] - q_nom[0]) ** 2 + (q[i, 1] - anchor[i, 1] - q_nom[1]) ** 2)
-    extra[i, 1] = 0.0
-    extra[i, 2] = 0.0
-
-
-@njit(cache=CACHE, inline="always")
-def _weight(p):
-    weight = (p[0] + p[1] + p[2]) * p[10]
-    return weight if weight > 0.0 else 1.0
-
-
-@njit(cache=CACHE)
-def assess(state, consts, out, obs, flags):
-    """The task after a control step of every robot (``leg_env.step.physics_range``), in place.
-
-    Writes the observation, the reward terms (``OUT_TERMS``; they sum to the reward), the extras and
-    ``flags`` (``FLAG_NAMES`` order); the actions are read (clipped) for the control cost.
-    """
-    q, qd, anchor, action, trig, mode, lam, extra, hyb = _unpack(state, out)
-    terms = out[:, OUT_TERMS]
-    kept = np.empty(obs.shape[1])
-    for i in range(state.shape[0]):
-        p, c, mu, q_nom, weight = _robot(consts, i)
-        _evaluate(i, state, q, qd, anchor, action, trig, mode, p, c, mu, q_nom, weight, lam, obs, terms, flags, extra, hyb, kept)
-
-
-@njit(cache=CACHE)
-def start(state, consts, out, obs, flags):
-    """The task at freshly started robots (after ``leg_env.step.physics_start``): reward terms zero."""
-    q, qd, anchor, _, trig, mode, lam, extra, hyb = _unpack(state, out)
-    terms = out[:, OUT_TERMS]
-    for i in range(state.shape[0]):
-        p, c, mu, q_nom, weight = _robot(consts, i)
-        _assess(i, q, qd, anchor, lam, 0.0, 0.0, p, c, mu, q_nom, weight, obs, terms, flags, extra, trig, mode, hyb)
-        for k in range(terms.shape[1]):
-            terms[i, k] = 0.0
-
-
-@njit(cache=CACHE)
-def step_one(a0, a1, state, consts, out, obs, flags):
-    """The single env's control step in one compiled call: the action ``(a0, a1)``, ``physics_one``,
-    then ``assess``; returns the reward, the terms summed in order."""
-    physics_one(a0, a1, state, consts, out, flags)
-    assess(state, consts, out, obs, flags)
-    return summed_terms(out, N_TERMS)
-
-
 def step_batch(state, consts, out, obs, flags):
     """Advance every robot one control step and evaluate the task, in place (one thread).
 
@@ -548,7 +322,7 @@ def step_batch(state, consts, out, obs, flags):
         flags: ``(N, 4)`` bool out, in ``FLAG_NAMES`` order.
     """
     physics_range(0, state.shape[0], state, consts, out, flags)
-    assess(state, consts, out, obs, flags)
+    TASK.assess(state, consts, out, obs, flags)
 
 
 def step_range(lo, hi, state, consts, out, obs, flags):
@@ -557,7 +331,7 @@ def step_range(lo, hi, state, consts, out, obs, flags):
     Robots are independent: the rows of a batch stepped in any split are bitwise those of ``step_batch``.
     """
     physics_range(lo, hi, state, consts, out, flags)
-    assess(state[lo:hi], consts, out[lo:hi], obs[lo:hi], flags[lo:hi])
+    TASK.assess(state[lo:hi], consts if consts.shape[0] == 1 else consts[lo:hi], out[lo:hi], obs[lo:hi], flags[lo:hi])
 
 
 def start_batch(state, consts, out, obs, flags):
@@ -568,7 +342,7 @@ def start_batch(state, consts, out, obs, flags):
     Arguments as in ``step_batch`` (the actions are not read).
     """
     physics_start(state, consts, out, flags)
-    start(state, consts, out, obs, flags)
+    TASK.start(state, consts, out, obs, flags)
 
 
 def reset_state(rng: np.random.Generator, p: LegParams, config: StanceConfig, nominal: Nominal):
@@ -607,18 +381,9 @@ def starts_from_noise(noise: np.ndarray, p: LegParams, config: StanceConfig, nom
     the states are the same bit for bit whether the draws were made in Python or in compiled code
     (``BitGeneratorRows``).
     """
-    return _perturbed_starts(noise, config.reset_noise_scale, nominal.q, p.array)
-
-
-@njit(cache=CACHE)
-def _perturbed_starts(noise, s, q_nom, p):
-    """``leg_env.step.perturbed_start`` of every row of ``noise``, as new arrays ``(q, qd, anchor)``."""
     k = noise.shape[0]
-    q = np.empty((k, 5))
-    qd = np.empty((k, 5))
-    anchor = np.empty((k, 2))
-    for i in range(k):
-        perturbed_start(noise[i], s, q_nom, p, q[i], qd[i], anchor[i])
+    q, qd, anchor = np.empty((k, 5)), np.empty((k, 5)), np.empty((k, 2))
+    kernels.perturbed_starts(np.ascontiguousarray(noise, dtype=np.float64), config.reset_noise_scale, nominal.q, p.array, q, qd, anchor)
     return q, qd, anchor
 
 
@@ -753,9 +518,7 @@ TASK = Task(
     name="stance",
     config_cls=StanceConfig,
     reward_terms=REWARD_TERMS,
-    assess=assess,
-    start=start,
-    step_one=step_one,
+    kernel=0,
     observation_space=observation_space,
 )
 """The balance task as the shared environments see it (``leg_env.tasks.base.Task``)."""

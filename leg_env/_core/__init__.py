@@ -1,0 +1,13 @@
+"""The compiled core: the planar leg's dynamics, contact and time stepping in C.
+
+``kernels`` is the extension module built from ``module.c`` (and the files it includes: ``robot.h`` the
+structs, ``dynamics.c``, ``contact.c``, ``integrate.c``, ``hybrid.c``) by the package's build backend at
+install. Nothing is compiled at run time. Its functions take numpy arrays and loop over robots in C with
+the GIL released; the public API (``leg_env.dynamics``, ``leg_env.contact``, ``leg_env.integrate``,
+``leg_env.hybrid``) shapes and validates the arrays around them, and ``leg_env.layout`` holds the numpy
+dtypes of the C structs, checked against the compiled layout at import.
+"""
+
+from . import kernels
+
+__all__ = ["kernels"]

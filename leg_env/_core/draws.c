@@ -1,0 +1,62 @@
+/* Draws made in compiled code from numpy generators: the uniforms of fresh starts and the robots of a
+ * randomised batch (leg_env.randomize documents the draws and the rejection rule for users).
+ *
+ * A numpy BitGenerator hands out its C interface in a capsule named "BitGenerator" holding a bitgen_t
+ * (numpy/random/bitgen.h); next_double() is what Generator.random() calls for each float64, so a draw
+ * here takes the same numbers, and advances the generator the same way, as rng.random(out=...).
+ *
+ * Part of the unity build of module.c.
+ */
+#include <math.h>
+#include <stdint.h>
+
+#include "env.h"
+
+typedef struct bitgen {
+    void *state;
+    uint64_t (*next_uint64)(void *st);
+    uint32_t (*next_uint32)(void *st);
+    double (*next_double)(void *st);
+    uint64_t (*next_raw)(void *st);
+} bitgen_t;
+
+/* A drawn robot's constants in `row` (cols doubles) from the uniforms u of each spec line (column, kind,
+ * low, high; kinds 0 scale, 1 offset, 2 range of the nominal `base`); then its nominal posture, holding
+ * torques and COM. `limits` = (hip_lo, hip_hi, knee_lo, knee_hi, min_base_height, nominal_knee). Returns
+ * whether the robot is accepted: it can hold its nominal posture within its torque limits, the posture
+ * is inside the task's limits, and on the unilateral ground mu is below the Painleve bound there. The
+ * caller has checked every spec column against cols. */
+static int robot_params(const double *u, const double *spec, Py_ssize_t n_spec, const double *base, const double *limits,
+                        double *row, Py_ssize_t cols)
+{
+    for (Py_ssize_t j = 0; j < cols; j++)
+        row[j] = base[j];
+    for (Py_ssize_t f = 0; f < n_spec; f++) {
+        const Py_ssize_t col = (Py_ssize_t)spec[4 * f];
+        const int kind = (int)spec[4 * f + 1];
+        const double lo = spec[4 * f + 2], hi = spec[4 * f + 3];
+        const double x = lo + (hi - lo) * u[f]; /* numpy's uniform(lo, hi) from the same draw */
+        if (kind == 0)
+            row[col] = base[col] * x;
+        else if (kind == 1)
+            row[col] = base[col] + x;
+        else
+            row[col] = x;
+    }
+    env_robot *r = (env_robot *)row;
+    equilibrium_one(&r->p, limits[5], r->q_nom, r->tau_nom);
+    com_one(&r->p, r->q_nom, NULL, r->com_nom, NULL);
+    const double *q = r->q_nom;
+    if (fabs(r->tau_nom[0]) > r->c.tau_hip || fabs(r->tau_nom[1]) > r->c.tau_knee)
+        return 0;
+    if (q[3] < limits[0] || q[3] > limits[1] || q[4] < limits[2] || q[4] > limits[3] || q[1] < limits[4])
+        return 0; /* the nominal posture would end the episode at once (the foot is at the origin) */
+    if (r->c.unilateral > 0.5) {
+        double s1, co1, s2, co2;
+        leg_trig(q, &s1, &co1, &s2, &co2);
+        const leg_response R = foot_response(&r->p, s1, co1, s2, co2);
+        if (R.Lxy != 0.0 && r->c.mu >= R.Lyy / fabs(R.Lxy))
+            return 0;
+    }
+    return 1;
+}

@@ -1,0 +1,86 @@
+/* The planar floating-base leg: the structs every kernel of the compiled core shares.
+ *
+ * Conventions (leg_env.dynamics states them for users, the lesson's sections 1-5):
+ *   q = [x_b, y_b, th_b, q1, q2]: torso COM position (the hip sits there), torso angle, hip angle
+ *   (thigh relative to torso), knee angle (shank relative to thigh). Absolute link angles
+ *   th1 = th_b + q1, th2 = th1 + q2.  M(q) qdd + h(q, qd) = S^T tau + Jc^T lam, h holding Coriolis,
+ *   centrifugal and gravity terms; lam = [lam_x, lam_y] is the ground's force on the foot.
+ *
+ * Every layout here is mirrored once by a numpy dtype in leg_env/layout.py, which checks the field
+ * names, offsets and sizes against leg_core_layouts() (module.c) at import.
+ */
+#ifndef LEG_ROBOT_H
+#define LEG_ROBOT_H
+
+#include <stdint.h>
+
+#define LEG_NQ 5 /* generalised coordinates */
+#define LEG_NU 2 /* actuated joints */
+
+/* Masses [kg], inertias [kg m^2], lengths [m] and gravity [m/s^2]: LegParams, field for field. */
+typedef struct {
+    double m_b, m1, m2; /* torso, thigh, shank masses */
+    double I_b, I1, I2; /* rotational inertias about each link's COM */
+    double l1, l2;      /* thigh (hip to knee) and shank (knee to foot) lengths */
+    double c1, c2;      /* hip to thigh COM, knee to shank COM */
+    double g;           /* gravity along -y; 0: none */
+} leg_params;
+
+/* What is held over a control step besides the state: joint torques, a horizontal force on the
+ * torso's COM (a push), and the ground's friction coefficient. */
+typedef struct {
+    double tau_hip, tau_knee; /* [N m] */
+    double load_x;            /* [N] */
+    double mu;                /* [1] */
+} leg_drive;
+
+/* Contact modes of the foot (leg_env.contact). */
+typedef enum { LEG_STICK = 0, LEG_SLIP_FORWARD = 1, LEG_SLIP_BACKWARD = 2, LEG_FLIGHT = 3 } leg_mode;
+
+/* Located transitions (leg_env.hybrid), one witness each. */
+typedef enum { LEG_LIFTOFF = 0, LEG_SLIP_ONSET = 1, LEG_SLIDING_STOP = 2, LEG_TOUCHDOWN = 3 } leg_event;
+
+/* Status of a foot impact (contact.c). */
+typedef enum { LEG_IMPACT_NONE = 0, LEG_IMPACT_STICK = 1, LEG_IMPACT_SLIDE = 2, LEG_IMPACT_PAINLEVE = 3 } leg_impact;
+
+#define LEG_MAX_EVENTS 8                    /* located events per control step before a Zeno settle */
+#define LEG_LOG_SIZE (2 * LEG_MAX_EVENTS)   /* events per step can reach 2 LEG_MAX_EVENTS */
+#define LEG_GROUND_TOL 1e-9                 /* a foot within this height of the ground is on it [m] */
+#define LEG_SETTLE_SPEED 1e-6               /* a slower touchdown settles the robot into contact [m/s] */
+#define LEG_ROOT_TIME 1e-12                 /* event location: bracket length [s] */
+#define LEG_ROOT_ITERATIONS 100
+#define LEG_REST_SPEED 1e-9                 /* a foot slower than this counts as at rest [m/s] */
+#define LEG_MAX_SUBSTEPS 4096               /* most RK4 steps per control step */
+
+/* The integrator's state: q, qd and the sines and cosines of th1 and th2 (kept up to date by the
+ * integrator, so that no RK4 stage calls sin or cos). */
+typedef struct {
+    double x, y, a, b, c;      /* q = (x_b, y_b, th_b, q1, q2) */
+    double vx, vy, va, vb, vc; /* qd */
+    double s1, c1, s2, c2;     /* sin th1, cos th1, sin th2, cos th2 */
+} leg_x;
+
+/* Accelerations and contact force of one mode at one state. */
+typedef struct {
+    double xdd, ydd, thbdd, q1dd, q2dd; /* qdd */
+    double lam_x, lam_y;                /* ground force on the foot [N] */
+} leg_accel;
+
+/* What one hybrid control step did (leg_env.hybrid.HybridStep). */
+typedef struct {
+    double impulse[2];          /* integral of the contact force over the continuous modes [N s] */
+    double kick[2];             /* sum of impact (and tangential) impulses [N s] */
+    double stick_time, slip_time, flight_time; /* [s] */
+    double slip_distance;       /* [m] */
+    double work;                /* actuator work [J] */
+    double work_load;           /* work of the horizontal force on the torso's COM [J] */
+    double slip_dissipation;    /* energy dissipated by sliding friction [J] */
+    double impact_dissipation;  /* kinetic energy lost in impulses [J] */
+    int32_t events;             /* located transitions */
+    int32_t painleve;           /* uses of the Painleve rule */
+    int32_t settles;            /* Zeno settles */
+    int32_t event_kind[LEG_LOG_SIZE]; /* leg_event of each located transition, -1 after the last */
+    double event_time[LEG_LOG_SIZE];  /* its time since the step's start [s], NaN after the last */
+} leg_record;
+
+#endif

@@ -27,7 +27,7 @@ Rows:
     (ratio to Hopper-v5), ``gym.make_vec`` at N = 4096 under the same random actions (lift-offs, slips and
     touchdowns included; ratio to the pinned batch), and both models balancing: the stance LQR's action
     plus uniform noise of +-``BALANCE_NOISE``, only ``step`` timed (ratio of unilateral to pinned).
-(e) every other registered task (``leg_env.tasks.REGISTRY``: ``PlanarLegStance-v1``, ``PlanarLegPush-v0``)
+(e) every other registered task (``leg_env.tasks.REGISTRY``: ``PlanarLegBalance-v0``, ``PlanarLegPush-v0``)
     through ``gym.make_vec`` at N = 4096, under random actions and balancing, each as a share of the
     unilateral stance batch's rate under the same actions (issue 10's target: at least 70%).
 With ``--ppo``: SB3 PPO (``MlpPolicy``, SB3's default hyperparameters, 16,384-step rollouts) for

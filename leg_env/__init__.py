@@ -1,8 +1,10 @@
 """leg-env: the planar floating-base leg as an exact, fast Gymnasium environment.
 
 Importing the package registers every task id of ``leg_env.tasks.REGISTRY`` (``gymnasium.make`` and
-``gymnasium.make_vec``): ``leg_env/PlanarLegStance-v0``, ``leg_env/PlanarLegStance-v1``,
-``leg_env/PlanarLegPush-v0`` and ``leg_env/PlanarLegHop-v0``. It stays cheap: the environments load on first use,
+``gymnasium.make_vec``): ``leg_env/PlanarLegStance-v0`` (balance on a pinned foot, the lesson's model),
+``leg_env/PlanarLegBalance-v0`` (balance on the unilateral ground), ``leg_env/PlanarLegPush-v0`` and
+``leg_env/PlanarLegHop-v0``; and, for one release, the deprecated ``leg_env/PlanarLegStance-v1`` (the old id
+of ``PlanarLegBalance-v0``, which it makes with a ``DeprecationWarning``). It stays cheap: the environments load on first use,
 and pygame only when a frame is drawn. The physics and the tasks run in the compiled core (``leg_env/_core``,
 C, built at install): nothing is compiled at run time.
 """
@@ -10,33 +12,44 @@ C, built at install): nothing is compiled at run time.
 import gymnasium
 
 from .params import LegParams
-from .tasks import REGISTRY
+from .tasks import ALIASES, REGISTRY
 
 __all__ = ["LegParams", "StanceConfig", "PlanarLegStanceEnv", "PlanarLegStanceVectorEnv", "ENV_ID", "ENV_IDS"]
 __version__ = "0.1.0"
 
 ENV_ID = "leg_env/PlanarLegStance-v0"
 ENV_IDS = tuple(REGISTRY)
+"""Every current task id (the deprecated aliases of ``leg_env.tasks.ALIASES`` are not listed)."""
 
-for _id, (_task, _kwargs) in REGISTRY.items():
-    if _id in gymnasium.registry:
-        continue
-    if _task == "stance":  # the balance task's own classes (and documentation)
+
+def _entry_points(task: str) -> tuple[str, str]:
+    if task == "stance":  # the balance task's own classes (and documentation)
+        return "leg_env.envs.stance:PlanarLegStanceEnv", "leg_env.envs.vector:PlanarLegStanceVectorEnv"
+    return "leg_env.envs.single:LegEnv", "leg_env.envs.vector:LegVectorEnv"
+
+
+def _kwargs(task: str, kwargs: dict) -> dict:
+    return dict(kwargs) if task == "stance" else {"task": task, **kwargs}
+
+
+for _id, (_task, _kw) in REGISTRY.items():
+    if _id not in gymnasium.registry:
+        _single, _vector = _entry_points(_task)
+        gymnasium.register(id=_id, entry_point=_single, vector_entry_point=_vector, max_episode_steps=1000, kwargs=_kwargs(_task, _kw))
+
+for _old, _new in ALIASES.items():
+    if _old not in gymnasium.registry:
+        _task, _kw = REGISTRY[_new]
         gymnasium.register(
-            id=_id,
-            entry_point="leg_env.envs.stance:PlanarLegStanceEnv",
-            vector_entry_point="leg_env.envs.vector:PlanarLegStanceVectorEnv",
+            id=_old,
+            entry_point=f"leg_env.envs.aliases:single_{_task}",
+            vector_entry_point=f"leg_env.envs.aliases:vector_{_task}",
             max_episode_steps=1000,
-            kwargs=dict(_kwargs),
+            kwargs={"_alias": (_old, _new), **_kwargs(_task, _kw)},
         )
-    else:
-        gymnasium.register(
-            id=_id,
-            entry_point="leg_env.envs.single:LegEnv",
-            vector_entry_point="leg_env.envs.vector:LegVectorEnv",
-            max_episode_steps=1000,
-            kwargs={"task": _task, **_kwargs},
-        )
+        # Gymnasium calls an id "out of date" when the registry holds a higher version of its name: the alias
+        # is not a newer version of the pinned balance, so its spec carries no version
+        gymnasium.registry[_old].version = None
 
 
 def __getattr__(name: str):

@@ -170,7 +170,7 @@ class LQRController:
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         """SB3-style ``predict``: actions in [-1, 1] for one observation (12,) or a batch (N, 12).
 
-        On the unilateral ground (18 entries: ``PlanarLegStance-v1``, ``PlanarLegPush-v0``) the same
+        On the unilateral ground (18 entries: ``PlanarLegBalance-v0``, ``PlanarLegPush-v0``) the same
         entries 2-4 and 7-9 are read; the gain is the stance model's whatever the contact mode.
 
         Returns:

@@ -24,8 +24,8 @@ from leg_env.step import STATE_Q, STATE_QD
 NP = len(PARAM_NAMES)
 CASES = [
     ("leg_env/PlanarLegStance-v0", False),
-    ("leg_env/PlanarLegStance-v1", False),
-    ("leg_env/PlanarLegStance-v1", True),
+    ("leg_env/PlanarLegBalance-v0", False),
+    ("leg_env/PlanarLegBalance-v0", True),
     ("leg_env/PlanarLegPush-v0", False),
     ("leg_env/PlanarLegHop-v0", False),
     ("leg_env/PlanarLegHop-v0", True),

@@ -22,7 +22,7 @@ from test_vector import SEED, STEPS, assert_same, random_actions
 
 ROOT = Path(__file__).resolve().parents[1]
 TASK_IDS = leg_env.ENV_IDS
-STANCE_V1 = "leg_env/PlanarLegStance-v1"
+STANCE_V1 = "leg_env/PlanarLegBalance-v0"
 N = 6
 
 

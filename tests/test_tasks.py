@@ -16,7 +16,7 @@ import leg_env
 from leg_env import dynamics as dyn
 from leg_env.tasks import REGISTRY
 
-NEW_IDS = ("leg_env/PlanarLegStance-v1", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0")
+NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0")
 ALL_IDS = tuple(REGISTRY)
 NUM_ENVS = 4
 SEED = 5
@@ -26,7 +26,7 @@ MAX_STEPS = 40
 FAST_PUSHES = dict(first_push=(0.05, 0.15), push_interval=(0.1, 0.2), push_force=(40.0, 160.0))
 KWARGS = {
     "leg_env/PlanarLegStance-v0": dict(reset_noise_scale=0.05, ctrl_cost_weight=0.02),
-    "leg_env/PlanarLegStance-v1": dict(ctrl_cost_weight=0.02, params={"m_b": 9.0}),
+    "leg_env/PlanarLegBalance-v0": dict(ctrl_cost_weight=0.02, params={"m_b": 9.0}),
     "leg_env/PlanarLegPush-v0": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
     "leg_env/PlanarLegHop-v0": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
 }
@@ -41,13 +41,31 @@ def test_every_task_id_is_registered():
     assert set(ALL_IDS) <= set(gym.registry) and set(NEW_IDS) <= set(ALL_IDS) and leg_env.ENV_IDS == ALL_IDS
 
 
-def test_stance_v1_is_stance_on_the_unilateral_ground_with_a_larger_noise():
-    env = gym.make("leg_env/PlanarLegStance-v1").unwrapped
+def test_no_current_id_is_out_of_date_and_the_old_stance_v1_is_a_deprecated_alias_of_balance():
+    """Making any current id draws no warning (Gymnasium calls an id out of date when a higher version of its
+    name is registered); the old ``PlanarLegStance-v1`` makes ``PlanarLegBalance-v0`` with a DeprecationWarning."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for env_id in leg_env.ENV_IDS:
+            gym.make(env_id).reset(seed=0)
+            gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point").reset(seed=0)
+    assert "leg_env/PlanarLegStance-v1" not in leg_env.ENV_IDS
+    for make in (gym.make, lambda i: gym.make_vec(i, num_envs=2, vectorization_mode="vector_entry_point")):
+        with pytest.warns(DeprecationWarning, match="PlanarLegBalance-v0"):
+            old = make("leg_env/PlanarLegStance-v1")
+        new = make("leg_env/PlanarLegBalance-v0")
+        assert data_equivalence(old.reset(seed=4), new.reset(seed=4), exact=True)
+
+
+def test_balance_is_stance_on_the_unilateral_ground_with_a_larger_noise():
+    env = gym.make("leg_env/PlanarLegBalance-v0").unwrapped
     assert env.config.contact == "unilateral" and env.config.reset_noise_scale == 0.05 and env.config.mu == 0.5
     assert env.observation_space.shape == (18,)
     v0 = gym.make("leg_env/PlanarLegStance-v0", contact="unilateral", reset_noise_scale=0.05)
     a = actions(50, 1)[:, 0]
-    env = gym.make("leg_env/PlanarLegStance-v1")
+    env = gym.make("leg_env/PlanarLegBalance-v0")
     assert data_equivalence(env.reset(seed=3), v0.reset(seed=3), exact=True)
     for x in a:
         assert data_equivalence(env.step(x), v0.step(x), exact=True)
@@ -411,7 +429,7 @@ def test_stance_v1_starts_every_controller_fails_are_recoverable(path):
     its 95% bar is not capped by the physics): replayed open loop from their seeds, whole episodes."""
     seed = int(path.stem.rsplit("_", 1)[1])
     actions = np.load(path)
-    env = gym.make("leg_env/PlanarLegStance-v1")
+    env = gym.make("leg_env/PlanarLegBalance-v0")
     env.reset(seed=seed)
     for t, action in enumerate(actions):
         _, _, terminated, truncated, info = env.step(action)

@@ -57,7 +57,7 @@ def as_sync_info(info: dict) -> dict:
 # ------------------------------------------------------------------ registration and spaces
 
 
-# Gymnasium marks every id with a newer version registered (PlanarLegStance-v1) as out of date: its one notice
+# Gymnasium marks every id with a newer version registered (PlanarLegBalance-v0) as out of date: its one notice
 @pytest.mark.filterwarnings("error", "ignore:.*PlanarLegStance-v0 is out of date:DeprecationWarning")
 def test_make_vec_uses_the_native_class_by_default():
     envs = gym.make_vec(ENV_ID, num_envs=3)

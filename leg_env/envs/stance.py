@@ -1,4 +1,4 @@
-"""``leg_env/PlanarLegStance-v0`` (and ``-v1``): balance the planar leg on its foot (one robot)."""
+"""``leg_env/PlanarLegStance-v0`` and ``leg_env/PlanarLegBalance-v0``: balance the planar leg on its foot (one robot)."""
 
 from __future__ import annotations
 
@@ -239,10 +239,13 @@ class PlanarLegStanceEnv(LegEnv):
     noise of 0.05 the LQR survives about 84-86% on the pinned model).
 
     ## Version History
-    * v1: the unilateral ground (``contact="unilateral"``) and a reset noise of 0.05 by default, so that
-      the start is not already inside the LQR's comfort zone (``gymnasium.make("leg_env/PlanarLegStance-v1")``
-      is ``PlanarLegStance-v0`` with those two arguments).
-    * v0: Initial release. The ``contact`` argument (default ``"pinned"``: the release's behaviour, bit
+    ``PlanarLegBalance-v0`` is this task on the unilateral ground (``contact="unilateral"``) with a reset
+    noise of 0.05, so that the start is not already inside the LQR's comfort zone:
+    ``gymnasium.make("leg_env/PlanarLegBalance-v0")`` is ``PlanarLegStance-v0`` with those two arguments. It
+    was registered as ``PlanarLegStance-v1`` before it had a name of its own; that id still makes it, with a
+    ``DeprecationWarning``, until the next release.
+
+    * PlanarLegStance-v0: Initial release. The ``contact`` argument (default ``"pinned"``: the release's behaviour, bit
       for bit) adds the unilateral ground as an opt-in model; the ``randomize`` argument (default None:
       the same, bit for bit) adds domain randomisation in every version and task.
     """

@@ -9,16 +9,24 @@ from __future__ import annotations
 
 import importlib
 
-__all__ = ["REGISTRY", "get"]
+__all__ = ["REGISTRY", "ALIASES", "get"]
 
 REGISTRY = {
     # id: (task module, keyword arguments of the id)
     "leg_env/PlanarLegStance-v0": ("stance", {}),
-    "leg_env/PlanarLegStance-v1": ("stance", {"contact": "unilateral", "reset_noise_scale": 0.05}),
+    "leg_env/PlanarLegBalance-v0": ("stance", {"contact": "unilateral", "reset_noise_scale": 0.05}),
     "leg_env/PlanarLegPush-v0": ("push", {}),
     "leg_env/PlanarLegHop-v0": ("hop", {}),
 }
-"""Every registered id: ``(task module, kwargs)``; ``PlanarLegStance-v0`` keeps its own entry points."""
+"""Every current id: ``(task module, kwargs)``; the balance task's ids keep its own entry points."""
+
+ALIASES = {
+    # deprecated id: the current id it makes, with a DeprecationWarning (removed in the next release)
+    "leg_env/PlanarLegStance-v1": "leg_env/PlanarLegBalance-v0",
+}
+"""Old ids that still work for one release. ``PlanarLegStance-v1`` was the unilateral balance: a different
+contact model is a different task, so it has its own name (``PlanarLegBalance-v0``) rather than a version
+of the pinned balance (``PlanarLegStance-v0``, the lesson's model)."""
 
 
 def get(name: str):

@@ -27,25 +27,30 @@ typedef struct {
     double K11, K12, K22, inv_det;
 } leg_response;
 
-static inline leg_response foot_response(const leg_params *P, double s1, double co1, double s2, double co2)
+static inline leg_response foot_response_m(const leg_model *M, double s1, double co1, double s2, double co2)
 {
-    const leg_flight_inertia f = flight_inertia(P);
     leg_response R;
-    R.K11 = f.K11;
-    R.K22 = f.K22;
-    R.K12 = f.kf * (co1 * co2 + s1 * s2);
+    R.K11 = M->K11f;
+    R.K22 = M->K22f;
+    R.K12 = M->kf * (co1 * co2 + s1 * s2);
     R.inv_det = 1.0 / (R.K11 * R.K22 - R.K12 * R.K12);
-    const double al1 = P->l1 - f.a / f.m, al2 = P->l2 - f.b / f.m;
+    const double al1 = M->al1, al2 = M->al2;
     const double g1x = -al1 * s1, g1y = al1 * co1; /* d(p_f - p_com)/d th1 */
     const double g2x = -al2 * s2, g2y = al2 * co2; /* d(p_f - p_com)/d th2 */
     R.B1x = (R.K22 * g1x - R.K12 * g2x) * R.inv_det;
     R.B2x = (R.K11 * g2x - R.K12 * g1x) * R.inv_det;
     R.B1y = (R.K22 * g1y - R.K12 * g2y) * R.inv_det;
     R.B2y = (R.K11 * g2y - R.K12 * g1y) * R.inv_det;
-    R.Lxx = 1.0 / f.m + g1x * R.B1x + g2x * R.B2x;
+    R.Lxx = M->inv_m + g1x * R.B1x + g2x * R.B2x;
     R.Lxy = g1x * R.B1y + g2x * R.B2y;
-    R.Lyy = 1.0 / f.m + g1y * R.B1y + g2y * R.B2y;
+    R.Lyy = M->inv_m + g1y * R.B1y + g2y * R.B2y;
     return R;
+}
+
+static inline leg_response foot_response(const leg_params *P, double s1, double co1, double s2, double co2)
+{
+    const leg_model M = model_of(P);
+    return foot_response_m(&M, s1, co1, s2, co2);
 }
 
 /* Free leg accelerations u = K^-1 r and the free foot acceleration a0. */
@@ -53,12 +58,11 @@ typedef struct {
     double u1, u2, a0x, a0y;
 } leg_free;
 
-static inline leg_free free_terms(const leg_params *P, const leg_response *R, double s1, double co1, double s2,
-                                  double co2, double w1, double w2, double tau_hip, double tau_knee, double F)
+static inline leg_free free_terms_m(const leg_model *M, const leg_response *R, double s1, double co1, double s2,
+                                    double co2, double w1, double w2, double tau_hip, double tau_knee, double F)
 {
-    const leg_flight_inertia f = flight_inertia(P);
-    const double m = f.m, a = f.a, b = f.b, kf = f.kf;
-    const double al1 = P->l1 - a / m, al2 = P->l2 - b / m;
+    const double m = M->m, a = M->a, b = M->b, kf = M->kf;
+    const double al1 = M->al1, al2 = M->al2;
     const double s12 = s1 * co2 - co1 * s2;
     const double v1 = w1 * w1, v2 = w2 * w2;
     double r1 = (tau_hip - tau_knee) - kf * s12 * v2;
@@ -71,23 +75,30 @@ static inline leg_free free_terms(const leg_params *P, const leg_response *R, do
     out.u1 = (R->K22 * r1 - R->K12 * r2) * R->inv_det;
     out.u2 = (R->K11 * r2 - R->K12 * r1) * R->inv_det;
     out.a0x = -al1 * (s1 * out.u1 + co1 * v1) - al2 * (s2 * out.u2 + co2 * v2) + F / m;
-    out.a0y = al1 * (co1 * out.u1 - s1 * v1) + al2 * (co2 * out.u2 - s2 * v2) - P->g;
+    out.a0y = al1 * (co1 * out.u1 - s1 * v1) + al2 * (co2 * out.u2 - s2 * v2) - M->p.g;
     return out;
 }
 
+static inline leg_free free_terms(const leg_params *P, const leg_response *R, double s1, double co1, double s2, double co2,
+                                  double w1, double w2, double tau_hip, double tau_knee, double F)
+{
+    const leg_model M = model_of(P);
+    return free_terms_m(&M, R, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
+}
+
 /* qdd under the foot force (Fx, Fy) from the free leg accelerations and B. */
-static inline leg_accel forced_accel(const leg_params *P, const leg_response *R, const leg_free *u, double s1,
+static inline leg_accel forced_accel(const leg_model *M, const leg_response *R, const leg_free *u, double s1,
                                      double co1, double s2, double co2, double w1, double w2, double Fx, double Fy,
                                      double tau_hip, double F)
 {
-    const double m = P->m_b + P->m1 + P->m2, a = P->m1 * P->c1 + P->m2 * P->l1, b = P->m2 * P->c2;
+    const double m = M->m, a = M->a, b = M->b;
     const double dd1 = u->u1 + R->B1x * Fx + R->B1y * Fy;
     const double dd2 = u->u2 + R->B2x * Fx + R->B2y * Fy;
     leg_accel out;
     /* x_b = x_com - (a cos th1 + b cos th2) / m, and likewise y_b; m p_com'' = F_foot + F e_x - m g e_y */
     out.xdd = (Fx + a * (co1 * w1 * w1 + s1 * dd1) + b * (co2 * w2 * w2 + s2 * dd2) + F) / m;
-    out.ydd = (Fy + a * (s1 * w1 * w1 - co1 * dd1) + b * (s2 * w2 * w2 - co2 * dd2)) / m - P->g;
-    out.thbdd = -tau_hip / P->I_b;
+    out.ydd = (Fy + a * (s1 * w1 * w1 - co1 * dd1) + b * (s2 * w2 * w2 - co2 * dd2)) / m - M->p.g;
+    out.thbdd = -tau_hip / M->p.I_b;
     out.q1dd = dd1 - out.thbdd;
     out.q2dd = dd2 - dd1;
     out.lam_x = Fx;
@@ -97,15 +108,22 @@ static inline leg_accel forced_accel(const leg_params *P, const leg_response *R,
 
 /* Slip in direction sigma (+1: +x): only y_f'' = 0 holds, lam = lam_y (-sigma mu, 1) with
  * lam_y = -a0_y / k_sigma, k_sigma = Lambda_yy - sigma mu Lambda_yx. */
-static inline leg_accel slip_core(const leg_params *P, double s1, double co1, double s2, double co2, double w1,
-                                  double w2, double tau_hip, double tau_knee, double F, double mu, double sigma)
+static inline leg_accel slip_m(const leg_model *M, double s1, double co1, double s2, double co2, double w1, double w2,
+                               double tau_hip, double tau_knee, double F, double mu, double sigma)
 {
-    const leg_response R = foot_response(P, s1, co1, s2, co2);
-    const leg_free u = free_terms(P, &R, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
+    const leg_response R = foot_response_m(M, s1, co1, s2, co2);
+    const leg_free u = free_terms_m(M, &R, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
     const double k = R.Lyy - sigma * mu * R.Lxy;
     const double lam_y = -u.a0y / k;
     const double lam_x = -sigma * mu * lam_y;
-    return forced_accel(P, &R, &u, s1, co1, s2, co2, w1, w2, lam_x, lam_y, tau_hip, F);
+    return forced_accel(M, &R, &u, s1, co1, s2, co2, w1, w2, lam_x, lam_y, tau_hip, F);
+}
+
+static inline leg_accel slip_core(const leg_params *P, double s1, double co1, double s2, double co2, double w1,
+                                  double w2, double tau_hip, double tau_knee, double F, double mu, double sigma)
+{
+    const leg_model M = model_of(P);
+    return slip_m(&M, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F, mu, sigma);
 }
 
 /* The foot's velocity v_f = J qd from the base velocity and the link rates. */
@@ -117,10 +135,10 @@ static inline void foot_velocity(const leg_params *P, double s1, double co1, dou
 }
 
 /* The velocity jump M^-1 J^T P of a foot impulse P, as (d x_b', d y_b', d th_b', d q1', d q2'). */
-static inline void impulse_velocity(const leg_params *P, const leg_response *R, double s1, double co1, double s2,
-                                    double co2, double Px, double Py, double *d)
+static inline void impulse_velocity_m(const leg_model *M, const leg_response *R, double s1, double co1, double s2,
+                                      double co2, double Px, double Py, double *d)
 {
-    const double m = P->m_b + P->m1 + P->m2, a = P->m1 * P->c1 + P->m2 * P->l1, b = P->m2 * P->c2;
+    const double m = M->m, a = M->a, b = M->b;
     const double dw1 = R->B1x * Px + R->B1y * Py;
     const double dw2 = R->B2x * Px + R->B2y * Py;
     d[0] = (Px + a * s1 * dw1 + b * s2 * dw2) / m;
@@ -128,6 +146,13 @@ static inline void impulse_velocity(const leg_params *P, const leg_response *R, 
     d[2] = 0.0;
     d[3] = dw1;
     d[4] = dw2 - dw1;
+}
+
+static inline void impulse_velocity(const leg_params *P, const leg_response *R, double s1, double co1, double s2,
+                                    double co2, double Px, double Py, double *d)
+{
+    const leg_model M = model_of(P);
+    impulse_velocity_m(&M, R, s1, co1, s2, co2, Px, Py, d);
 }
 
 /* Plastic (e = 0) foot impulse for the foot velocity v_f-; returns a leg_impact status.
@@ -183,20 +208,20 @@ static leg_impact impact_core(double vfx, double vfy, double mu, double Lxx, dou
 /* The consistent mode of a foot at rest on the ground, by enumeration (stick, slip, flight); `exclude`
  * is a mode that a located transition has just made inconsistent, or -1. With no consistent
  * candidate (past the Painleve bound) the foot sticks and *painleve is set. */
-static int mode_at_rest(const leg_params *P, double s1, double co1, double s2, double co2, double w1, double w2,
-                        double tau_hip, double tau_knee, double F, double mu, int exclude, int *painleve)
+static int mode_at_rest_m(const leg_model *M, double s1, double co1, double s2, double co2, double w1, double w2,
+                          double tau_hip, double tau_knee, double F, double mu, int exclude, int *painleve)
 {
-    const double m = P->m_b + P->m1 + P->m2;
-    const double f_scale = m * fmax(P->g, 1.0); /* forces: the weight (or mass x 1 m/s^2 without gravity) */
-    const double a_scale = fmax(P->g, 1.0);
+    const double m = M->m;
+    const double f_scale = m * fmax(M->p.g, 1.0); /* forces: the weight (or mass x 1 m/s^2 without gravity) */
+    const double a_scale = fmax(M->p.g, 1.0);
     const double tie = -LEG_TIE;
     *painleve = 0;
-    const leg_accel st = stance_core(P, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
+    const leg_accel st = stance_m(M, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
     const double lam_x = st.lam_x, lam_y = st.lam_y;
     if (exclude != LEG_STICK && lam_y / f_scale >= tie && (mu * lam_y - fabs(lam_x)) / f_scale >= tie)
         return LEG_STICK;
-    const leg_response R = foot_response(P, s1, co1, s2, co2);
-    const leg_free u = free_terms(P, &R, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
+    const leg_response R = foot_response_m(M, s1, co1, s2, co2);
+    const leg_free u = free_terms_m(M, &R, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
     const double first = lam_x > 0.0 ? -1.0 : 1.0; /* the slip opposite to the friction the stick needed */
     for (int n = 0; n < 2; n++) {
         const double sigma = n == 0 ? first : -first;
@@ -218,11 +243,11 @@ static int mode_at_rest(const leg_params *P, double s1, double co1, double s2, d
 /* The mode of a foot sliding in direction sigma: slip if its normal force is compressive, else
  * flight. Past the Painleve bound (k_sigma <= 0, *painleve set): flight if a0_y >= 0, else -1 (no
  * consistent force: the caller stops the foot by a tangential impact). */
-static int mode_sliding(const leg_params *P, double s1, double co1, double s2, double co2, double w1, double w2,
-                        double tau_hip, double tau_knee, double F, double mu, double sigma, int *painleve)
+static int mode_sliding_m(const leg_model *M, double s1, double co1, double s2, double co2, double w1, double w2,
+                          double tau_hip, double tau_knee, double F, double mu, double sigma, int *painleve)
 {
-    const leg_response R = foot_response(P, s1, co1, s2, co2);
-    const leg_free u = free_terms(P, &R, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
+    const leg_response R = foot_response_m(M, s1, co1, s2, co2);
+    const leg_free u = free_terms_m(M, &R, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
     const double k = R.Lyy - sigma * mu * R.Lxy;
     *painleve = 0;
     if (k <= 0.0) {
@@ -240,12 +265,13 @@ static int contact_mode_one(const leg_params *P, const double *q, const double *
 {
     double s1, co1, s2, co2, vfx, vfy;
     int painleve;
+    const leg_model M = model_of(P);
     leg_trig(q, &s1, &co1, &s2, &co2);
     const double w1 = qd[2] + qd[3], w2 = w1 + qd[4];
     foot_velocity(P, s1, co1, s2, co2, qd[0], qd[1], w1, w2, &vfx, &vfy);
     if (fabs(vfx) <= LEG_REST_SPEED)
-        return mode_at_rest(P, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, 0.0, mu, -1, &painleve);
-    const int mode = mode_sliding(P, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, 0.0, mu, vfx > 0.0 ? 1.0 : -1.0,
-                                  &painleve);
+        return mode_at_rest_m(&M, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, 0.0, mu, -1, &painleve);
+    const int mode = mode_sliding_m(&M, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, 0.0, mu, vfx > 0.0 ? 1.0 : -1.0,
+                                    &painleve);
     return mode < 0 ? LEG_FLIGHT : mode;
 }

@@ -45,6 +45,40 @@ static inline leg_flight_inertia flight_inertia(const leg_params *P)
     return f;
 }
 
+/* A robot's parameters with the constants of its dynamics computed once (per control step rather than
+ * per RK4 stage): the same expressions as flight_inertia() and stance_m(), so the same bits. */
+typedef struct {
+    leg_params p;               /* first: a leg_model is also its leg_params */
+    double m, inv_m, a, b;      /* total mass, 1 / m, first moments of the leg about the hip and the shank about the knee */
+    double kf, K11f, K22f;      /* the flight inertia of the leg angles (flight_inertia) */
+    double e1, e2, kap, K11s, K22s; /* the leg seen from the pinned foot (stance_m) */
+    double al1, al2;            /* the foot relative to the COM: l1 - a / m, l2 - b / m */
+} leg_model;
+
+static inline leg_model model_of(const leg_params *P)
+{
+    const double m_b = P->m_b, m1 = P->m1, m2 = P->m2, I1 = P->I1, I2 = P->I2;
+    const double l1 = P->l1, l2 = P->l2, c1 = P->c1, c2 = P->c2;
+    const leg_flight_inertia f = flight_inertia(P);
+    leg_model M;
+    M.p = *P;
+    M.m = f.m;
+    M.inv_m = 1.0 / f.m;
+    M.a = f.a;
+    M.b = f.b;
+    M.kf = f.kf;
+    M.K11f = f.K11;
+    M.K22f = f.K22;
+    M.e1 = m_b * l1 + m1 * (l1 - c1);
+    M.e2 = (m_b + m1) * l2 + m2 * (l2 - c2);
+    M.kap = l2 * M.e1;
+    M.K11s = I1 + m1 * ((l1 - c1) * (l1 - c1)) + m_b * l1 * l1;
+    M.K22s = I2 + m2 * ((l2 - c2) * (l2 - c2)) + (m_b + m1) * l2 * l2;
+    M.al1 = l1 - f.a / f.m;
+    M.al2 = l2 - f.b / f.m;
+    return M;
+}
+
 /* Stance (foot pinned): the KKT solve from the link angles' sines/cosines and rates w1 = th1',
  * w2 = th2'. Seen from the foot the leg is an inverted double pendulum carrying the torso as a point
  * mass at the hip; eliminating (x_b, y_b) leaves, in the absolute leg angles,
@@ -57,17 +91,11 @@ static inline leg_flight_inertia flight_inertia(const leg_params *P)
  *   kap = l2 e1,  c12 = cos(th1 - th2),  s12 = sin(th1 - th2)
  *
  * The base follows from the contact and lam = m a_com + m g e_y - F e_x. */
-static inline leg_accel stance_core(const leg_params *P, double s1, double co1, double s2, double co2, double w1,
-                                    double w2, double tau_hip, double tau_knee, double F)
+LEG_INLINE leg_accel stance_m(const leg_model *M, double s1, double co1, double s2, double co2, double w1, double w2,
+                                 double tau_hip, double tau_knee, double F)
 {
-    const double m_b = P->m_b, m1 = P->m1, m2 = P->m2, I_b = P->I_b, I1 = P->I1, I2 = P->I2;
-    const double l1 = P->l1, l2 = P->l2, c1 = P->c1, c2 = P->c2, g = P->g;
-    const double m = m_b + m1 + m2;
-    const double e1 = m_b * l1 + m1 * (l1 - c1);
-    const double e2 = (m_b + m1) * l2 + m2 * (l2 - c2);
-    const double kap = l2 * e1;
-    const double K11 = I1 + m1 * ((l1 - c1) * (l1 - c1)) + m_b * l1 * l1;
-    const double K22 = I2 + m2 * ((l2 - c2) * (l2 - c2)) + (m_b + m1) * l2 * l2;
+    const double I_b = M->p.I_b, l1 = M->p.l1, l2 = M->p.l2, g = M->p.g;
+    const double m = M->m, e1 = M->e1, e2 = M->e2, kap = M->kap, K11 = M->K11s, K22 = M->K22s;
     const double c12 = co1 * co2 + s1 * s2;
     const double s12 = s1 * co2 - co1 * s2;
     const double K12 = kap * c12;
@@ -91,18 +119,24 @@ static inline leg_accel stance_core(const leg_params *P, double s1, double co1, 
     return out;
 }
 
+static inline leg_accel stance_core(const leg_params *P, double s1, double co1, double s2, double co2, double w1,
+                                    double w2, double tau_hip, double tau_knee, double F)
+{
+    const leg_model M = model_of(P);
+    return stance_m(&M, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
+}
+
 /* Flight (no contact): the COM falls freely, m p_com'' = (F, -m g), and the leg angles obey
  *
  *   [K11     kf c12] [th1'']   [tau_hip - tau_knee - kf s12 th2'^2 + F a s1 / m]
  *   [kf c12  K22   ] [th2''] = [tau_knee           + kf s12 th1'^2 + F b s2 / m]
  *
  * with the flight inertia of flight_inertia(). */
-static inline leg_accel flight_core(const leg_params *P, double s1, double co1, double s2, double co2, double w1,
-                                    double w2, double tau_hip, double tau_knee, double F)
+LEG_INLINE leg_accel flight_m(const leg_model *M, double s1, double co1, double s2, double co2, double w1, double w2,
+                                 double tau_hip, double tau_knee, double F)
 {
-    const double I_b = P->I_b, g = P->g;
-    const leg_flight_inertia f = flight_inertia(P);
-    const double m = f.m, a = f.a, b = f.b, kf = f.kf, K11 = f.K11, K22 = f.K22;
+    const double I_b = M->p.I_b, g = M->p.g;
+    const double m = M->m, a = M->a, b = M->b, kf = M->kf, K11 = M->K11f, K22 = M->K22f;
     const double c12 = co1 * co2 + s1 * s2;
     const double s12 = s1 * co2 - co1 * s2;
     const double K12 = kf * c12;
@@ -122,6 +156,13 @@ static inline leg_accel flight_core(const leg_params *P, double s1, double co1, 
     out.lam_x = 0.0;
     out.lam_y = 0.0;
     return out;
+}
+
+static inline leg_accel flight_core(const leg_params *P, double s1, double co1, double s2, double co2, double w1,
+                                    double w2, double tau_hip, double tau_knee, double F)
+{
+    const leg_model M = model_of(P);
+    return flight_m(&M, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
 }
 
 /* Mechanical energy T + V [J] from the link trigonometry, base height and velocity and rates (Koenig:

@@ -148,13 +148,14 @@ static int start_unilateral(const leg_params *P, double *q, double *qd, double *
         q[1] -= height;
     leg_x X = x_from(q, qd, s1, co1, s2, co2);
     const leg_drive u = {tau[0], tau[1], 0.0, mu};
+    const leg_model M = model_of(P);
     leg_record rec;
     memset(&rec, 0, sizeof(rec));
-    const int m = choose_mode(LEG_FLIGHT, &X, anchor, P, &u, -1, 0, &rec);
+    const int m = choose_mode(LEG_FLIGHT, &X, anchor, &M, &u, -1, 0, &rec);
     x_to(&X, q, qd);
     if (m != LEG_STICK)
         anchor[0] = q[0] + P->l1 * co1 + P->l2 * co2;
-    const leg_accel k = derivative(m, P, &u, &X);
+    const leg_accel k = derivative(m, &M, &u, &X);
     o->lam[0] = k.lam_x;
     o->lam[1] = k.lam_y;
     zero_accumulators(o);

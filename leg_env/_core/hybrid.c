@@ -24,13 +24,13 @@ typedef struct {
     double x, y, vx, vy;
 } leg_foot;
 
-static inline leg_foot foot_of(const leg_params *P, const leg_x *X)
+static inline leg_foot foot_of(const leg_model *M, const leg_x *X)
 {
     leg_foot f;
     const double w1 = X->va + X->vb, w2 = w1 + X->vc;
-    foot_velocity(P, X->s1, X->c1, X->s2, X->c2, X->vx, X->vy, w1, w2, &f.vx, &f.vy);
-    f.x = X->x + P->l1 * X->c1 + P->l2 * X->c2;
-    f.y = X->y + P->l1 * X->s1 + P->l2 * X->s2;
+    foot_velocity(&M->p, X->s1, X->c1, X->s2, X->c2, X->vx, X->vy, w1, w2, &f.vx, &f.vy);
+    f.x = X->x + M->p.l1 * X->c1 + M->p.l2 * X->c2;
+    f.y = X->y + M->p.l1 * X->s1 + M->p.l2 * X->s2;
     return f;
 }
 
@@ -50,18 +50,18 @@ static inline double touchdown_witness(double y_f, double ground) { return y_f -
 
 /* The mode's two witnesses at X (k: its derivative and force there); INFINITY fills a missing one.
  * stick: (LIFTOFF, SLIP_ONSET); slip: (LIFTOFF, SLIDING_STOP); flight: (TOUCHDOWN, -). */
-static inline void witnesses(int mode, const leg_params *P, const leg_drive *u, const leg_x *X, const leg_accel *k,
+static inline void witnesses(int mode, const leg_model *M, const leg_drive *u, const leg_x *X, const leg_accel *k,
                              const double *anchor, double *wa, double *wb)
 {
     if (mode == LEG_FLIGHT) {
-        *wa = touchdown_witness(foot_of(P, X).y, anchor[1]);
+        *wa = touchdown_witness(foot_of(M, X).y, anchor[1]);
         *wb = INFINITY;
     } else if (mode == LEG_STICK) {
         *wa = liftoff_witness(k->lam_y);
         *wb = slip_onset_witness(k->lam_x, k->lam_y, u->mu);
     } else {
         *wa = liftoff_witness(k->lam_y);
-        *wb = sliding_stop_witness(foot_of(P, X).vx, slip_sigma(mode));
+        *wb = sliding_stop_witness(foot_of(M, X).vx, slip_sigma(mode));
     }
 }
 
@@ -89,21 +89,21 @@ static inline int watched(int kind, int settled, int events)
 
 /* ---------------------------------------------------------------- reset maps and mode choice */
 
-/* Apply the foot impulse P to X's velocity; book it and the kinetic energy it removes,
- * Delta T = P . (v_f- + v_f+) / 2. */
-static leg_x kick(const leg_params *P, const leg_x *X, double Px, double Py, leg_record *rec)
+/* Apply the foot impulse M to X's velocity; book it and the kinetic energy it removes,
+ * Delta T = M . (v_f- + v_f+) / 2. */
+static leg_x kick(const leg_model *M, const leg_x *X, double Px, double Py, leg_record *rec)
 {
-    const leg_response R = foot_response(P, X->s1, X->c1, X->s2, X->c2);
-    const leg_foot before = foot_of(P, X);
+    const leg_response R = foot_response_m(M, X->s1, X->c1, X->s2, X->c2);
+    const leg_foot before = foot_of(M, X);
     double d[LEG_NQ];
-    impulse_velocity(P, &R, X->s1, X->c1, X->s2, X->c2, Px, Py, d);
+    impulse_velocity_m(M, &R, X->s1, X->c1, X->s2, X->c2, Px, Py, d);
     leg_x Y = *X;
     Y.vx += d[0];
     Y.vy += d[1];
     Y.va += d[2];
     Y.vb += d[3];
     Y.vc += d[4];
-    const leg_foot after = foot_of(P, &Y);
+    const leg_foot after = foot_of(M, &Y);
     rec->kick[0] += Px;
     rec->kick[1] += Py;
     rec->impact_dissipation += -0.5 * (Px * (before.vx + after.vx) + Py * (before.vy + after.vy));
@@ -111,50 +111,50 @@ static leg_x kick(const leg_params *P, const leg_x *X, double Px, double Py, leg
 }
 
 /* The sticking impulse -Lambda^-1 v_f: the foot at rest. */
-static leg_x stop_foot(const leg_params *P, const leg_x *X, leg_record *rec)
+static leg_x stop_foot(const leg_model *M, const leg_x *X, leg_record *rec)
 {
-    const leg_response R = foot_response(P, X->s1, X->c1, X->s2, X->c2);
-    const leg_foot f = foot_of(P, X);
+    const leg_response R = foot_response_m(M, X->s1, X->c1, X->s2, X->c2);
+    const leg_foot f = foot_of(M, X);
     double Px, Py;
     impact_core(f.vx, f.vy, INFINITY, R.Lxx, R.Lxy, R.Lyy, &Px, &Py);
-    return kick(P, X, Px, Py, rec);
+    return kick(M, X, Px, Py, rec);
 }
 
 /* The consistent mode at X, applying the impulses it needs: a foot above the ground, or leaving it,
  * flies; a foot hitting it gets the impact map first; a sliding foot slips or flies; a foot at rest
  * gets the one consistent mode (mode_at_rest). `mode` is the current one (a stick that stays keeps its
  * anchor), `exclude` a mode that a transition has just made inconsistent (or -1). Updates anchor[0]. */
-static int choose_mode(int mode, leg_x *X, double *anchor, const leg_params *P, const leg_drive *u, int exclude,
+static int choose_mode(int mode, leg_x *X, double *anchor, const leg_model *M, const leg_drive *u, int exclude,
                        int settled, leg_record *rec)
 {
     const double t_hip = u->tau_hip, t_knee = u->tau_knee, F = u->load_x, mu = u->mu;
-    leg_foot f = foot_of(P, X);
+    leg_foot f = foot_of(M, X);
     if (f.y - anchor[1] > LEG_GROUND_TOL || f.vy > LEG_REST_SPEED)
         return LEG_FLIGHT;
     const double s1 = X->s1, co1 = X->c1, s2 = X->s2, co2 = X->c2;
     if (f.vy < -LEG_REST_SPEED) { /* hitting the ground: the impact first */
-        const leg_response R = foot_response(P, s1, co1, s2, co2);
+        const leg_response R = foot_response_m(M, s1, co1, s2, co2);
         double Px, Py;
         if (impact_core(f.vx, f.vy, mu, R.Lxx, R.Lxy, R.Lyy, &Px, &Py) == LEG_IMPACT_PAINLEVE)
             rec->painleve += 1;
-        *X = kick(P, X, Px, Py, rec);
-        f = foot_of(P, X);
+        *X = kick(M, X, Px, Py, rec);
+        f = foot_of(M, X);
     }
     const double w1 = X->va + X->vb, w2 = X->va + X->vb + X->vc;
     int new_mode = -1, painleve;
     if (fabs(f.vx) > LEG_REST_SPEED) {
-        new_mode = mode_sliding(P, s1, co1, s2, co2, w1, w2, t_hip, t_knee, F, mu, f.vx > 0.0 ? 1.0 : -1.0, &painleve);
+        new_mode = mode_sliding_m(M, s1, co1, s2, co2, w1, w2, t_hip, t_knee, F, mu, f.vx > 0.0 ? 1.0 : -1.0, &painleve);
         if (painleve)
             rec->painleve += 1;
         if (new_mode < 0) { /* no consistent force: a tangential impact stops the foot */
-            *X = stop_foot(P, X, rec);
+            *X = stop_foot(M, X, rec);
         } else if (new_mode == LEG_FLIGHT && settled) {
             new_mode = f.vx > 0.0 ? LEG_SLIP_FORWARD : LEG_SLIP_BACKWARD;
             rec->settles += 1;
         }
     }
     if (new_mode < 0) { /* at rest */
-        new_mode = mode_at_rest(P, s1, co1, s2, co2, w1, w2, t_hip, t_knee, F, mu, exclude, &painleve);
+        new_mode = mode_at_rest_m(M, s1, co1, s2, co2, w1, w2, t_hip, t_knee, F, mu, exclude, &painleve);
         if (painleve)
             rec->painleve += 1;
         if (new_mode == LEG_FLIGHT && settled) {
@@ -163,11 +163,11 @@ static int choose_mode(int mode, leg_x *X, double *anchor, const leg_params *P, 
         }
     }
     if (new_mode == LEG_STICK) {
-        const leg_foot g = foot_of(P, X);
+        const leg_foot g = foot_of(M, X);
         if (mode != LEG_STICK)
             anchor[0] = g.x;
         if (g.vx != 0.0 || g.vy != 0.0)
-            *X = stop_foot(P, X, rec);
+            *X = stop_foot(M, X, rec);
     }
     return new_mode;
 }
@@ -186,14 +186,14 @@ static inline double watched_min(int watch_a, int watch_b, double wa, double wb)
     return fmin(watch_a ? wa : INFINITY, watch_b ? wb : INFINITY);
 }
 
-static int locate(int mode, const leg_params *P, const leg_drive *u, const double *anchor, const leg_x *X,
+static int locate(int mode, const leg_model *M, const leg_drive *u, const double *anchor, const leg_x *X,
                   const leg_accel *k, double h, const leg_x *X1, const leg_accel *k1, const leg_sums *sums1,
                   int watch_a, int watch_b, leg_located *out)
 {
     double wa, wb;
-    witnesses(mode, P, u, X, k, anchor, &wa, &wb);
+    witnesses(mode, M, u, X, k, anchor, &wa, &wb);
     double fa = watched_min(watch_a, watch_b, wa, wb);
-    witnesses(mode, P, u, X1, k1, anchor, &wa, &wb);
+    witnesses(mode, M, u, X1, k1, anchor, &wa, &wb);
     double fb = watched_min(watch_a, watch_b, wa, wb);
     double a = 0.0, b = h;
     out->s = h;
@@ -209,9 +209,9 @@ static int locate(int mode, const leg_params *P, const leg_drive *u, const doubl
         if (!(a < s && s < b))
             s = 0.5 * (a + b);
         leg_sums sums = {0.0, 0.0, 0.0};
-        const leg_x Xs = rk4_substep(mode, P, u, anchor, X, k, s, &sums);
-        const leg_accel ks = derivative(mode, P, u, &Xs);
-        witnesses(mode, P, u, &Xs, &ks, anchor, &wa, &wb);
+        const leg_x Xs = rk4_substep(mode, M, u, anchor, X, k, s, &sums);
+        const leg_accel ks = derivative(mode, M, u, &Xs);
+        witnesses(mode, M, u, &Xs, &ks, anchor, &wa, &wb);
         const double fs = watched_min(watch_a, watch_b, wa, wb);
         if (fs < 0.0) {
             b = s;
@@ -232,12 +232,12 @@ static int locate(int mode, const leg_params *P, const leg_drive *u, const doubl
         }
         s_next = -1.0;
         if (mode == LEG_FLIGHT) {
-            const double vfy = foot_of(P, &Xs).vy;
+            const double vfy = foot_of(M, &Xs).vy;
             if (vfy < 0.0) /* Newton, nudged past the root so that the bracket closes */
                 s_next = s - fs / vfy + (fs >= 0.0 ? 0.25 * LEG_ROOT_TIME : -0.25 * LEG_ROOT_TIME);
         }
     }
-    witnesses(mode, P, u, &out->X, &out->k, anchor, &wa, &wb);
+    witnesses(mode, M, u, &out->X, &out->k, anchor, &wa, &wb);
     int kind_a, kind_b;
     event_kinds(mode, &kind_a, &kind_b);
     if (watch_b && (!watch_a || wb < wa))
@@ -246,24 +246,24 @@ static int locate(int mode, const leg_params *P, const leg_drive *u, const doubl
 }
 
 /* The reset map of event `kind` at X (just past it), then the mode choice; returns the new mode. */
-static int transition(int kind, int mode, leg_x *X, double *anchor, const leg_params *P, const leg_drive *u,
+static int transition(int kind, int mode, leg_x *X, double *anchor, const leg_model *M, const leg_drive *u,
                       int *settled, leg_record *rec)
 {
     if (kind == LEG_TOUCHDOWN) {
-        const leg_foot f = foot_of(P, X);
+        const leg_foot f = foot_of(M, X);
         X->y = X->y - (f.y - anchor[1]);
         if (-f.vy < LEG_SETTLE_SPEED && !*settled) {
             *settled = 1;
             rec->settles += 1;
         }
     } else if (kind == LEG_SLIDING_STOP) {
-        *X = stop_foot(P, X, rec);
+        *X = stop_foot(M, X, rec);
     }
-    return choose_mode(mode, X, anchor, P, u, kind != LEG_TOUCHDOWN ? mode : -1, *settled, rec);
+    return choose_mode(mode, X, anchor, M, u, kind != LEG_TOUCHDOWN ? mode : -1, *settled, rec);
 }
 
 /* Add a substep of length h in `mode` from X0 to X1 to the step's record. */
-static inline void book(int mode, const leg_params *P, double h, const leg_x *X0, const leg_x *X1,
+static inline void book(int mode, const leg_model *M, double h, const leg_x *X0, const leg_x *X1,
                         const leg_sums *sums, leg_record *rec)
 {
     rec->impulse[0] += h * sums->lx;
@@ -274,7 +274,7 @@ static inline void book(int mode, const leg_params *P, double h, const leg_x *X0
         rec->flight_time += h;
     } else {
         rec->slip_time += h;
-        rec->slip_distance += slip_sigma(mode) * (foot_of(P, X1).x - foot_of(P, X0).x);
+        rec->slip_distance += slip_sigma(mode) * (foot_of(M, X1).x - foot_of(M, X0).x);
         rec->slip_dissipation += h * sums->power;
     }
 }
@@ -291,19 +291,19 @@ typedef struct {
 /* Substeps in `mode` while no witness of it is negative at a substep's end. A substep that ends with
  * one negative is not taken: the general loop of hybrid_control_step redoes it from the same state and
  * locates the event. Called with `mode` a constant, so that the compiler specialises the RK4 stages. */
-static inline void steady(int mode, const leg_params *P, const leg_drive *u, const double *anchor, leg_progress *g,
+static inline void steady(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
                           leg_record *rec)
 {
     while (g->n_left > 0) {
         const double h = g->t_left / g->n_left;
         leg_sums sums = {0.0, 0.0, 0.0};
-        const leg_x X1 = rk4_substep(mode, P, u, anchor, &g->X, &g->k, h, &sums);
-        const leg_accel k1 = derivative(mode, P, u, &X1);
+        const leg_x X1 = rk4_substep(mode, M, u, anchor, &g->X, &g->k, h, &sums);
+        const leg_accel k1 = derivative(mode, M, u, &X1);
         double w1a, w1b;
-        witnesses(mode, P, u, &X1, &k1, anchor, &w1a, &w1b);
+        witnesses(mode, M, u, &X1, &k1, anchor, &w1a, &w1b);
         if (w1a < 0.0 || w1b < 0.0)
             break;
-        book(mode, P, h, &g->X, &X1, &sums, rec);
+        book(mode, M, h, &g->X, &X1, &sums, rec);
         g->X = X1;
         g->k = k1;
         g->t += h;
@@ -320,6 +320,7 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
                                double *anchor, double dt, int substeps, double max_angle, double s1, double co1,
                                double s2, double co2, leg_record *rec)
 {
+    const leg_model model = model_of(P), *M = &model;
     memset(rec, 0, sizeof(*rec));
     for (int j = 0; j < LEG_LOG_SIZE; j++) {
         rec->event_kind[j] = -1;
@@ -330,17 +331,17 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
     int settled = 0, events = 0;
     /* the mode under this step's torques: a stick that stays consistent, or a foot in the air, keeps its
      * mode without the full choice (the common cases); anything else goes through choose_mode() */
-    g.k = derivative(mode, P, u, &g.X);
+    g.k = derivative(mode, M, u, &g.X);
     int keep = 0;
     if (mode == LEG_STICK) {
         keep = g.k.lam_y >= 0.0 && u->mu * g.k.lam_y - fabs(g.k.lam_x) >= 0.0;
     } else if (mode == LEG_FLIGHT) {
-        const leg_foot f = foot_of(P, &g.X);
+        const leg_foot f = foot_of(M, &g.X);
         keep = f.y - anchor[1] > LEG_GROUND_TOL || f.vy > LEG_REST_SPEED;
     }
     if (!keep) {
-        mode = choose_mode(mode, &g.X, anchor, P, u, -1, settled, rec);
-        g.k = derivative(mode, P, u, &g.X);
+        mode = choose_mode(mode, &g.X, anchor, M, u, -1, settled, rec);
+        g.k = derivative(mode, M, u, &g.X);
     }
     g.t = 0.0;
     g.t_left = dt;
@@ -348,24 +349,24 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
     /* the common cases (a stick while balancing, a flight) with the mode a constant; the general loop
      * below goes on from where they stop */
     if (mode == LEG_STICK)
-        steady(LEG_STICK, P, u, anchor, &g, rec);
+        steady(LEG_STICK, M, u, anchor, &g, rec);
     else if (mode == LEG_FLIGHT)
-        steady(LEG_FLIGHT, P, u, anchor, &g, rec);
+        steady(LEG_FLIGHT, M, u, anchor, &g, rec);
     int kind_a, kind_b;
     double w0a, w0b;
     event_kinds(mode, &kind_a, &kind_b);
-    witnesses(mode, P, u, &g.X, &g.k, anchor, &w0a, &w0b);
+    witnesses(mode, M, u, &g.X, &g.k, anchor, &w0a, &w0b);
     while (g.n_left > 0) {
         const double h = g.t_left / g.n_left;
         leg_sums sums = {0.0, 0.0, 0.0};
-        const leg_x X1 = rk4_substep(mode, P, u, anchor, &g.X, &g.k, h, &sums);
-        const leg_accel k1 = derivative(mode, P, u, &X1);
+        const leg_x X1 = rk4_substep(mode, M, u, anchor, &g.X, &g.k, h, &sums);
+        const leg_accel k1 = derivative(mode, M, u, &X1);
         double w1a, w1b;
-        witnesses(mode, P, u, &X1, &k1, anchor, &w1a, &w1b);
+        witnesses(mode, M, u, &X1, &k1, anchor, &w1a, &w1b);
         const int watch_a = watched(kind_a, settled, events) && w0a >= 0.0;
         const int watch_b = watched(kind_b, settled, events) && w0b >= 0.0;
         if (!((watch_a && w1a < 0.0) || (watch_b && w1b < 0.0))) {
-            book(mode, P, h, &g.X, &X1, &sums, rec);
+            book(mode, M, h, &g.X, &X1, &sums, rec);
             g.X = X1;
             g.k = k1;
             w0a = w1a;
@@ -376,8 +377,8 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
             continue;
         }
         leg_located at;
-        const int kind = locate(mode, P, u, anchor, &g.X, &g.k, h, &X1, &k1, &sums, watch_a, watch_b, &at);
-        book(mode, P, at.s, &g.X, &at.X, &at.sums, rec);
+        const int kind = locate(mode, M, u, anchor, &g.X, &g.k, h, &X1, &k1, &sums, watch_a, watch_b, &at);
+        book(mode, M, at.s, &g.X, &at.X, &at.sums, rec);
         g.t += at.s;
         g.t_left -= at.s;
         if (events < LEG_LOG_SIZE) {
@@ -390,17 +391,17 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
             rec->settles += 1;
         }
         g.X = at.X;
-        mode = transition(kind, mode, &g.X, anchor, P, u, &settled, rec);
+        mode = transition(kind, mode, &g.X, anchor, M, u, &settled, rec);
         /* the rest of the step in the new mode, by the step rule at the post-event rates */
         const int n_rule = substeps_for_rates(g.X.va, g.X.vb, g.X.vc, g.t_left, 1, max_angle);
         if (n_rule > g.n_left)
             g.n_left = n_rule;
-        g.k = derivative(mode, P, u, &g.X);
+        g.k = derivative(mode, M, u, &g.X);
         event_kinds(mode, &kind_a, &kind_b);
-        witnesses(mode, P, u, &g.X, &g.k, anchor, &w0a, &w0b);
+        witnesses(mode, M, u, &g.X, &g.k, anchor, &w0a, &w0b);
     }
     if (mode != LEG_STICK)
-        anchor[0] = foot_of(P, &g.X).x;
+        anchor[0] = foot_of(M, &g.X).x;
     rec->events = events;
     rec->work = u->tau_hip * (g.X.b - q[3]) + u->tau_knee * (g.X.c - q[4]);
     rec->work_load = u->load_x * (g.X.x - q[0]); /* exact: F constant over the step, x_b continuous */

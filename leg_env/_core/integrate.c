@@ -57,21 +57,21 @@ static inline int is_slip(int mode) { return mode == LEG_SLIP_FORWARD || mode ==
 static inline double slip_sigma(int mode) { return mode == LEG_SLIP_FORWARD ? 1.0 : -1.0; }
 
 /* Accelerations and force of the contact mode `mode`. */
-static inline leg_accel accel(int mode, const leg_params *P, const leg_drive *u, double s1, double co1, double s2,
+LEG_INLINE leg_accel accel(int mode, const leg_model *M, const leg_drive *u, double s1, double co1, double s2,
                               double co2, double w1, double w2)
 {
     if (mode == LEG_STICK)
-        return stance_core(P, s1, co1, s2, co2, w1, w2, u->tau_hip, u->tau_knee, u->load_x);
+        return stance_m(M, s1, co1, s2, co2, w1, w2, u->tau_hip, u->tau_knee, u->load_x);
     if (mode == LEG_FLIGHT)
-        return flight_core(P, s1, co1, s2, co2, w1, w2, u->tau_hip, u->tau_knee, u->load_x);
-    return slip_core(P, s1, co1, s2, co2, w1, w2, u->tau_hip, u->tau_knee, u->load_x, u->mu, slip_sigma(mode));
+        return flight_m(M, s1, co1, s2, co2, w1, w2, u->tau_hip, u->tau_knee, u->load_x);
+    return slip_m(M, s1, co1, s2, co2, w1, w2, u->tau_hip, u->tau_knee, u->load_x, u->mu, slip_sigma(mode));
 }
 
 /* accel() at the integrator state X. */
-static inline leg_accel derivative(int mode, const leg_params *P, const leg_drive *u, const leg_x *X)
+LEG_INLINE leg_accel derivative(int mode, const leg_model *M, const leg_drive *u, const leg_x *X)
 {
     const double w1 = X->va + X->vb, w2 = X->va + X->vb + X->vc;
-    return accel(mode, P, u, X->s1, X->c1, X->s2, X->c2, w1, w2);
+    return accel(mode, M, u, X->s1, X->c1, X->s2, X->c2, w1, w2);
 }
 
 /* Base position and velocity that put the foot on `anchor` with Jc qd = 0. */
@@ -102,9 +102,10 @@ typedef struct {
 /* One classical RK4 step of length h in `mode` from X with the stage-1 derivative k1, then the mode's
  * projection (at `anchor` with Jc qd = 0 in stick; on the line y = anchor[1] with zero normal velocity
  * in slip; none in flight). Every stage turns the sines/cosines by its angle increment (turn()). */
-static inline leg_x rk4_substep(int mode, const leg_params *P, const leg_drive *u, const double *anchor,
+LEG_INLINE leg_x rk4_substep(int mode, const leg_model *M, const leg_drive *u, const double *anchor,
                                 const leg_x *X, const leg_accel *k1, double h, leg_sums *sums)
 {
+    const leg_params *P = &M->p;
     const double l1 = P->l1, l2 = P->l2;
     const double ch = RK4_HALF * h;
     const double W0 = RK4_W0, W1 = RK4_W1;
@@ -117,7 +118,7 @@ static inline leg_x rk4_substep(int mode, const leg_params *P, const leg_drive *
     turn(X->s1, X->c1, ch * w1, &S1, &C1);
     turn(X->s2, X->c2, ch * w2, &S2, &C2);
     const double w1_2 = va2 + vb2, w2_2 = va2 + vb2 + vc2;
-    const leg_accel k2 = accel(mode, P, u, S1, C1, S2, C2, w1_2, w2_2);
+    const leg_accel k2 = accel(mode, M, u, S1, C1, S2, C2, w1_2, w2_2);
     double power = 0.0;
     if (slip)
         power = W0 * -k1->lam_x * (X->vx - l1 * X->s1 * w1 - l2 * X->s2 * w2)
@@ -128,7 +129,7 @@ static inline leg_x rk4_substep(int mode, const leg_params *P, const leg_drive *
     turn(X->s1, X->c1, ch * w1_2, &S1, &C1);
     turn(X->s2, X->c2, ch * w2_2, &S2, &C2);
     const double w1_3 = va3 + vb3, w2_3 = va3 + vb3 + vc3;
-    const leg_accel k3 = accel(mode, P, u, S1, C1, S2, C2, w1_3, w2_3);
+    const leg_accel k3 = accel(mode, M, u, S1, C1, S2, C2, w1_3, w2_3);
     if (slip)
         power += W1 * -k3.lam_x * (vx3 - l1 * S1 * w1_3 - l2 * S2 * w2_3);
     /* stage 4: y0 + h k3 */
@@ -136,7 +137,7 @@ static inline leg_x rk4_substep(int mode, const leg_params *P, const leg_drive *
                  vb4 = X->vb + h * k3.q1dd, vc4 = X->vc + h * k3.q2dd;
     turn(X->s1, X->c1, h * w1_3, &S1, &C1);
     turn(X->s2, X->c2, h * w2_3, &S2, &C2);
-    const leg_accel k4 = accel(mode, P, u, S1, C1, S2, C2, va4 + vb4, va4 + vb4 + vc4);
+    const leg_accel k4 = accel(mode, M, u, S1, C1, S2, C2, va4 + vb4, va4 + vb4 + vc4);
     if (slip)
         power += W0 * -k4.lam_x * (vx4 - l1 * S1 * (va4 + vb4) - l2 * S2 * (va4 + vb4 + vc4));
     /* y1 = y0 + h (k1 + 2 k2 + 2 k3 + k4) / 6 */
@@ -196,12 +197,19 @@ static void rk4_control_step(const leg_params *P, const leg_drive *u, double *q,
 {
     const int n = substeps_for_rates(qd[2], qd[3], qd[4], dt, substeps, max_angle);
     const double h = dt / n;
-    const int mode = stance ? LEG_STICK : LEG_FLIGHT;
+    const leg_model M = model_of(P);
     leg_x X = x_from(q, qd, s1, co1, s2, co2);
     leg_sums sums = {0.0, 0.0, 0.0};
-    for (int i = 0; i < n; i++) {
-        const leg_accel k1 = derivative(mode, P, u, &X);
-        X = rk4_substep(mode, P, u, anchor, &X, &k1, h, &sums);
+    if (stance) { /* the mode a constant in each loop: its stages compile to that mode's dynamics alone */
+        for (int i = 0; i < n; i++) {
+            const leg_accel k1 = derivative(LEG_STICK, &M, u, &X);
+            X = rk4_substep(LEG_STICK, &M, u, anchor, &X, &k1, h, &sums);
+        }
+    } else {
+        for (int i = 0; i < n; i++) {
+            const leg_accel k1 = derivative(LEG_FLIGHT, &M, u, &X);
+            X = rk4_substep(LEG_FLIGHT, &M, u, anchor, &X, &k1, h, &sums);
+        }
     }
     x_to(&X, q, qd);
     lam_mean[0] = sums.lx / n;

@@ -14,6 +14,14 @@
 
 #include <stdint.h>
 
+/* Inlined into every caller: the RK4 stages of one contact mode then compile to straight-line code of that
+ * mode's dynamics (the compiler's own heuristics leave the three-mode dispatch out of line). */
+#if defined(_MSC_VER)
+#define LEG_INLINE static __forceinline
+#else
+#define LEG_INLINE static inline __attribute__((always_inline))
+#endif
+
 #define LEG_NQ 5 /* generalised coordinates */
 #define LEG_NU 2 /* actuated joints */
 

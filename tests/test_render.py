@@ -119,3 +119,32 @@ def test_a_push_shows_as_an_arrow_at_the_torso():
     for _ in range(10):
         _, _, terminated, _, info = env.step(np.zeros(2))
     assert info["push_force"] == 0.0 and count(env.render(), PUSH) == 0
+
+
+@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegStance-v0", "leg_env/PlanarLegHop-v0"])
+def test_a_randomised_batch_draws_each_robot_with_its_own_parameters(env_id):
+    """Every sub-env's frame is its own robot (its link lengths, its friction cone) at its own state, the frame
+    the single env draws for that robot; with drawn lengths the nominal robot's frame differs."""
+    from leg_env.envs.single import robot_of_row
+
+    n = 4
+    envs = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", render_mode="rgb_array",
+                        randomize={"l1": ("scale", 0.8, 1.2), "l2": ("scale", 0.8, 1.2), "mu": ("range", 0.3, 0.5)})
+    envs.reset(seed=3)
+    envs.step(np.zeros((n, 2), dtype=np.float32))
+    u = envs.unwrapped
+    frames = envs.render()
+    q, _, anchor = u.state
+    differs = 0
+    for i in range(n):
+        params, mu = robot_of_row(u._consts[i])
+        violated = bool(u._flags[i, 1] or u._flags[i, 2])
+        from leg_env.envs.single import contact_marks, push_mark
+
+        mode, impulse = contact_marks(u._state, u._out, i, u.unilateral)
+        own = draw(q[i], anchor[i], u._lam[i], params, violated, u.width, u.height, mu, mode, impulse, push_mark(u.task, u._out, i))
+        nominal = draw(q[i], anchor[i], u._lam[i], u.params, violated, u.width, u.height, u.config.mu, mode, impulse,
+                       push_mark(u.task, u._out, i))
+        assert np.array_equal(frames[i], own), i
+        differs += not np.array_equal(own, nominal)
+    assert differs > 0

@@ -197,14 +197,14 @@ class LegEnv(gym.Env):
         return self._q[0].copy(), self._qd[0].copy(), self._anchor[0].copy()
 
     def _robot_mu(self) -> float:
-        return float(self._consts[0, len(PARAM_NAMES) + C_MU])
+        return robot_of_row(self._consts[0])[1]
 
     @property
     def robot_params(self) -> LegParams:
         """The ``LegParams`` of the robot being simulated: ``params`` unless randomised or set by a reset."""
         if not self._custom_robot:
             return self.params
-        return LegParams(**{name: float(v) for name, v in zip(PARAM_NAMES, self._consts[0, :len(PARAM_NAMES)])})
+        return robot_of_row(self._consts[0])[0]
 
     # ------------------------------------------------------------ helpers
 
@@ -274,6 +274,11 @@ class LegEnv(gym.Env):
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._bind()
+
+
+def robot_of_row(row: np.ndarray) -> tuple[LegParams, float]:
+    """The ``LegParams`` and friction coefficient of the robot whose ``consts`` row is ``row``."""
+    return LegParams(**{name: float(v) for name, v in zip(PARAM_NAMES, row[:len(PARAM_NAMES)])}), float(row[len(PARAM_NAMES) + C_MU])
 
 
 def explicit_start(options: dict, q_nominal: np.ndarray, max_rate: float, rows: int | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -45,7 +45,7 @@ from ..step import (
 )
 from ..randomize import FIELD_COLUMNS, FIELDS
 from ..tasks.stance import INFO_NAMES, REWARD_TERMS, UNILATERAL_KEYS, StanceConfig, unilateral_columns
-from .single import LegEnv, contact_marks, explicit_start, push_mark, start_anchor
+from .single import LegEnv, contact_marks, explicit_start, push_mark, robot_of_row, start_anchor
 
 __all__ = ["LegVectorEnv", "PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
 
@@ -221,6 +221,7 @@ class LegVectorEnv(VectorEnv):
         self._elapsed = np.zeros(n, dtype=np.int64)
         self._ended = np.zeros(n, dtype=np.bool_)  # ended on the last step and not reset since
         self._rngs = BitGeneratorRows(n)  # sub-env i's generator, drawn from in compiled code
+        self._rng_seeds: list[int | None] = [None] * n  # the seed each generator was made from
         self._needs_reset = True  # step() refuses to run before the first reset()
 
     # ---------------------------------------------------------------- API
@@ -243,7 +244,7 @@ class LegVectorEnv(VectorEnv):
             super().reset(seed=int(seed))
         for i in rows.tolist():
             if seeds[i] is not None or self._rngs[i] is None:
-                self._rngs[i] = seeding.np_random(seeds[i])[0]
+                self._rngs[i], self._rng_seeds[i] = seeding.np_random(seeds[i])
         rejected = self._set_robots(rows, robots)
         starts = self._draw_starts(rows, explicit)
         self._start(None if rows.size == n else rows, *starts)
@@ -304,9 +305,10 @@ class LegVectorEnv(VectorEnv):
         for i in range(self.num_envs if self.render_envs is None else min(self.render_envs, self.num_envs)):
             violated = bool(self._flags[i, _FLAG["unilateral_violation"]] or self._flags[i, _FLAG["friction_violation"]])
             mode, impulse = contact_marks(self._state, self._out, i, self.unilateral)
+            params, mu = robot_of_row(self._consts[i if self._consts.shape[0] > 1 else 0])  # each robot drawn as it is
             frames.append(
                 render.draw(
-                    self._q[i], self._anchor[i], self._lam[i], self.params, violated, self.width, self.height, self.config.mu,
+                    self._q[i], self._anchor[i], self._lam[i], params, violated, self.width, self.height, mu,
                     mode, impulse, push_mark(self.task, self._out, i),
                 )
             )  # fmt: skip
@@ -323,6 +325,12 @@ class LegVectorEnv(VectorEnv):
     def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Copies of ``(q, qd, anchor)``, shapes ``(num_envs, 5), (num_envs, 5), (num_envs, 2)``."""
         return self._q.copy(), self._qd.copy(), self._anchor.copy()
+
+    @property
+    def np_random_seed(self) -> tuple[int | None, ...]:
+        """Each sub-env's seed, as ``SyncVectorEnv`` gives them: the seed its generator was made from at its last
+        seeded reset (an entropy-drawn one after ``reset(seed=None)``), None before its first reset."""
+        return tuple(self._rng_seeds)
 
     @property
     def elapsed_steps(self) -> np.ndarray:
@@ -526,8 +534,10 @@ class LegVectorEnv(VectorEnv):
     def _reset_rows(self, reset_mask) -> np.ndarray:
         if reset_mask is None:
             return np.arange(self.num_envs)
-        if not isinstance(reset_mask, np.ndarray) or reset_mask.dtype != np.bool_ or reset_mask.shape != (self.num_envs,):
-            raise ValueError(f"options['reset_mask'] must be a bool numpy array of shape ({self.num_envs},), got {reset_mask!r}")
+        if not isinstance(reset_mask, np.ndarray) or reset_mask.dtype != np.bool_:  # SyncVectorEnv: a TypeError
+            raise checks.ArgumentTypeError(f"options['reset_mask'] must be a bool numpy array of shape ({self.num_envs},), got {checks.shown(reset_mask)}")
+        if reset_mask.shape != (self.num_envs,):
+            raise ValueError(f"options['reset_mask'] must be a bool numpy array of shape ({self.num_envs},), got shape {reset_mask.shape}")
         if not reset_mask.any():
             raise ValueError("options['reset_mask'] must select at least one sub-env")
         return np.flatnonzero(reset_mask)

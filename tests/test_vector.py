@@ -369,3 +369,25 @@ def test_threaded_kernel_is_bitwise_the_serial_one():
 def test_bad_num_threads_raise(bad):
     with pytest.raises(ValueError, match="num_threads"):
         PlanarLegStanceVectorEnv(num_envs=2, num_threads=bad)
+
+
+def test_np_random_seed_and_reset_mask_errors_follow_sync_vector_env():
+    """``np_random_seed`` is the tuple of each sub-env's seed and a reset mask of the wrong type is a TypeError,
+    as in Gymnasium's ``SyncVectorEnv``."""
+    n = 3
+    native = gym.make_vec("leg_env/PlanarLegStance-v0", num_envs=n, vectorization_mode="vector_entry_point")
+    sync = gym.make_vec("leg_env/PlanarLegStance-v0", num_envs=n, vectorization_mode="sync")
+    for envs in (native, sync):
+        envs.reset(seed=5)
+    assert native.np_random_seed == sync.np_random_seed == (5, 6, 7)
+    mask = np.array([False, True, False])
+    for envs in (native, sync):
+        envs.reset(seed=[None, 40, None], options={"reset_mask": mask})
+    assert native.np_random_seed == sync.np_random_seed == (5, 40, 7)
+    for envs in (native, sync):
+        with pytest.raises(TypeError):
+            envs.reset(options={"reset_mask": [True, False, True]})
+        with pytest.raises(TypeError):
+            envs.reset(options={"reset_mask": np.ones(n, dtype=np.int64)})
+        with pytest.raises(ValueError):
+            envs.reset(options={"reset_mask": np.ones(n + 1, dtype=np.bool_)})

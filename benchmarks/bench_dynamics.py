@@ -5,7 +5,7 @@
 Every number is the median over ``REPEATS`` timed repeats (``time.perf_counter``). (a) times loops
 of calls, alternating leg-env and Pinocchio repeats; (b) and (c) time trajectories of
 ``STEPS_PER_ROUND`` control steps from fixed start states (the reset between trajectories is not
-timed). One thread (numba and BLAS/OpenMP).
+timed). One thread (BLAS/OpenMP).
 
 (a) One stance-dynamics evaluation on one robot, called from Python:
     ``leg_env.dynamics.stance_dynamics`` vs Pinocchio's constrained forward dynamics
@@ -41,7 +41,7 @@ from pathlib import Path  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # leg_env, and the one Pinocchio model builder
 
-import numba  # noqa: E402
+import platform  # noqa: E402
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
 
@@ -87,7 +87,7 @@ def machine_info() -> str:
         pass
     return (
         f"{platform.platform()} | {cpu} | {os.cpu_count()} CPUs | Python {platform.python_version()} | "
-        f"numpy {np.__version__} | numba {numba.__version__} | pin {pin.__version__} | "
+        f"numpy {np.__version__} | C core ({platform.python_compiler()}) | pin {pin.__version__} | "
         f"NUMBA_NUM_THREADS={os.environ['NUMBA_NUM_THREADS']} OMP_NUM_THREADS={os.environ['OMP_NUM_THREADS']}"
     )
 

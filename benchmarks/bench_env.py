@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/bench_env.py          # the table (about a minute)
     .venv/bin/python benchmarks/bench_env.py --ppo    # and PPO fps, 50,000 steps each (a few minutes)
 
-MuJoCo comes from the ``bench`` extra (``pip install -e '.[bench]'``). One thread for numba, BLAS/OpenMP
+MuJoCo comes from the ``bench`` extra (``pip install -e '.[bench]'``). One thread for BLAS/OpenMP
 and torch. Every number is the median over ``REPEATS`` timed repeats (``time.perf_counter``), each
 timing a loop of steps and dividing; the rows are timed round-robin, repeat by repeat, so that a
 change in machine load hits every row alike; random actions are sampled before timing (uniform over the
@@ -39,8 +39,7 @@ from __future__ import annotations
 
 import os
 
-# numba's pool may hold every core, but only the row marked "threads" uses more than one
-os.environ["NUMBA_NUM_THREADS"] = str(os.cpu_count() or 1)
+# only the row marked "threads" uses more than one core
 os.environ["OMP_NUM_THREADS"] = "1"
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
@@ -215,7 +214,7 @@ def machine() -> str:
         pass
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "n/a"
     packages = ", ".join(
-        f"{name} {version(name)}" for name in ("numpy", "numba", "gymnasium", "mujoco", "stable-baselines3", "torch")
+        f"{name} {version(name)}" for name in ("numpy", "gymnasium", "mujoco", "stable-baselines3", "torch")
     )
     return (
         f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; Python {platform.python_version()}; "

@@ -75,7 +75,6 @@ def main() -> None:
     parser.add_argument("--num-cpus", type=int, default=None, help="CPUs of the local Ray")
     args = parser.parse_args()
 
-    import numba
     import ray
     import torch
 
@@ -84,7 +83,7 @@ def main() -> None:
     cpus = int(ray.cluster_resources()["CPU"])
     print(
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Ray CPUs {cpus}, Python {platform.python_version()}, "
-        f"ray {ray.__version__}, torch {torch.__version__}, numba {numba.__version__}, load average {os.getloadavg()[0]:.1f}"
+        f"ray {ray.__version__}, torch {torch.__version__}, load average {os.getloadavg()[0]:.1f}"
     )
     print("| measurement | env runners | value |\n|---|---:|---:|")
     for runners in (1, 2):

@@ -54,13 +54,11 @@ from .params import LegParams
 
 __all__ = list(_CONTACT_NAMES)  # leg_env.dynamics re-exports these names
 
-STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT = 0, 1, 2, 3
+STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT = kernels.STICK, kernels.SLIP_FORWARD, kernels.SLIP_BACKWARD, kernels.FLIGHT
 MODE_NAMES = ("stick", "slip", "slip", "flight")
 """``info["contact_mode"]`` of each mode constant (both slip directions are ``"slip"``)."""
-REST_SPEED = 1e-9
+REST_SPEED = kernels.REST_SPEED
 """A foot slower than this [m/s] counts as at rest."""
-# Impact status codes of ``_impact_core``
-IMPACT_NONE, IMPACT_STICK, IMPACT_SLIDE, IMPACT_PAINLEVE = 0, 1, 2, 3
 
 
 def _scalar_field(x, lead, name: str) -> np.ndarray:

@@ -39,7 +39,7 @@ off and a foot on the ground stays in contact; a flying foot still lands and a s
 stops (at most ``2 MAX_EVENTS`` events in all). A touchdown slower than ``SETTLE_SPEED`` (1e-6 m/s)
 also settles the robot into contact for the rest of the step. Every settle is counted.
 
-What a step accumulates (``ACC_*`` columns of ``acc``): the contact impulse of the continuous modes
+What a step accumulates (``HybridStep``'s fields; the compiled core's ``leg_record``): the contact impulse of the continuous modes
 (its mean over the step is the mean contact force, impacts excluded), the sum of impact impulses,
 the time in each mode, the slip distance, the actuator work ``tau . (q1, q2)(end) - (q1, q2)(start)``
 (exact: the joint angles are continuous and the torques constant), the friction dissipation (RK4
@@ -80,28 +80,16 @@ __all__ = [
     "GROUND_TOL",
     "SETTLE_SPEED",
     "ROOT_TIME",
-    "ACC_DIM",
 ]
 
-LIFTOFF, SLIP_ONSET, SLIDING_STOP, TOUCHDOWN = 0, 1, 2, 3
+LIFTOFF, SLIP_ONSET, SLIDING_STOP, TOUCHDOWN = kernels.LIFTOFF, kernels.SLIP_ONSET, kernels.SLIDING_STOP, kernels.TOUCHDOWN
 EVENT_NAMES = ("liftoff", "slip_onset", "sliding_stop", "touchdown")
-MAX_EVENTS = 8  # located events per control step before the robot is settled (Zeno guard)
-LOG_SIZE = 2 * MAX_EVENTS  # events per step can reach 2 MAX_EVENTS; each is logged
-GROUND_TOL = 1e-9  # a foot within this height of the ground [m] is on it
-SETTLE_SPEED = 1e-6  # a touchdown slower than this [m/s] settles the robot into contact
-ROOT_TIME = 1e-12  # event location: bracket length [s]
+MAX_EVENTS = kernels.MAX_EVENTS  # located events per control step before the robot is settled (Zeno guard): 8
+LOG_SIZE = kernels.LOG_SIZE  # events per step can reach 2 MAX_EVENTS; each is logged
+GROUND_TOL = kernels.GROUND_TOL  # a foot within this height of the ground [m] is on it: 1e-9
+SETTLE_SPEED = kernels.SETTLE_SPEED  # a touchdown slower than this [m/s] settles the robot into contact: 1e-6
+ROOT_TIME = kernels.ROOT_TIME  # event location: bracket length [s]: 1e-12
 
-# columns of the accumulator row of one control step
-(
-    ACC_IMPULSE_X, ACC_IMPULSE_Y,  # integral of the contact force over the continuous modes [N s]
-    ACC_KICK_X, ACC_KICK_Y,  # sum of impact impulses [N s]
-    ACC_STICK_TIME, ACC_SLIP_TIME, ACC_FLIGHT_TIME,  # [s]
-    ACC_SLIP_DISTANCE,  # [m]
-    ACC_WORK, ACC_SLIP_DISSIPATION, ACC_IMPACT_DISSIPATION,  # [J]
-    ACC_EVENTS, ACC_PAINLEVE, ACC_SETTLES,  # counts
-    ACC_WORK_LOAD,  # work of the horizontal force on the torso's COM, F (x_b(end) - x_b(start)) [J]
-    ACC_DIM,
-) = range(16)  # fmt: skip
 
 
 

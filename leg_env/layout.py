@@ -1,9 +1,18 @@
-"""The numpy dtypes of the compiled core's structs (``leg_env/_core/robot.h``), each declared once.
+"""The numpy dtypes of the compiled core's structs, built from the structs themselves.
 
-``PARAMS`` mirrors ``leg_params`` (the fields of ``LegParams``, in order) and ``RECORD`` mirrors
-``leg_record`` (what one hybrid control step did). At import every dtype is checked against the
-layout the compiled module reports (field names, offsets, sizes and the item size), so that a change
-on one side without the other fails at once, never as a silently wrong number.
+Each layout is declared once, in C (``leg_env/_core/robot.h`` and ``env.h``): the compiled module reports
+every struct's fields (name, byte offset, type, length) and the item size, and this module builds the
+numpy structured dtypes from that report. A batch of robots is then one structured array per struct,
+and every field has its name: ``state["qd"]`` is ``(N, 5)``, ``out["terminated"]`` is ``(N,)`` bool.
+
+* ``PARAMS`` (``leg_params``): a robot's masses, inertias, lengths and gravity (``LegParams``' fields).
+* ``RECORD`` (``leg_record``): what one hybrid control step did (``leg_env.hybrid.HybridStep``).
+* ``ROBOT`` (``env_robot``): a robot of an env (its parameters ``p``, ``mu``, ``torque_limit`` and its
+  nominal posture, holding torques and COM); a randomised batch has one per sub-env.
+* ``state_dtype(task)``, ``settings_dtype(task)``, ``out_dtype(task)``: a robot's state, a task's settings
+  and what a control step gives, each with the task's own fields (``env_state``, ``env_settings``,
+  ``env_out`` and their unions).
+* ``OBS``: the observation's columns by name (``obs_index``), and the width of each kind of observation.
 """
 
 from __future__ import annotations
@@ -12,49 +21,58 @@ import numpy as np
 
 from ._core import kernels
 
-__all__ = ["PARAMS", "RECORD", "LOG_SIZE", "check"]
+__all__ = ["PARAMS", "RECORD", "ROBOT", "OBS", "LOG_SIZE", "MAX_TERMS", "state_dtype", "settings_dtype", "out_dtype"]
 
 LOG_SIZE = kernels.LOG_SIZE
 """Located events one control step can log (``2 * MAX_EVENTS``)."""
+MAX_TERMS = kernels.MAX_TERMS
+"""Reward terms a task has at most (the length of ``out["terms"]``)."""
 
-PARAMS = np.dtype(
-    [(name, np.float64) for name in ("m_b", "m1", "m2", "I_b", "I1", "I2", "l1", "l2", "c1", "c2", "g")], align=True
-)
-"""``leg_params``: masses [kg], inertias [kg m^2], lengths [m] and gravity [m/s^2] of one robot."""
-
-RECORD = np.dtype(
-    [
-        ("impulse", np.float64, (2,)),  # integral of the contact force over the continuous modes [N s]
-        ("kick", np.float64, (2,)),  # sum of impact (and tangential) impulses [N s]
-        ("stick_time", np.float64),  # [s]
-        ("slip_time", np.float64),  # [s]
-        ("flight_time", np.float64),  # [s]
-        ("slip_distance", np.float64),  # [m]
-        ("work", np.float64),  # actuator work [J]
-        ("work_load", np.float64),  # work of the horizontal force on the torso's COM [J]
-        ("slip_dissipation", np.float64),  # [J]
-        ("impact_dissipation", np.float64),  # [J]
-        ("events", np.int32),  # located transitions
-        ("painleve", np.int32),  # uses of the Painleve rule
-        ("settles", np.int32),  # Zeno settles
-        ("event_kind", np.int32, (LOG_SIZE,)),  # LIFTOFF, SLIP_ONSET, SLIDING_STOP, TOUCHDOWN; -1 after the last
-        ("event_time", np.float64, (LOG_SIZE,)),  # since the step's start [s]; NaN after the last
-    ],
-    align=True,
-)
-"""``leg_record``: what one hybrid control step did (``leg_env.hybrid.HybridStep``)."""
+_LAYOUTS = kernels.layouts()
+_TASKS = ("stance", "push", "hop")
 
 
-def check(name: str, dtype: np.dtype) -> None:
-    """Raise ``ImportError`` unless ``dtype`` has exactly the layout of the C struct ``name``."""
-    itemsize, fields = kernels.layouts()[name]
-    ours = [(field, dtype.fields[field][1], dtype.fields[field][0].itemsize) for field in dtype.names]
-    if itemsize != dtype.itemsize or ours != [tuple(f) for f in fields]:
-        raise ImportError(
-            f"leg_env.layout: the numpy dtype of {name} does not match the compiled core "
-            f"(C: {itemsize} bytes, {fields}; numpy: {dtype.itemsize} bytes, {ours}); rebuild the package"
-        )
+def _dtype(struct: str, task: str | None = None) -> np.dtype:
+    """The dtype of C struct ``struct``, with the fields of ``task`` in its union where it has them."""
+    itemsize, fields = _LAYOUTS[struct]
+    extra = _LAYOUTS.get(f"{struct}.{task}", (itemsize, []))[1] if task else []
+    names, formats, offsets = [], [], []
+    for name, offset, kind, count in list(fields) + list(extra):
+        base = _DTYPES[kind] if kind in _DTYPES else np.dtype(kind)
+        names.append(name)
+        formats.append(base if count == 1 else (base, (count,)))
+        offsets.append(offset)
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": itemsize})
 
 
-for _name, _dtype in (("leg_params", PARAMS), ("leg_record", RECORD)):
-    check(_name, _dtype)
+_DTYPES: dict[str, np.dtype] = {}
+PARAMS = _dtype("leg_params")
+_DTYPES["leg_params"] = PARAMS
+RECORD = _dtype("leg_record")
+ROBOT = _dtype("env_robot")
+
+
+def _check_task(task: str) -> str:
+    if task not in _TASKS:
+        raise ValueError(f"task must be one of {list(_TASKS)}, got {task!r}")
+    return task
+
+
+def state_dtype(task: str) -> np.dtype:
+    """One robot's state (``env_state``) with ``task``'s own fields (push: its schedule; hop: its command)."""
+    return _dtype("env_state", _check_task(task))
+
+
+def settings_dtype(task: str) -> np.dtype:
+    """A task's settings (``env_settings``) with ``task``'s own weights."""
+    return _dtype("env_settings", _check_task(task))
+
+
+def out_dtype(task: str) -> np.dtype:
+    """What one control step of a robot gives (``env_out``) with ``task``'s own info (push: the force and its work)."""
+    return _dtype("env_out", _check_task(task))
+
+
+OBS = dict(kernels.observation())
+"""The observation's columns by name (``base_x`` .. ``command``), and its widths (``pinned_dim``,
+``unilateral_dim``, ``hop_dim``)."""

@@ -13,7 +13,7 @@ range is one of
 Each value is drawn from the nominal one at every reset, never from the last drawn one, so nothing
 compounds across resets. "Nominal" is the env's own robot (its ``params``, ``mu`` and
 ``torque_limit``). The nominal posture, holding torques, COM height and every other derived constant
-follow each drawn robot (``leg_env.step``'s ``consts`` has a row per robot).
+follow each drawn robot (the env's ``robots`` array has a row per robot).
 
 Draws, in the sub-env's own generator, before the posture noise: one uniform per randomised field in
 ``FIELDS`` order (whatever the order of the dict). **Rejection rule.** A drawn robot is refused, and
@@ -46,10 +46,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import checks
+from . import checks, layout
 from ._core import kernels
 from .params import PARAM_NAMES, PARAM_RANGE
-from .step import COM0, NP, TAU0, C_MU, C_TAU_HIP, C_TAU_KNEE
 
 __all__ = [
     "FIELDS",
@@ -78,11 +77,18 @@ MAX_DRAWS = 100
 CHECK_DRAWS = 1000
 MIN_ACCEPTANCE = 0.1
 
-# the consts column of each field: LegParams, then the settings block (leg_env.step)
-_COLUMN = {**{name: j for j, name in enumerate(PARAM_NAMES)}, "mu": NP + C_MU, "hip_torque_limit": NP + C_TAU_HIP,
-           "knee_torque_limit": NP + C_TAU_KNEE}  # fmt: skip
+def _double_index(field: str, k: int = 0) -> int:
+    """The index of ``ROBOT`` field ``field`` (entry ``k`` of an array field) among the doubles of a robot."""
+    if field in layout.PARAMS.names:
+        return (layout.ROBOT.fields["p"][1] + layout.PARAMS.fields[field][1]) // 8
+    return layout.ROBOT.fields[field][1] // 8 + k
+
+
+# where each field lives among the doubles of a robot (leg_env.layout.ROBOT: its LegParams, mu, torque limits)
+_COLUMN = {**{name: _double_index(name) for name in PARAM_NAMES}, "mu": _double_index("mu"),
+           "hip_torque_limit": _double_index("torque_limit", 0), "knee_torque_limit": _double_index("torque_limit", 1)}  # fmt: skip
 FIELD_COLUMNS = np.array([_COLUMN[name] for name in FIELDS])
-"""The ``consts`` column of each of ``FIELDS``."""
+"""The index of each of ``FIELDS`` among the doubles of a ``leg_env.layout.ROBOT`` row (``row.view(np.float64)``)."""
 _BIG = 1.0e6
 # accepted values of a drawn field: (low, high, low open)
 _VALID = {
@@ -132,14 +138,15 @@ class Randomization:
         return cls(tuple(ranges))
 
     def spec(self) -> np.ndarray:
-        """``(k, 4)`` float64 rows ``(consts column, kind index, low, high)`` for the compiled draw."""
+        """``(k, 4)`` float64 rows ``(the field's index among a robot's doubles, kind index, low, high)`` for the compiled draw."""
         return np.array([[_COLUMN[n], KINDS.index(k), lo, hi] for n, k, lo, hi in self.ranges], dtype=np.float64).reshape(-1, 4)
 
-    def check_against(self, base_row: np.ndarray) -> None:
-        """``ValueError`` naming the field if a value the ranges can draw around the nominal ``base_row``
-        (a row of ``consts``) is not a valid value of the field (a mass at or below 0, a negative ``mu``)."""
+    def check_against(self, base: np.ndarray) -> None:
+        """``ValueError`` naming the field if a value the ranges can draw around the nominal robot ``base`` (a
+        1-row ``ROBOT`` array) is not a valid value of the field (a mass at or below 0, a negative ``mu``)."""
+        doubles = base.view(np.float64)
         for name, kind, lo, hi in self.ranges:
-            nominal = float(base_row[_COLUMN[name]])
+            nominal = float(doubles[_COLUMN[name]])
             ends = (_drawn(kind, nominal, lo), _drawn(kind, nominal, hi))
             v_lo, v_hi, lo_open = _VALID[name]
             for v in ends:
@@ -174,11 +181,11 @@ def _checked_range(name: str, value) -> tuple[str, float, float]:
 
 
 def robot_params(u: np.ndarray, spec: np.ndarray, base: np.ndarray, limits: np.ndarray, row: np.ndarray) -> bool:
-    """Build a drawn robot's ``consts`` row in ``row`` from the ``(k,)`` uniforms ``u``; return whether it is accepted.
+    """Build a drawn robot in ``row`` from the ``(k,)`` uniforms ``u``; return whether it is accepted.
 
-    ``spec`` is ``Randomization.spec()``, ``base`` the nominal robot's ``consts`` row (the settings and
-    the task's constants are copied from it), ``limits`` ``(hip_lo, hip_hi, knee_lo, knee_hi,
-    min_base_height, nominal_knee)``. The drawn fields are written, then the nominal posture, holding
+    ``spec`` is ``Randomization.spec()``; ``base`` the nominal robot and ``row`` the drawn one, 1-row arrays of
+    ``leg_env.layout.ROBOT``; ``limits`` ``(hip_lo, hip_hi, knee_lo, knee_hi, min_base_height, nominal_knee,
+    unilateral)`` (``posture_limits``). The drawn fields are written, then the nominal posture, holding
     torques and COM of the drawn parameters (``leg_env.dynamics.static_equilibrium``), then the
     rejection rule of the module docstring is applied (in the compiled core, ``leg_env/_core/draws.c``).
     """
@@ -193,13 +200,14 @@ def draw_robot(rng: np.random.Generator, spec: np.ndarray, base: np.ndarray, lim
         rng.random(out=u)
         if robot_params(u, spec, base, limits, row):
             return t
-    row[:] = base
+    row[0] = base[0]
     return MAX_DRAWS
 
 
 def posture_limits(config) -> np.ndarray:
     """The ``limits`` argument of ``robot_params`` for a task ``config``."""
-    return np.array([*config.hip_range, *config.knee_range, config.min_base_height, config.nominal_knee], dtype=np.float64)
+    return np.array([*config.hip_range, *config.knee_range, config.min_base_height, config.nominal_knee,
+                     float(config.contact == "unilateral")], dtype=np.float64)  # fmt: skip
 
 
 def acceptance(randomization: Randomization, base: np.ndarray, limits: np.ndarray, draws: int = CHECK_DRAWS, seed: int = 0) -> float:
@@ -214,12 +222,12 @@ class Robots:
     """The robots of an env's sub-envs: the nominal one, the ranges, and how a reset sets each robot's row.
 
     Shared by the single and the vector env, so that a sub-env and a single env draw the same robot from
-    the same generator. ``base`` is the nominal robot's ``consts`` row.
+    the same generator. ``base`` is the nominal robot, a 1-row array of ``leg_env.layout.ROBOT``.
     """
 
     def __init__(self, randomize, base: np.ndarray, config):
         self.randomization = Randomization.from_any(randomize)
-        self.base = np.array(base, dtype=np.float64)
+        self.base = np.array(base, dtype=layout.ROBOT).reshape(1)
         self.base.setflags(write=False)
         self.limits = posture_limits(config)
         self.spec = np.zeros((0, 4)) if self.randomization is None else self.randomization.spec()
@@ -249,19 +257,19 @@ class Robots:
         return self.randomization is not None
 
     def draw_one(self, rng: np.random.Generator, row: np.ndarray) -> int:
-        """Draw one sub-env's robot into ``row``; the number of refused tries."""
+        """Draw one sub-env's robot into ``row`` (a 1-row ``ROBOT`` array); the number of refused tries."""
         return draw_robot(rng, self.spec, self.base, self.limits, row)
 
-    def draw_rows(self, rngs, rows: np.ndarray, consts: np.ndarray) -> np.ndarray:
-        """Draw the robots of sub-envs ``rows`` into their rows of ``consts`` (``(num_envs, D)``) from ``rngs``
+    def draw_rows(self, rngs, rows: np.ndarray, robots: np.ndarray) -> np.ndarray:
+        """Draw the robots of sub-envs ``rows`` into their rows of ``robots`` (``(num_envs,)`` ``ROBOT``) from ``rngs``
         (``leg_env.step.BitGeneratorRows``); the refused tries of each."""
         rejected = np.zeros(rows.size, dtype=np.int64)
-        kernels.draw_robots(rngs.capsules, np.ascontiguousarray(rows, dtype=np.int64), self.spec, self.base, self.limits, MAX_DRAWS,
-                            consts, rejected)
+        kernels.draw_robots(rngs.generators, np.ascontiguousarray(rows, dtype=np.int64), self.spec, self.base, self.limits, MAX_DRAWS,
+                            robots, rejected)
         return rejected
 
     def explicit_rows(self, params, k: int | None = None) -> np.ndarray:
-        """The ``consts`` rows of the ``reset(options={"params": ...})`` robots: ``(1 or k, D)``.
+        """The robots of the ``reset(options={"params": ...})``: a ``(1 or k,)`` ``ROBOT`` array.
 
         ``params`` maps fields of ``FIELDS`` to values (with ``k``: a number for every sub-env, or one
         per sub-env, shape ``(k,)``); fields left out keep their nominal values. Raises ``ValueError``
@@ -290,21 +298,21 @@ class Robots:
                 )
             values[:, j] = v
         spec = np.array([[_COLUMN[name], KINDS.index("range"), 0.0, 0.0] for name in names], dtype=np.float64).reshape(-1, 4)
-        out = np.empty((n, self.base.shape[0]))
+        out = np.empty(n, dtype=layout.ROBOT)
         u = np.zeros(len(names))
         for r in range(n):
             spec[:, 2] = values[r]
             spec[:, 3] = values[r]
-            if not robot_params(u, spec, self.base, self.limits, out[r]):
+            if not robot_params(u, spec, self.base, self.limits, out[r:r + 1]):
                 where = "" if k is None else f" (sub-env {r})"
                 raise ValueError(
                     f"reset option 'params' gives a robot{where} that cannot run its nominal posture: a holding torque "
-                    f"{out[r, TAU0:COM0].round(3).tolist()} N m above its limit, the posture outside the task's limits, "
+                    f"{out['tau_nom'][r].round(3).tolist()} N m above its limit, the posture outside the task's limits, "
                     "or (unilateral ground) mu at or past the Painleve bound there (leg_env.randomize)"
                 )
         return out
 
 
-def params_of_row(row: np.ndarray) -> dict:
-    """``info["params"]`` of one robot from its ``consts`` row: field name to float."""
-    return dict(zip(FIELDS, row[FIELD_COLUMNS].tolist()))
+def params_of_row(row) -> dict:
+    """``info["params"]`` of one robot (a row of ``leg_env.layout.ROBOT``): field name to float."""
+    return dict(zip(FIELDS, np.asarray(row).reshape(1).view(np.float64)[FIELD_COLUMNS].tolist()))

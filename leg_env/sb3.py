@@ -25,15 +25,10 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
 from . import checks
-from .envs.vector import STATE_KEYS, LegVectorEnv
-from .step import STATE_MODE
-from .tasks.stance import UNILATERAL_KEYS
+from .envs.vector import LegVectorEnv
 
 __all__ = ["LegStanceVecEnv", "make_sb3_vec_env"]
 
-# the per-env state values built from Python scalars (after the task's reward terms)
-_STATE_SCALARS = ("normal_force", "unilateral_violation", "friction_violation", "numerical_failure", "base_drift", "foot_error")
-assert set(_STATE_SCALARS) | {"contact_force"} == set(STATE_KEYS)
 # attributes whose single-environment meaning differs from the batched env's
 _SINGLE_ATTRIBUTES = {"observation_space": "single_observation_space", "action_space": "single_action_space"}
 
@@ -86,7 +81,7 @@ class LegStanceVecEnv(VecEnv):
         obs, info = self.env.reset(seed=seeds, options=self._merged_options())
         self._reset_seeds()
         self._reset_options()
-        self.reset_infos = _per_env_state_infos(info, range(self.num_envs), self.env.state_keys)
+        self.reset_infos = _per_env_infos(info, range(self.num_envs), self.env.state_keys)
         _add_params(self.reset_infos, info, range(self.num_envs))
         return obs
 
@@ -98,37 +93,28 @@ class LegStanceVecEnv(VecEnv):
             raise RuntimeError("step_wait() called without a step_async(actions) before it")
         actions, self._actions = self._actions, None
         env = self.env
-        t = env._step(actions)
-        columns = env._step_info_columns(t)
-        time_limit = t.truncated & ~t.terminated
-        rewards = env.reward_keys
-        n_rewards = len(rewards)
-        scalars = [columns[key].tolist() for key in rewards + _STATE_SCALARS]
-        infos = []
-        for row in zip(*scalars, columns["contact_force"], time_limit.tolist()):
-            info = dict(zip(rewards, row[:n_rewards]))
-            info["contact_force"] = row[-2]
-            info.update(zip(_STATE_SCALARS, row[n_rewards:-2]))
-            info["TimeLimit.truncated"] = row[-1]
-            infos.append(info)
-        extra_keys = (UNILATERAL_KEYS if env.unilateral else ()) + env.task.info_names
-        if extra_keys:  # the contact model's and the task's keys, as the single env's info has them
-            for key in extra_keys:
-                values = columns[key] if key == "impulse" else columns[key].tolist()
-                for info, value in zip(infos, values):
-                    info[key] = value
-        if t.restarted is not None:
-            rows = t.restarted.tolist()
-            for k, i in enumerate(rows):
-                infos[i]["terminal_observation"] = t.final.obs[k]
-            state = env._state_columns(env._out[t.restarted], env._flags[t.restarted], env._state[t.restarted, STATE_MODE])
-            for k, reset_info in enumerate(_per_env_state_infos(state, range(len(rows)), env.state_keys)):
-                self.reset_infos[rows[k]] = reset_info
-            params = {}
-            env._add_params_info(params, t.restarted, t.rejected)
-            _add_params(self.reset_infos, params, rows)
-        dones = t.terminated | t.truncated
-        return t.obs, t.reward.astype(np.float32), dones, infos
+        obs, rewards, terminated, truncated, info = env.step(actions)
+        keys = env.reward_keys + env.state_keys
+        columns = {key: info[key] for key in keys}
+        final = info.get("final_info")
+        ended = None
+        if final is not None:  # the sub-envs reset in this step report their last step, not their reset (SB3's way)
+            ended = np.flatnonzero(info["_final_info"])
+            for key in keys:
+                column = columns[key].copy()
+                column[ended] = final[key][ended]
+                columns[key] = column
+        infos = _per_env_infos(columns, range(self.num_envs), keys)
+        for info_i, limit in zip(infos, (truncated & ~terminated).tolist()):
+            info_i["TimeLimit.truncated"] = limit
+        if ended is not None:
+            rows = ended.tolist()
+            for i in rows:
+                infos[i]["terminal_observation"] = info["final_obs"][i]
+            for i, reset_info in zip(rows, _per_env_infos(info, rows, env.state_keys)):
+                self.reset_infos[i] = reset_info
+            _add_params(self.reset_infos, info, rows)
+        return obs, rewards.astype(np.float32), terminated | truncated, infos
 
     def close(self) -> None:
         self.env.close()
@@ -167,7 +153,6 @@ class LegStanceVecEnv(VecEnv):
         return {key: np.stack([checks.real_array(f"set_options {key!r}", o[key], "real numbers") for o in self._options]) for key in keys}
 
 
-_ARRAY_KEYS = ("contact_force", "impulse")  # per-env values that stay arrays
 
 
 def _add_params(infos: list[dict], info: dict, rows) -> None:
@@ -183,10 +168,14 @@ def _add_params(infos: list[dict], info: dict, rows) -> None:
                 infos[i]["params_rejected"] = info["params_rejected"][i].item()
 
 
-def _per_env_state_infos(info: dict, rows, keys) -> list[dict]:
-    """Per-row dicts of the state ``keys`` of a vector-style ``info`` (or of row-aligned columns)."""
-    columns = [info[key] for key in keys]
-    return [{key: column[i] if key in _ARRAY_KEYS else column[i].item() for key, column in zip(keys, columns)} for i in rows]
+def _per_env_infos(columns: dict, rows, keys) -> list[dict]:
+    """Per-row dicts of ``keys`` from their columns (a vector ``info``): numbers as Python's, arrays as the row's."""
+    rows = list(rows)
+    values = []
+    for key in keys:
+        column = columns[key]
+        values.append(column[rows] if column.ndim > 1 else column[rows].tolist())
+    return [dict(zip(keys, row)) for row in zip(*values)] if keys else [{} for _ in rows]
 
 
 def make_sb3_vec_env(num_envs: int, seed: int | None = None, env_id: str | None = None, **env_kwargs: Any) -> LegStanceVecEnv:
@@ -198,8 +187,12 @@ def make_sb3_vec_env(num_envs: int, seed: int | None = None, env_id: str | None 
     With ``seed``, the first ``reset`` seeds sub-env ``i`` with ``seed + i``.
     """
     if env_id is not None:
-        from .tasks import REGISTRY
+        from .tasks import ALIASES, REGISTRY
 
+        if env_id in ALIASES:
+            warnings.warn(f"{env_id} is deprecated and will be removed in the next release: it is now {ALIASES[env_id]}",
+                          DeprecationWarning, stacklevel=2)  # fmt: skip
+            env_id = ALIASES[env_id]
         if env_id not in REGISTRY:
             raise ValueError(f"env_id must be one of {sorted(REGISTRY)}, got {env_id!r}")
         task, fixed = REGISTRY[env_id]

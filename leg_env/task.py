@@ -1,5 +1,5 @@
-"""The balance task's names where they used to live (kept for imports): ``leg_env.tasks.stance`` and the
-packed-array layout of ``leg_env.step`` it builds on."""
+"""The balance task's names where they used to live (kept for imports): ``leg_env.tasks.stance`` and
+``leg_env.step``."""
 
 from . import step as _step
 from .tasks import stance as _stance

@@ -66,6 +66,7 @@ from __future__ import annotations
 import numpy as np
 
 from leg_env.params import LegParams
+from leg_env.tasks.stance import Obs
 
 __all__ = ["HopperController"]
 
@@ -150,16 +151,16 @@ class HopperController:
         """Joint torques [N m] for observations ``(N, 19)``; advances the per-robot phase and apex bias."""
         p, m, a, b = self.params, self.m, self.a, self.b
         l1, l2, g, dt = p.l1, p.l2, p.g, self.config.dt
-        thb, q1, q2 = obs[:, 2], obs[:, 3], obs[:, 4]
-        vxb, vyb, wb, wq1, wq2 = obs[:, 5], obs[:, 6], obs[:, 7], obs[:, 8], obs[:, 9]
-        contact = obs[:, 15] > 0.5
-        command = obs[:, 18]
+        thb, q1, q2 = obs[:, Obs.th_b], obs[:, Obs.q1], obs[:, Obs.q2]
+        vxb, vyb, wb, wq1, wq2 = obs[:, Obs.vx_b], obs[:, Obs.vy_b], obs[:, Obs.w_b], obs[:, Obs.w_q1], obs[:, Obs.w_q2]
+        contact = obs[:, Obs.contact] > 0.5
+        command = obs[:, Obs.command]
         th1, th2 = thb + q1, thb + q1 + q2
         w1, w2 = wb + wq1, wb + wq1 + wq2
         s1, c1, s2, c2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
         # COM relative to the hip (the base point) and its velocity, world axes
         x_com_rel = (a * c1 + b * c2) / m
-        y_com = obs[:, 1] + (a * s1 + b * s2) / m  # above the ground
+        y_com = obs[:, Obs.base_y] + (a * s1 + b * s2) / m  # above the ground
         vx_com = vxb - (a * s1 * w1 + b * s2 * w2) / m
         vy_com = vyb + (a * c1 * w1 + b * c2 * w2) / m
         rx, ry = l1 * c1 + l2 * c2, l1 * s1 + l2 * s2  # foot relative to the hip
@@ -254,8 +255,8 @@ class HopperController:
 
         n = obs.shape[0]
         q = np.zeros((n, 5))
-        q[:, 1:5] = obs[:, 1:5]  # the stance dynamics do not depend on x_b
-        qd = obs[:, 5:10].astype(np.float64)
+        q[:, 1:5] = obs[:, Obs.base_y:Obs.q2 + 1]  # the stance dynamics do not depend on x_b
+        qd = obs[:, Obs.vx_b:Obs.w_q2 + 1].astype(np.float64)
         torques = np.zeros((3, n, 2))
         torques[1, :, 0] = 1.0
         torques[2, :, 1] = 1.0

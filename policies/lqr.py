@@ -39,10 +39,11 @@ from leg_env.dynamics import stance_dynamics
 from leg_env.integrate import project_stance
 from leg_env.params import LegParams
 from leg_env.task import StanceConfig, nominal_state
+from leg_env.tasks.stance import Obs
 
 __all__ = ["LQRController", "linearize", "discretize", "base_jacobian", "STATE_INDEX"]
 
-STATE_INDEX = (2, 3, 4, 7, 8, 9)
+STATE_INDEX = (Obs.th_b, Obs.q1, Obs.q2, Obs.w_b, Obs.w_q1, Obs.w_q2)
 """Observation indices of the minimal state ``[th_b, q1, q2, th_b', q1', q2']`` (see ``leg_env.task``)."""
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from leg_env.params import LegParams
+from leg_env.tasks.stance import Obs
 
 __all__ = ["com_from_observation", "lqr_and_hopper", "observation_batch"]
 
@@ -22,13 +23,13 @@ def com_from_observation(obs, params: LegParams) -> tuple[np.ndarray, np.ndarray
     obs = np.asarray(obs, dtype=np.float64)
     m = p.m_b + p.m1 + p.m2
     a, b = p.m1 * p.c1 + p.m2 * p.l1, p.m2 * p.c2
-    th1 = obs[..., 2] + obs[..., 3]
-    th2 = th1 + obs[..., 4]
-    w1 = obs[..., 7] + obs[..., 8]
-    w2 = w1 + obs[..., 9]
-    x = obs[..., 0] + (a * np.cos(th1) + b * np.cos(th2)) / m
-    y = obs[..., 1] + (a * np.sin(th1) + b * np.sin(th2)) / m
-    vx = obs[..., 5] - (a * np.sin(th1) * w1 + b * np.sin(th2) * w2) / m
+    th1 = obs[..., Obs.th_b] + obs[..., Obs.q1]
+    th2 = th1 + obs[..., Obs.q2]
+    w1 = obs[..., Obs.w_b] + obs[..., Obs.w_q1]
+    w2 = w1 + obs[..., Obs.w_q2]
+    x = obs[..., Obs.base_x] + (a * np.cos(th1) + b * np.cos(th2)) / m
+    y = obs[..., Obs.base_y] + (a * np.sin(th1) + b * np.sin(th2)) / m
+    vx = obs[..., Obs.vx_b] - (a * np.sin(th1) * w1 + b * np.sin(th2) * w2) / m
     return x, y, vx
 
 

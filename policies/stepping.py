@@ -38,6 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from leg_env.params import LegParams
+from leg_env.tasks.stance import Obs
 from policies.recovery import com_from_observation, lqr_and_hopper, observation_batch
 
 __all__ = ["SteppingController", "STEP_GAINS"]
@@ -136,9 +137,9 @@ class SteppingController:
 
         # 1. the push observer, between two sticking observations (``_run``: sticking observations in a row)
         _, _, v = com_from_observation(batch, self.params)
-        lam_x = batch[:, 10].astype(np.float64) * self.weight
-        contact = batch[:, 15] > 0.5
-        self._run = np.where(contact & (batch[:, 16] == 0.0), self._run + 1, 0)
+        lam_x = batch[:, Obs.lam_x].astype(np.float64) * self.weight
+        contact = batch[:, Obs.contact] > 0.5
+        self._run = np.where(contact & (batch[:, Obs.slip] == 0.0), self._run + 1, 0)
         self.push_estimate = np.where(
             self._run >= 2, self.mass * (v - self._v) / self.config.dt - 0.5 * (lam_x + self._lam_x), 0.0
         )
@@ -151,7 +152,7 @@ class SteppingController:
         self._flew |= self.hopping & ~contact
         touchdown = self.hopping & contact & self._flew & (self._landed_at < 0)
         self._landed_at[touchdown] = self._age[touchdown]
-        settled = (self._landed_at >= 0) & (self._age - self._landed_at >= self.settle_steps) & (batch[:, 6] > -self.exit_sink_speed)
+        settled = (self._landed_at >= 0) & (self._age - self._landed_at >= self.settle_steps) & (batch[:, Obs.vy_b] > -self.exit_sink_speed)
         done = self.hopping & (settled | (self._age >= self.max_hop_steps))
         self.hopping &= ~done
         self._cool[done] = self.cooldown

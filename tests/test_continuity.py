@@ -203,12 +203,13 @@ def replay_single(prefix: str, spec: dict) -> None:
     got = R.run_single(spec["env_id"], spec["kwargs"], spec["seed"], rec["action"][:n])
     what = f"{prefix} ({spec['env_id']} {spec['kwargs']} seed {spec['seed']})"
     reset_keys = sorted(k for k in rec if k.startswith("reset_info/"))
-    assert sorted(k for k in got if k.startswith("reset_info/")) == reset_keys, f"{what}: reset info keys"
+    # every recorded key is still there (keys added since, such as com_position, are not in the recording)
+    assert set(reset_keys) <= {k for k in got if k.startswith("reset_info/")}, f"{what}: reset info keys"
     assert_agree({k: got[k][None] for k in reset_keys}, {k: rec[k][None] for k in reset_keys}, reset_keys, np.ones(1, bool), what + ", reset")
     assert_agree({"obs": got["obs"][:1]}, {"obs": rec["obs"][:1]}, ["obs"], np.ones(1, bool), what + ", reset")
     assert len(got["reward"]) == n, f"{what}: the replay ended after {len(got['reward'])} steps, the record ran {spec['steps']} (compared {n})"
     keys = R.single_step_keys(rec)
-    assert sorted(R.single_step_keys(got)) == sorted(keys), f"{what}: info keys differ"
+    assert set(keys) <= set(R.single_step_keys(got)), f"{what}: recorded info keys missing"
     expected = {k: rec[k][:n] for k in keys}
     expected["obs"] = rec["obs"][1 : n + 1]
     actual = {k: got[k] for k in keys}

@@ -17,11 +17,7 @@ import pytest
 import leg_env  # noqa: F401  (registers the ids)
 from leg_env.hybrid import hybrid_step
 from leg_env.integrate import stance_step
-from leg_env.params import PARAM_NAMES, LegParams
-from leg_env.step import C_DT, C_MAX_ANGLE, C_MU, C_SUBSTEPS, C_TAU_HIP, C_TAU_KNEE, FAILED, STATE_ANCHOR, STATE_LOAD, STATE_MODE
-from leg_env.step import STATE_Q, STATE_QD
-
-NP = len(PARAM_NAMES)
+from leg_env.envs.single import robot_of_row
 CASES = [
     ("leg_env/PlanarLegStance-v0", False),
     ("leg_env/PlanarLegBalance-v0", False),
@@ -35,17 +31,16 @@ STEPS = 150
 
 def _core_step(env, action):
     """The control step of the env's robot 0 as the compiled core takes it from the env's current state."""
-    state, consts = env._state[0], env._consts[0]
-    params = LegParams(**dict(zip(PARAM_NAMES, consts[:NP].tolist())))
-    c = consts[NP:]
-    tau = np.clip(action, -1.0, 1.0) * np.array([c[C_TAU_HIP], c[C_TAU_KNEE]])
-    dt, substeps, max_angle = c[C_DT], int(c[C_SUBSTEPS]), c[C_MAX_ANGLE]
-    q, qd, anchor = state[STATE_Q].copy(), state[STATE_QD].copy(), state[STATE_ANCHOR].copy()
+    state, robot, settings = env._state[0], env._robots[0], env._settings[0]
+    params, mu = robot_of_row(robot)
+    tau = np.clip(action, -1.0, 1.0) * robot["torque_limit"]
+    dt, substeps, max_angle = float(settings["dt"]), int(settings["substeps"]), float(settings["max_angle"])
+    q, qd, anchor = state["q"].copy(), state["qd"].copy(), state["anchor"].copy()
     if not env.unilateral:
         q1, qd1, lam = stance_step(q, qd, tau, params, dt=dt, substeps=substeps, anchor=anchor, max_angle=max_angle)
         return q1, qd1, None, None, lam
-    r = hybrid_step(q, qd, tau, params, c[C_MU], mode=int(state[STATE_MODE]), anchor_x=anchor[0], dt=dt, substeps=substeps,
-                    max_angle=max_angle, load_x=state[STATE_LOAD])
+    r = hybrid_step(q, qd, tau, params, mu, mode=int(state["mode"]), anchor_x=anchor[0], dt=dt, substeps=substeps,
+                    max_angle=max_angle, load_x=float(state["load"]))
     return r.q, r.qd, int(r.mode), float(r.anchor_x), r.lam_mean
 
 
@@ -61,14 +56,14 @@ def test_every_env_step_is_the_core_step_bit_for_bit(env_id, randomize):
         q, qd, mode, anchor_x, lam = _core_step(env, action.astype(np.float64))
         _, _, terminated, _, info = env.step(action)
         state = env._state[0]
-        if env._flags[0, FAILED]:  # a numerical failure: the env undid the step; the core's state is not kept
+        if info["numerical_failure"]:  # the env undid the step; the core's state is not kept
             env.reset()
             continue
-        np.testing.assert_array_equal(state[STATE_Q], q, err_msg=f"q at step {k}")
-        np.testing.assert_array_equal(state[STATE_QD], qd, err_msg=f"qd at step {k}")
+        np.testing.assert_array_equal(state["q"], q, err_msg=f"q at step {k}")
+        np.testing.assert_array_equal(state["qd"], qd, err_msg=f"qd at step {k}")
         np.testing.assert_array_equal(info["contact_force"], lam, err_msg=f"lam at step {k}")
         if mode is not None:
-            assert int(state[STATE_MODE]) == mode and state[STATE_ANCHOR][0] == anchor_x, k
+            assert int(state["mode"]) == mode and state["anchor"][0] == anchor_x, k
             events += info["contact_events"]
         if terminated:
             env.reset()

@@ -25,7 +25,7 @@ from leg_env.envs.stance import PlanarLegStanceEnv
 from leg_env.envs.vector import PlanarLegStanceVectorEnv
 from leg_env.integrate import stance_step
 from leg_env.params import PARAM_NAMES
-from leg_env.task import FIELD_RANGES, FLAG_NAMES, OUT_DIM, STATE_ACTION, STATE_DIM, start_batch, step_batch, task_constants
+from leg_env.tasks.stance import FIELD_RANGES, FLAG_NAMES, TASK, robot_row, start_batch, step_batch
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTACTS = ("pinned", "unilateral")
@@ -211,23 +211,23 @@ def test_an_observation_that_overflows_float32_is_a_flagged_numerical_failure(co
     gravity below the accepted range, put into the kernel's constants directly) is a numerical
     failure: flagged and terminated, the state and observation left at the last good ones."""
     env = PlanarLegStanceEnv(contact=contact, reset_noise_scale=0.0)
-    consts = task_constants(env.params, env.config, env.nominal)
+    robots, settings = robot_row(env.params, env.config, env.nominal), env.config.settings()
     n = 2
-    state, out = np.zeros((n, STATE_DIM)), np.zeros((n, OUT_DIM))
+    state, out = np.zeros(n, dtype=TASK.state_dtype), np.zeros(n, dtype=TASK.out_dtype)
     obs = np.zeros((n, env.observation_space.shape[0]), dtype=np.float32)
-    flags = np.zeros((n, len(FLAG_NAMES)), dtype=np.bool_)
-    state[:, :5] = env.nominal.q
-    start_batch(state, consts, out, obs, flags)
+    state["q"] = env.nominal.q
+    start_batch(state, robots, settings, out, obs)
     assert np.isfinite(obs).all()
     before_state, before_obs = state.copy(), obs.copy()
-    state[:, STATE_ACTION] = [[0.5, -0.2], [0.4, -0.25]]
-    tiny_g = consts.copy()
-    tiny_g[0, 10] = 1e-300  # g: the weight m g becomes 1.5e-299 N, and lam / (m g) overflows float32
-    step_batch(state, tiny_g, out, obs, flags)
+    state["action"] = [[0.5, -0.2], [0.4, -0.25]]
+    tiny_g = robots.copy()
+    tiny_g["p"]["g"] = 1e-300  # the weight m g becomes 1.5e-299 N, and lam / (m g) overflows float32
+    step_batch(state, tiny_g, settings, out, obs)
     assert np.isfinite(obs).all(), obs
-    assert flags[:, FLAG_NAMES.index("numerical_failure")].all() and flags[:, 0].all()
+    assert out["numerical_failure"].all() and out["terminated"].all()
     np.testing.assert_array_equal(obs, before_obs)
-    np.testing.assert_array_equal(state[:, :12], before_state[:, :12])
+    for field in ("q", "qd", "anchor"):
+        np.testing.assert_array_equal(state[field], before_state[field])
 
 
 # ---------------------------------------------------------------- item 9: strict coercion

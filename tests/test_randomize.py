@@ -16,7 +16,6 @@ from leg_env.hybrid import hybrid_step
 from leg_env.integrate import stance_step
 from leg_env.params import PARAM_NAMES, LegParams
 from leg_env.randomize import DEFAULT_RANGES, FIELDS, MAX_DRAWS
-from leg_env.step import STATE_MODE
 from test_tasks import _as_sync_info, _strings_as_objects
 from test_vector import SEED, STEPS, assert_same, random_actions
 
@@ -56,10 +55,10 @@ def test_without_randomize_the_shipped_lqr_evaluation_reproduces_bit_for_bit():
         assert round(total, 4) == episode["return"]
 
 
-def test_without_randomize_there_is_one_consts_row_and_no_params_key():
+def test_without_randomize_there_is_one_robot_row_and_no_params_key():
     envs = gym.make_vec(STANCE_V1, num_envs=3)
     _, info = envs.reset(seed=0)
-    assert "params" not in info and envs.unwrapped._consts.shape[0] == 1
+    assert "params" not in info and envs.unwrapped._robots.shape[0] == 1
 
 
 # ------------------------------------------------------------------ parity
@@ -92,7 +91,7 @@ def test_each_sub_env_runs_leg_env_dynamics_with_its_drawn_parameters(contact):
     env = envs.unwrapped
     obs, info = envs.reset(seed=5)
     q0, qd0, anchor0 = env.state
-    mode0 = env._state[:, STATE_MODE].copy()
+    mode0 = env._state["mode"].copy()
     actions = np.random.default_rng(0).uniform(-1, 1, (N, 2))
     envs.step(actions)
     q1, qd1, _ = env.state
@@ -227,7 +226,7 @@ def test_vector_reset_option_params_per_sub_env_and_masked_info():
     assert info["params"]["g"][1] == 9.0
     _, info = envs.reset(options={"reset_mask": mask})  # the nominal robot again: no params key
     assert "params" not in info
-    np.testing.assert_array_equal(envs.unwrapped._consts[1], envs.unwrapped.robots.base)
+    assert envs.unwrapped._robots[1] == envs.unwrapped.robots.base[0]
 
 
 @pytest.mark.parametrize(

@@ -125,7 +125,7 @@ def test_a_push_shows_as_an_arrow_at_the_torso():
 def test_a_randomised_batch_draws_each_robot_with_its_own_parameters(env_id):
     """Every sub-env's frame is its own robot (its link lengths, its friction cone) at its own state, the frame
     the single env draws for that robot; with drawn lengths the nominal robot's frame differs."""
-    from leg_env.envs.single import robot_of_row
+    from leg_env.envs.single import render_marks, robot_of_row
 
     n = 4
     envs = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", render_mode="rgb_array",
@@ -137,14 +137,11 @@ def test_a_randomised_batch_draws_each_robot_with_its_own_parameters(env_id):
     q, _, anchor = u.state
     differs = 0
     for i in range(n):
-        params, mu = robot_of_row(u._consts[i])
-        violated = bool(u._flags[i, 1] or u._flags[i, 2])
-        from leg_env.envs.single import contact_marks, push_mark
-
-        mode, impulse = contact_marks(u._state, u._out, i, u.unilateral)
-        own = draw(q[i], anchor[i], u._lam[i], params, violated, u.width, u.height, mu, mode, impulse, push_mark(u.task, u._out, i))
-        nominal = draw(q[i], anchor[i], u._lam[i], u.params, violated, u.width, u.height, u.config.mu, mode, impulse,
-                       push_mark(u.task, u._out, i))
+        params, mu = robot_of_row(u._robots[i])
+        violated, mode, impulse, push = render_marks(u._out, i, u.unilateral)
+        lam = u._out["lam"][i]
+        own = draw(q[i], anchor[i], lam, params, violated, u.width, u.height, mu, mode, impulse, push)
+        nominal = draw(q[i], anchor[i], lam, u.params, violated, u.width, u.height, u.config.mu, mode, impulse, push)
         assert np.array_equal(frames[i], own), i
         differs += not np.array_equal(own, nominal)
     assert differs > 0

@@ -81,9 +81,9 @@ def test_hop_tracker_apex_is_the_ballistic_apex():
     q[1] += 0.05  # the foot 5 cm above the ground
     qd = np.zeros(5)
     qd[1] = 1.0
-    obs, _ = env.reset(seed=0, options={"qpos": q, "qvel": qd})
+    obs, info = env.reset(seed=0, options={"qpos": q, "qvel": qd})
     tracker = HopTracker()
-    tracker.start(env, obs)
+    tracker.start(env, obs, info)
     heights = []
     while True:
         obs, _, _, _, info = env.step(np.zeros(2))

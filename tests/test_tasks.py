@@ -234,15 +234,11 @@ def test_push_schedule_follows_the_config_and_is_not_observed():
     """The schedule drawn at reset (the task's state columns): first push at 0.8-1.2 s, then every 2-3 s,
     0.1 s long, 20-150 N of either sign; the env applies exactly that force on those steps, and nothing
     of it is in the observation."""
-    from leg_env.step import STATE_DIM
-    from leg_env.tasks.push import MAX_PUSHES
-
     env = gym.make("leg_env/PlanarLegPush-v0").unwrapped
     signs = []
     for seed in range(40):
         env.reset(seed=seed)
-        cols = env._state[0, STATE_DIM:]
-        starts, forces = cols[2:2 + MAX_PUSHES], cols[2 + MAX_PUSHES:]
+        starts, forces = env._state["push_start"][0], env._state["push_force"][0]
         assert np.all(starts == np.rint(starts)) and 80 <= starts[0] <= 120
         assert np.all((np.diff(starts) >= 200) & (np.diff(starts) <= 300))
         assert np.all((np.abs(forces) >= 20.0) & (np.abs(forces) <= 150.0))
@@ -250,8 +246,7 @@ def test_push_schedule_follows_the_config_and_is_not_observed():
     assert 0.3 < np.mean(np.array(signs) > 0) < 0.7
     env = gym.make("leg_env/PlanarLegPush-v0", reset_noise_scale=0.0).unwrapped  # stands still until pushed
     env.reset(seed=3)
-    cols = env._state[0, STATE_DIM:]
-    first, force = int(cols[2]), cols[2 + MAX_PUSHES]
+    first, force = int(env._state["push_start"][0, 0]), env._state["push_force"][0, 0]
     hold = (env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32)
     seen = []
     for _ in range(first + 10):
@@ -314,11 +309,10 @@ def test_hop_reward_peaks_at_the_commanded_apex_on_scripted_flights():
     """Ballistic flights (zero torques, the robot translating upwards) whose COM apex is ``rise`` above
     standing: the height term is largest for ``rise`` = the command, where it is the full weight, and
     falls off as ``exp(-((rise - command) / height_scale)^2)``."""
-    from leg_env.step import STATE_DIM
-
     env = gym.make("leg_env/PlanarLegHop-v0", reset_noise_scale=0.0).unwrapped
-    obs, _ = env.reset(seed=4)
-    command = env._state[0, STATE_DIM]
+    obs, info = env.reset(seed=4)
+    command = env._state["command"][0]
+    assert info["command"] == command
     assert obs[18] == np.float32(command) and 0.05 <= command <= 0.15
     p = env.params
     y_stand = dyn.com_position(env.nominal.q, p)[1]

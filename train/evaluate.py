@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from leg_env import ENV_ID  # importing leg_env registers the env
+from leg_env.tasks.stance import Obs
 from train.cli import parse_args
 
 __all__ = [
@@ -269,7 +270,7 @@ def run_episodes(
         if hasattr(policy, "reset"):
             policy.reset()
         if hop is not None:
-            hop.start(env, obs)
+            hop.start(env, obs, reset_info)
         terms = dict.fromkeys(reward_terms, 0.0)
         ep_return, length, ep_drift_sq = 0.0, 0, 0.0
         rec = {"base_drift": [], "torso_angle": [], "torque": [], "contact_force": [], "mode": [], "impulse": [], "frames": []} if recording else None
@@ -291,12 +292,12 @@ def run_episodes(
             ep_drift_sq += d * d
             drift_max = max(drift_max, d)
             torque_sq += tau * tau
-            tilt_sq += float(obs[2]) ** 2
+            tilt_sq += float(obs[Obs.th_b]) ** 2
             unilateral += bool(info["unilateral_violation"])
             friction += bool(info["friction_violation"])
             if rec is not None:
                 rec["base_drift"].append(d)
-                rec["torso_angle"].append(float(obs[2]))
+                rec["torso_angle"].append(float(obs[Obs.th_b]))
                 rec["torque"].append(tau)
                 rec["contact_force"].append(np.asarray(info["contact_force"], dtype=np.float64))
                 rec["mode"].append(info.get("contact_mode", "stick"))

@@ -17,22 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["com_state", "HopTracker", "push_survival", "largest_survived_impulse"]
+from leg_env.tasks.stance import Obs
 
-
-def com_state(q: np.ndarray, qd: np.ndarray, p) -> tuple[float, float, float, float]:
-    """Whole-body COM ``(x, y, x', y')`` of one robot's world state (``LegParams`` ``p``)."""
-    m = p.m_b + p.m1 + p.m2
-    a, b = p.m1 * p.c1 + p.m2 * p.l1, p.m2 * p.c2
-    th1, w1 = q[2] + q[3], qd[2] + qd[3]
-    th2, w2 = th1 + q[4], w1 + qd[4]
-    s1, c1, s2, c2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
-    return (
-        float(q[0] + (a * c1 + b * c2) / m),
-        float(q[1] + (a * s1 + b * s2) / m),
-        float(qd[0] - (a * s1 * w1 + b * s2 * w2) / m),
-        float(qd[1] + (a * c1 * w1 + b * c2 * w2) / m),
-    )
+__all__ = ["HopTracker", "push_survival", "largest_survived_impulse"]
 
 
 class HopTracker:
@@ -50,21 +37,20 @@ class HopTracker:
         self.drifts: list[float] = []  # |x_com(end) - x_com(start)| of each episode that ran to its end [m]
         self.hops_per_episode: list[int] = []
 
-    def start(self, env, obs) -> None:
+    def start(self, env, obs, info: dict) -> None:
+        """A new episode from its reset's ``obs`` and ``info`` (the COM comes from ``info``)."""
         u = env.unwrapped
         self._p, self._dt, self._g = u.params, u.dt, u.params.g
         from leg_env.dynamics import com_position
         from leg_env.tasks.stance import nominal_state
 
-        self._target = float(com_position(nominal_state(u.params, u.config).q, u.params)[1]) + float(obs[-1])
-        q, qd, _ = u.state
-        self._x0 = com_state(q, qd, self._p)[0]
-        self._t, self._flying, self._last_liftoff, self._hops = 0.0, obs[15] < 0.5, None, 0
+        self._target = float(com_position(nominal_state(u.params, u.config).q, u.params)[1]) + float(info["command"])
+        self._x0 = float(info["com_position"][0])
+        self._t, self._flying, self._last_liftoff, self._hops = 0.0, obs[Obs.contact] < 0.5, None, 0
         self.series = {"com_height": [], "target": self._target, "apex": []}
 
     def step(self, env, obs, info) -> None:
-        q, qd, _ = env.unwrapped.state
-        x, y, _, vy = com_state(q, qd, self._p)
+        (x, y), vy = info["com_position"].tolist(), float(info["com_velocity"][1])
         self._t += self._dt
         flying = info["contact_mode"] == "flight"
         apex = y + vy * vy / (2.0 * self._g) if flying else np.nan

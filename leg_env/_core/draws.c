@@ -20,42 +20,42 @@ typedef struct bitgen {
     uint64_t (*next_raw)(void *st);
 } bitgen_t;
 
-/* A drawn robot's constants in `row` (cols doubles) from the uniforms u of each spec line (column, kind,
- * low, high; kinds 0 scale, 1 offset, 2 range of the nominal `base`); then its nominal posture, holding
- * torques and COM. `limits` = (hip_lo, hip_hi, knee_lo, knee_hi, min_base_height, nominal_knee). Returns
- * whether the robot is accepted: it can hold its nominal posture within its torque limits, the posture
- * is inside the task's limits, and on the unilateral ground mu is below the Painleve bound there. The
- * caller has checked every spec column against cols. */
-static int robot_params(const double *u, const double *spec, Py_ssize_t n_spec, const double *base, const double *limits,
-                        double *row, Py_ssize_t cols)
+/* A drawn robot in `row` from the uniforms u of each spec line (the field's index among the doubles of
+ * env_robot, its kind, low, high; kinds 0 scale, 1 offset, 2 range of the nominal `base`); then its
+ * nominal posture, holding torques and COM. `limits` = (hip_lo, hip_hi, knee_lo, knee_hi,
+ * min_base_height, nominal_knee, unilateral). Returns whether the robot is accepted: it can hold its
+ * nominal posture within its torque limits, the posture is inside the task's limits, and on the
+ * unilateral ground mu is below the Painleve bound there. The caller has checked every spec line. */
+static int robot_params(const double *u, const double *spec, Py_ssize_t n_spec, const env_robot *base,
+                        const double *limits, env_robot *r)
 {
-    for (Py_ssize_t j = 0; j < cols; j++)
-        row[j] = base[j];
+    *r = *base;
+    double *row = (double *)r;
+    const double *nominal = (const double *)base;
     for (Py_ssize_t f = 0; f < n_spec; f++) {
         const Py_ssize_t col = (Py_ssize_t)spec[4 * f];
         const int kind = (int)spec[4 * f + 1];
         const double lo = spec[4 * f + 2], hi = spec[4 * f + 3];
         const double x = lo + (hi - lo) * u[f]; /* numpy's uniform(lo, hi) from the same draw */
         if (kind == 0)
-            row[col] = base[col] * x;
+            row[col] = nominal[col] * x;
         else if (kind == 1)
-            row[col] = base[col] + x;
+            row[col] = nominal[col] + x;
         else
             row[col] = x;
     }
-    env_robot *r = (env_robot *)row;
     equilibrium_one(&r->p, limits[5], r->q_nom, r->tau_nom);
     com_one(&r->p, r->q_nom, NULL, r->com_nom, NULL);
     const double *q = r->q_nom;
-    if (fabs(r->tau_nom[0]) > r->c.tau_hip || fabs(r->tau_nom[1]) > r->c.tau_knee)
+    if (fabs(r->tau_nom[0]) > r->torque_limit[0] || fabs(r->tau_nom[1]) > r->torque_limit[1])
         return 0;
     if (q[3] < limits[0] || q[3] > limits[1] || q[4] < limits[2] || q[4] > limits[3] || q[1] < limits[4])
         return 0; /* the nominal posture would end the episode at once (the foot is at the origin) */
-    if (r->c.unilateral > 0.5) {
+    if (limits[6] > 0.5) {
         double s1, co1, s2, co2;
         leg_trig(q, &s1, &co1, &s2, &co2);
         const leg_response R = foot_response(&r->p, s1, co1, s2, co2);
-        if (R.Lxy != 0.0 && r->c.mu >= R.Lyy / fabs(R.Lxy))
+        if (R.Lxy != 0.0 && r->mu >= R.Lyy / fabs(R.Lxy))
             return 0;
     }
     return 1;

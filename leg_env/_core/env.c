@@ -11,15 +11,12 @@
 
 #include "env.h"
 
-static inline env_state *state_row(const env_batch *b, Py_ssize_t i) { return (env_state *)(b->state + i * b->state_cols); }
+static inline env_state *state_row(const env_batch *b, Py_ssize_t i) { return b->state + i; }
 
-/* Robot i's constants: its own row with a row per robot, else the one row every robot shares. */
-static inline const env_robot *robot_row(const env_batch *b, Py_ssize_t i)
-{
-    return (const env_robot *)(b->consts + (b->consts_rows > 1 ? i : 0) * b->consts_cols);
-}
+/* Robot i: its own row with a row per robot, else the one row every robot shares. */
+static inline const env_robot *robot_row(const env_batch *b, Py_ssize_t i) { return b->robots + (b->robot_rows > 1 ? i : 0); }
 
-static inline env_out *out_row(const env_batch *b, Py_ssize_t i) { return (env_out *)(b->out + i * b->out_cols); }
+static inline env_out *out_row(const env_batch *b, Py_ssize_t i) { return b->out + i; }
 
 static inline void write_trig(env_state *s) { leg_trig(s->q, &s->trig[0], &s->trig[1], &s->trig[2], &s->trig[3]); }
 
@@ -36,22 +33,38 @@ static inline void undo_step(env_state *s)
         s->trig[j] = s->prev_trig[j];
 }
 
-/* The hybrid step's accumulators and the unilateral extras, zero. */
-static inline void zero_accumulators(env_out *o)
+/* What the hybrid step did, and the unilateral extras, zero. */
+static inline void zero_record(env_out *o)
 {
-    memset(o->impulse, 0, offsetof(env_out, mode) - offsetof(env_out, impulse));
+    o->impulse[0] = o->impulse[1] = o->kick[0] = o->kick[1] = 0.0;
+    o->stick_time = o->slip_time = o->flight_time = o->slip_distance = 0.0;
+    o->work = o->slip_dissipation = o->impact_dissipation = o->work_load = 0.0;
+    o->energy = o->foot_height = 0.0;
+    o->events = o->painleve = o->settles = 0;
+}
+
+/* The whole-body COM and its velocity from the state's trigonometry. */
+static inline void com_of(const leg_params *P, const env_state *s, double *com, double *vel)
+{
+    const double m = P->m_b + P->m1 + P->m2, a = P->m1 * P->c1 + P->m2 * P->l1, b = P->m2 * P->c2;
+    const double s1 = s->trig[0], co1 = s->trig[1], s2 = s->trig[2], co2 = s->trig[3];
+    const double w1 = s->qd[2] + s->qd[3], w2 = w1 + s->qd[4];
+    com[0] = s->q[0] + (a * co1 + b * co2) / m;
+    com[1] = s->q[1] + (a * s1 + b * s2) / m;
+    vel[0] = s->qd[0] - (a * s1 * w1 + b * s2 * w2) / m;
+    vel[1] = s->qd[1] + (a * co1 * w1 + b * co2 * w2) / m;
 }
 
 /* One control step of robots lo .. hi - 1, in place. A numerical failure (a non-finite state or force, or
- * a rate above max_rate) restores the state before the step, zeroes lam and the accumulators and sets
- * the robot's FLAG_FAILED; otherwise the flag is cleared and trig follows the new q. Robots are
+ * a rate above max_rate) restores the state before the step, zeroes lam and the record and sets the
+ * robot's numerical_failure; otherwise it is cleared and trig follows the new q. Robots are
  * independent: the rows of a batch stepped in any split are bitwise those of one call. */
 static void physics_range(const env_batch *b, Py_ssize_t lo, Py_ssize_t hi)
 {
-    const env_settings *c = &robot_row(b, 0)->c; /* the settings every robot shares */
-    const int unilateral = c->unilateral > 0.5;
+    const env_settings *c = b->settings;
+    const int unilateral = c->unilateral;
     const double dt = c->dt, max_angle = c->max_angle, max_rate = c->max_rate;
-    const int substeps = (int)c->substeps;
+    const int substeps = c->substeps;
     leg_record rec;
     for (Py_ssize_t i = lo; i < hi; i++) {
         const env_robot *r = robot_row(b, i); /* this robot's parameters, friction and torque limits */
@@ -66,12 +79,12 @@ static void physics_range(const env_batch *b, Py_ssize_t lo, Py_ssize_t hi)
         for (int j = 0; j < 4; j++)
             s->prev_trig[j] = s->trig[j];
         leg_drive u;
-        u.tau_hip = fmin(1.0, fmax(-1.0, s->action[0])) * r->c.tau_hip;
-        u.tau_knee = fmin(1.0, fmax(-1.0, s->action[1])) * r->c.tau_knee;
+        u.tau_hip = fmin(1.0, fmax(-1.0, s->action[0])) * r->torque_limit[0];
+        u.tau_knee = fmin(1.0, fmax(-1.0, s->action[1])) * r->torque_limit[1];
         u.load_x = s->load;
-        u.mu = r->c.mu;
+        u.mu = r->mu;
         if (unilateral) {
-            s->mode = hybrid_control_step(&r->p, &u, s->q, s->qd, (int)s->mode, s->anchor, dt, substeps, max_angle,
+            s->mode = hybrid_control_step(&r->p, &u, s->q, s->qd, s->mode, s->anchor, dt, substeps, max_angle,
                                           s->trig[0], s->trig[1], s->trig[2], s->trig[3], &rec);
             o->impulse[0] = rec.impulse[0];
             o->impulse[1] = rec.impulse[1];
@@ -84,10 +97,10 @@ static void physics_range(const env_batch *b, Py_ssize_t lo, Py_ssize_t hi)
             o->work = rec.work;
             o->slip_dissipation = rec.slip_dissipation;
             o->impact_dissipation = rec.impact_dissipation;
+            o->work_load = rec.work_load;
             o->events = rec.events;
             o->painleve = rec.painleve;
             o->settles = rec.settles;
-            o->work_load = rec.work_load;
             o->energy = 0.0;
             o->foot_height = 0.0;
             o->lam[0] = rec.impulse[0] / dt;
@@ -102,14 +115,14 @@ static void physics_range(const env_batch *b, Py_ssize_t lo, Py_ssize_t hi)
             if (!(isfinite(s->q[j]) && fabs(s->qd[j]) <= max_rate))
                 finite = 0;
         if (finite) {
-            b->flags[i * N_FLAGS + FLAG_FAILED] = 0;
+            o->numerical_failure = 0;
             write_trig(s);
         } else {
             undo_step(s);
             o->lam[0] = 0.0;
             o->lam[1] = 0.0;
-            zero_accumulators(o);
-            b->flags[i * N_FLAGS + FLAG_FAILED] = 1;
+            zero_record(o);
+            o->numerical_failure = 1;
         }
         o->mode = s->mode;
     }
@@ -158,7 +171,7 @@ static int start_unilateral(const leg_params *P, double *q, double *qd, double *
     const leg_accel k = derivative(m, &M, &u, &X);
     o->lam[0] = k.lam_x;
     o->lam[1] = k.lam_y;
-    zero_accumulators(o);
+    zero_record(o);
     return m;
 }
 
@@ -171,10 +184,11 @@ static void start_row(const env_batch *b, Py_ssize_t i)
     env_state *s = state_row(b, i);
     env_out *o = out_row(b, i);
     s->load = 0.0; /* a start has no load; the task's start kernel sets the first step's */
-    if (r->c.unilateral > 0.5) {
-        s->mode = start_unilateral(&r->p, s->q, s->qd, s->anchor, r->tau_nom, r->c.mu, o);
+    if (b->settings->unilateral) {
+        s->mode = start_unilateral(&r->p, s->q, s->qd, s->anchor, r->tau_nom, r->mu, o);
     } else {
         double s1, co1, s2, co2;
+        s->mode = LEG_STICK;
         project_one(&r->p, s->q, s->qd, s->anchor);
         leg_trig(s->q, &s1, &co1, &s2, &co2);
         const double w1 = s->qd[2] + s->qd[3], w2 = w1 + s->qd[4];
@@ -184,18 +198,19 @@ static void start_row(const env_batch *b, Py_ssize_t i)
     }
     write_trig(s);
     o->mode = s->mode;
-    b->flags[i * N_FLAGS + FLAG_FAILED] = 0;
+    o->numerical_failure = 0;
 }
 
-/* physics_start of every row; with noise ((N, 6) uniforms), each row first starts at its nominal posture
- * plus that noise (perturbed_start) with its foot at the origin. */
+/* physics_start of every row; with noise ((N, 6) uniforms; NULL: none), each row first starts at its
+ * nominal posture plus that noise (perturbed_start) with its foot at the origin. */
 static void physics_start(const env_batch *b, const double *noise, double scale)
 {
+    static const double zeros[6] = {0.0};
     for (Py_ssize_t i = 0; i < b->n; i++) {
         if (noise) {
             const env_robot *r = robot_row(b, i);
             env_state *s = state_row(b, i);
-            perturbed_start(noise + 6 * i, scale, r->q_nom, &r->p, s->q, s->qd, s->anchor);
+            perturbed_start(scale > 0.0 ? noise + 6 * i : zeros, scale, r->q_nom, &r->p, s->q, s->qd, s->anchor);
         }
         start_row(b, i);
     }

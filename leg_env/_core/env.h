@@ -1,99 +1,132 @@
-/* The environments' rows: what one robot of a Gymnasium env keeps between control steps.
+/* The environments' structs: what one robot of a Gymnasium env keeps between control steps.
  *
- * Every field is a double, so a row of each struct is a row of a float64 numpy array; the struct
- * names the columns once, and leg_env.step checks its column indices against env_layouts() (module.c)
- * at import. A task's own columns follow each struct (state: the task's per-robot state; robot: the
- * task's constants; out: the reward terms, then the task's info).
+ * A batch is a numpy structured array of each struct (leg_env.layout builds the dtypes from
+ * env_layouts() of module_env.c, field for field, so each layout is declared here only): `state` and
+ * `out` one row per robot, `robots` one row per robot or one shared by all, `settings` one row, and a
+ * float32 observation matrix. A task's own fields live in the unions at the end of each struct.
  */
 #ifndef LEG_ENV_H
 #define LEG_ENV_H
 
+#include <stdint.h>
+
 #include "robot.h"
 
-/* One robot's state (leg_env.step's `state` row). */
+/* The tasks (leg_env.tasks). */
+typedef enum { TASK_STANCE = 0, TASK_PUSH = 1, TASK_HOP = 2, N_TASKS = 3 } env_task;
+
+#define PUSH_MAX 8     /* pushes scheduled per episode */
+#define MAX_TERMS 8    /* reward terms of a task, at most */
+
+/* The push-recovery task's state: its push schedule. */
+typedef struct {
+    int32_t steps;            /* control steps since the start */
+    int32_t start[PUSH_MAX];  /* the control step at which each push starts */
+    double x_com0;            /* the whole-body COM's x at the start [m] */
+    double force[PUSH_MAX];   /* each push's force on the torso's COM [N] */
+} push_state;
+
+/* The hopping task's state. */
+typedef struct {
+    double command; /* the commanded rise of the COM at the apex above standing [m] */
+    double x_com0;  /* the whole-body COM's x at the start [m] */
+} hop_state;
+
+/* One robot's state. */
 typedef struct {
     double q[LEG_NQ], qd[LEG_NQ];
     double anchor[2];      /* the stick contact point (anchor[1]: the ground's height) */
-    double action[2];      /* the last action, in [-1, 1] after clipping */
+    double action[2];      /* the last action, as given (clipped to [-1, 1] when used) */
     double trig[4];        /* sin th1, cos th1, sin th2, cos th2 of q */
-    double mode;           /* leg_mode */
     double load;           /* horizontal force on the torso's COM held over the next step [N] */
     /* the state before the last control step, to undo it */
     double prev_q[LEG_NQ], prev_qd[LEG_NQ];
-    double prev_mode, prev_anchor_x;
+    double prev_anchor_x;
     double prev_trig[4];
+    int32_t mode;          /* leg_mode */
+    int32_t prev_mode;
+    union {
+        push_state push;
+        hop_state hop;
+    } task;
 } env_state;
 
-/* A task's settings that every task has (StanceConfig.array(), in its order). */
-typedef struct {
-    double dt, substeps, max_angle;
-    double tau_hip, tau_knee;        /* torque limits [N m] */
-    double alive_bonus, w_position, w_angle, w_velocity, w_unilateral, w_friction, w_ctrl;
-    double mu;
-    double min_base_height, max_torso_angle, hip_lo, hip_hi, knee_lo, knee_hi;
-    double terminate_on_contact_loss, contact_loss_threshold;
-    double max_rate;
-    double unilateral;               /* 1: the unilateral ground, 0: the pinned foot */
-} env_settings;
-
-/* One robot's constants (leg_env.step's `consts` row): its parameters, the settings (a robot's own row
- * differs from row 0 only in mu and the torque limits), its nominal posture, holding torques and COM. */
+/* One robot: its parameters and what follows from them (a randomised batch has a row per robot). */
 typedef struct {
     leg_params p;
-    env_settings c;
-    double q_nom[LEG_NQ], tau_nom[LEG_NU], com_nom[2];
+    double mu;                   /* friction coefficient of its ground */
+    double torque_limit[LEG_NU]; /* |tau_hip|, |tau_knee| at action +-1 [N m] */
+    double q_nom[LEG_NQ];        /* its nominal posture, foot at the origin */
+    double tau_nom[LEG_NU];      /* the torques that hold it */
+    double com_nom[2];           /* its whole-body COM there [m] */
 } env_robot;
 
-/* What a control step of one robot gives (leg_env.step's `out` row), before the reward terms. */
+/* A task's settings, shared by every robot of an env (StanceConfig and the task's own). */
+typedef struct {
+    double dt;                 /* control period [s] */
+    double max_angle;          /* largest link rotation per RK4 step [rad] */
+    double max_rate;           /* a rate above this is a numerical failure [m/s, rad/s] */
+    double alive_bonus, w_position, w_angle, w_velocity, w_unilateral, w_friction, w_ctrl;
+    double min_base_height, max_torso_angle;
+    double hip_range[2], knee_range[2];
+    double contact_loss_threshold;
+    int32_t substeps;          /* least RK4 steps per control period */
+    uint8_t unilateral;        /* the unilateral ground (else the pinned foot) */
+    uint8_t terminate_on_contact_loss;
+    union {
+        struct {
+            double w_com;        /* per m^2 of the COM's displacement along x */
+            int32_t push_steps;  /* control steps of one push */
+        } push;
+        struct {
+            double w_height, height_scale, w_drift, w_tilt, w_impact, w_slip;
+        } hop;
+    } task;
+} env_settings;
+
+/* What a control step of one robot gives. */
 typedef struct {
     double lam[2];                              /* mean contact force over the step [N] */
     double base_drift, foot_error, normal_force;
-    /* the hybrid step's accumulators (leg_record's, as doubles) */
+    /* what the hybrid step did (leg_record's sums) */
     double impulse[2], kick[2];
     double stick_time, slip_time, flight_time, slip_distance;
-    double work, slip_dissipation, impact_dissipation;
-    double events, painleve, settles;
-    double work_load;
+    double work, slip_dissipation, impact_dissipation, work_load;
     double energy, foot_height;
-    double mode;                                /* the contact mode at the end of the step */
+    double com[2], com_velocity[2];             /* the whole-body COM and its velocity, world frame */
+    double terms[MAX_TERMS];                    /* the reward terms, in the task's order */
+    union {
+        struct {
+            double push_force, work_push;
+        } push;
+    } task;
+    int32_t events, painleve, settles;
+    int32_t mode;                               /* the contact mode at the end of the step */
+    uint8_t terminated, unilateral_violation, friction_violation, numerical_failure;
 } env_out;
 
-/* The flags of a robot after a step (leg_env.step.FLAG_NAMES), one byte each. */
-enum { FLAG_TERMINATED = 0, FLAG_UNILATERAL = 1, FLAG_FRICTION = 2, FLAG_FAILED = 3, N_FLAGS = 4 };
+/* Observation indices (float32 columns), the same for every task: the hop task's command last. */
+typedef enum {
+    OBS_BASE_X = 0, OBS_BASE_Y, OBS_TH_B, OBS_Q1, OBS_Q2,
+    OBS_VX_B, OBS_VY_B, OBS_W_B, OBS_W_Q1, OBS_W_Q2,
+    OBS_LAM_X, OBS_LAM_Y,
+    OBS_PINNED_DIM, /* the pinned foot's observation ends here */
+    OBS_FOOT_HEIGHT = OBS_PINNED_DIM, OBS_FOOT_VX, OBS_FOOT_VY, OBS_CONTACT, OBS_SLIP, OBS_IMPULSE_Y,
+    OBS_UNILATERAL_DIM, /* the unilateral ground's */
+    OBS_COMMAND = OBS_UNILATERAL_DIM,
+    OBS_HOP_DIM
+} obs_index;
 
-/* The tasks (leg_env.tasks) and their own columns. */
-typedef enum { TASK_STANCE = 0, TASK_PUSH = 1, TASK_HOP = 2 } env_task;
-
-#define PUSH_MAX 8
+/* A batch: the arrays of one call, checked (module_env.c). */
 typedef struct {
-    double steps, x_com0;
-    double start[PUSH_MAX]; /* control step of each push's start */
-    double force[PUSH_MAX]; /* its force [N] */
-} push_state;
-typedef struct {
-    double push_steps, w_com;
-} push_constants;
-
-typedef struct {
-    double command, x_com0;
-} hop_state;
-typedef struct {
-    double w_height, height_scale, w_drift, w_tilt, w_impact, w_slip;
-} hop_constants;
-
-#define ENV_DOUBLES(type) ((Py_ssize_t)(sizeof(type) / sizeof(double)))
-
-/* A batch of robots: the packed arrays of leg_env.step with their row lengths (doubles). */
-typedef struct {
-    double *state;
-    Py_ssize_t n, state_cols;
-    const double *consts;
-    Py_ssize_t consts_rows, consts_cols;
-    double *out;
-    Py_ssize_t out_cols;
+    env_state *state;
+    Py_ssize_t n;
+    const env_robot *robots;
+    Py_ssize_t robot_rows;
+    const env_settings *settings;
+    env_out *out;
     float *obs;
     Py_ssize_t obs_cols;
-    unsigned char *flags;
 } env_batch;
 
 #endif

@@ -191,6 +191,19 @@ static int as_double(PyObject *obj, const char *name, double *out)
     return 1;
 }
 
+/* The truth of `obj` (a flag argument); 0 with a TypeError naming `name` if it has none (an array of
+ * several values, or an object whose __bool__ raises). */
+static int as_bool(PyObject *obj, const char *name, int *out)
+{
+    *out = PyObject_IsTrue(obj);
+    if (*out < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s must be true or false, got %.80R", name, obj);
+        return 0;
+    }
+    return 1;
+}
+
 /* The step rule's settings, checked: dt > 0 finite, 1 <= substeps <= LEG_MAX_SUBSTEPS, max_angle > 0. */
 static int step_rule(PyObject *const *args, double *dt, int *substeps, double *max_angle)
 {
@@ -272,8 +285,8 @@ static PyObject *py_bias(PyObject *self, PyObject *const *args, Py_ssize_t nargs
     CHECK(P)
     double *out = F64_OUT(args[3], "h", n * LEG_NQ);
     CHECK(out)
-    const int gravity_only = PyObject_IsTrue(args[4]);
-    if (gravity_only < 0)
+    int gravity_only;
+    if (!as_bool(args[4], "gravity_only", &gravity_only))
         goto fail;
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t i = 0; i < n; i++)
@@ -284,11 +297,11 @@ static PyObject *py_bias(PyObject *self, PyObject *const *args, Py_ssize_t nargs
 }
 
 /* foot(q, p, out), jacobian(q, p, Jc): functions of the configuration only */
-#define CONFIGURATION_FUNCTION(pyname, fn, width, outname)                                                             \
+#define CONFIGURATION_FUNCTION(pyname, name, fn, width, outname)                                                       \
     static PyObject *pyname(PyObject *self, PyObject *const *args, Py_ssize_t nargs)                                   \
     {                                                                                                                  \
         BEGIN                                                                                                          \
-        if (!n_args(nargs, 3, #fn))                                                                                    \
+        if (!n_args(nargs, 3, name))                                                                                   \
             return NULL;                                                                                               \
         ROBOTS(args[0])                                                                                                \
         const leg_params *P = params_of(args[1], n, &ps, &h);                                                          \
@@ -299,8 +312,8 @@ static PyObject *py_bias(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         Py_END_ALLOW_THREADS DONE FAIL                                                                                 \
     }
 
-CONFIGURATION_FUNCTION(py_foot, foot_one, 2, "out")
-CONFIGURATION_FUNCTION(py_jacobian, jacobian_one, 2 * LEG_NQ, "Jc")
+CONFIGURATION_FUNCTION(py_foot, "foot", foot_one, 2, "out")
+CONFIGURATION_FUNCTION(py_jacobian, "jacobian", jacobian_one, 2 * LEG_NQ, "Jc")
 
 static PyObject *py_jdot_qd(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -668,8 +681,8 @@ static PyObject *py_rk4_step(PyObject *self, PyObject *const *args, Py_ssize_t n
     int substeps;
     if (!step_rule(args + 6, &dt, &substeps, &max_angle))
         goto fail;
-    const int stance = PyObject_IsTrue(args[9]);
-    if (stance < 0)
+    int stance;
+    if (!as_bool(args[9], "stance", &stance))
         goto fail;
     double *lam = F64_OUT(args[10], "lam_mean", n * 2);
     CHECK(lam)
@@ -742,37 +755,77 @@ static PyObject *py_hybrid_step(PyObject *self, PyObject *const *args, Py_ssize_
 #include "module_env.c"
 
 /* ------------------------------------------------------------------------------------------------
- * Layouts: what leg_env.layout checks its numpy dtypes against
+ * Layouts: every struct's fields, from which leg_env.layout builds the numpy dtypes
  * ------------------------------------------------------------------------------------------------ */
 
 typedef struct {
     const char *name;
-    size_t offset, size;
+    size_t offset;
+    const char *type; /* a numpy type ("f8", "i4", "?" for a byte flag) or a struct's name */
+    size_t count;     /* 1 for a scalar, else the array's length */
 } field;
 
-#define FIELD(type, member) {#member, offsetof(type, member), sizeof(((type *)0)->member)}
+#define F(type, member, code, count) {#member, offsetof(type, member), code, count}
+#define TASK(type, member, name, code, count) {name, offsetof(type, member), code, count}
 
-static const field PARAMS_FIELDS[] = {FIELD(leg_params, m_b), FIELD(leg_params, m1), FIELD(leg_params, m2),
-                                      FIELD(leg_params, I_b), FIELD(leg_params, I1), FIELD(leg_params, I2),
-                                      FIELD(leg_params, l1),  FIELD(leg_params, l2), FIELD(leg_params, c1),
-                                      FIELD(leg_params, c2),  FIELD(leg_params, g),  {NULL, 0, 0}};
+static const field PARAMS_FIELDS[] = {
+    F(leg_params, m_b, "f8", 1), F(leg_params, m1, "f8", 1), F(leg_params, m2, "f8", 1), F(leg_params, I_b, "f8", 1),
+    F(leg_params, I1, "f8", 1),  F(leg_params, I2, "f8", 1), F(leg_params, l1, "f8", 1), F(leg_params, l2, "f8", 1),
+    F(leg_params, c1, "f8", 1),  F(leg_params, c2, "f8", 1), F(leg_params, g, "f8", 1),  {NULL, 0, NULL, 0}};
 
-static const field RECORD_FIELDS[] = {FIELD(leg_record, impulse),
-                                      FIELD(leg_record, kick),
-                                      FIELD(leg_record, stick_time),
-                                      FIELD(leg_record, slip_time),
-                                      FIELD(leg_record, flight_time),
-                                      FIELD(leg_record, slip_distance),
-                                      FIELD(leg_record, work),
-                                      FIELD(leg_record, work_load),
-                                      FIELD(leg_record, slip_dissipation),
-                                      FIELD(leg_record, impact_dissipation),
-                                      FIELD(leg_record, events),
-                                      FIELD(leg_record, painleve),
-                                      FIELD(leg_record, settles),
-                                      FIELD(leg_record, event_kind),
-                                      FIELD(leg_record, event_time),
-                                      {NULL, 0, 0}};
+static const field RECORD_FIELDS[] = {
+    F(leg_record, impulse, "f8", 2), F(leg_record, kick, "f8", 2), F(leg_record, stick_time, "f8", 1),
+    F(leg_record, slip_time, "f8", 1), F(leg_record, flight_time, "f8", 1), F(leg_record, slip_distance, "f8", 1),
+    F(leg_record, work, "f8", 1), F(leg_record, work_load, "f8", 1), F(leg_record, slip_dissipation, "f8", 1),
+    F(leg_record, impact_dissipation, "f8", 1), F(leg_record, events, "i4", 1), F(leg_record, painleve, "i4", 1),
+    F(leg_record, settles, "i4", 1), F(leg_record, event_kind, "i4", LEG_LOG_SIZE), F(leg_record, event_time, "f8", LEG_LOG_SIZE),
+    {NULL, 0, NULL, 0}};
+
+static const field STATE_FIELDS[] = {
+    F(env_state, q, "f8", LEG_NQ), F(env_state, qd, "f8", LEG_NQ), F(env_state, anchor, "f8", 2), F(env_state, action, "f8", 2),
+    F(env_state, trig, "f8", 4), F(env_state, load, "f8", 1), F(env_state, prev_q, "f8", LEG_NQ),
+    F(env_state, prev_qd, "f8", LEG_NQ), F(env_state, prev_anchor_x, "f8", 1), F(env_state, prev_trig, "f8", 4),
+    F(env_state, mode, "i4", 1), F(env_state, prev_mode, "i4", 1), {NULL, 0, NULL, 0}};
+static const field STATE_PUSH_FIELDS[] = {
+    TASK(env_state, task.push.steps, "steps", "i4", 1), TASK(env_state, task.push.start, "push_start", "i4", PUSH_MAX),
+    TASK(env_state, task.push.x_com0, "x_com0", "f8", 1), TASK(env_state, task.push.force, "push_force", "f8", PUSH_MAX),
+    {NULL, 0, NULL, 0}};
+static const field STATE_HOP_FIELDS[] = {
+    TASK(env_state, task.hop.command, "command", "f8", 1), TASK(env_state, task.hop.x_com0, "x_com0", "f8", 1), {NULL, 0, NULL, 0}};
+
+static const field ROBOT_FIELDS[] = {
+    F(env_robot, p, "leg_params", 1), F(env_robot, mu, "f8", 1), F(env_robot, torque_limit, "f8", LEG_NU),
+    F(env_robot, q_nom, "f8", LEG_NQ), F(env_robot, tau_nom, "f8", LEG_NU), F(env_robot, com_nom, "f8", 2), {NULL, 0, NULL, 0}};
+
+static const field SETTINGS_FIELDS[] = {
+    F(env_settings, dt, "f8", 1), F(env_settings, max_angle, "f8", 1), F(env_settings, max_rate, "f8", 1),
+    F(env_settings, alive_bonus, "f8", 1), F(env_settings, w_position, "f8", 1), F(env_settings, w_angle, "f8", 1),
+    F(env_settings, w_velocity, "f8", 1), F(env_settings, w_unilateral, "f8", 1), F(env_settings, w_friction, "f8", 1),
+    F(env_settings, w_ctrl, "f8", 1), F(env_settings, min_base_height, "f8", 1), F(env_settings, max_torso_angle, "f8", 1),
+    F(env_settings, hip_range, "f8", 2), F(env_settings, knee_range, "f8", 2), F(env_settings, contact_loss_threshold, "f8", 1),
+    F(env_settings, substeps, "i4", 1), F(env_settings, unilateral, "?", 1), F(env_settings, terminate_on_contact_loss, "?", 1),
+    {NULL, 0, NULL, 0}};
+static const field SETTINGS_PUSH_FIELDS[] = {
+    TASK(env_settings, task.push.w_com, "w_com", "f8", 1), TASK(env_settings, task.push.push_steps, "push_steps", "i4", 1),
+    {NULL, 0, NULL, 0}};
+static const field SETTINGS_HOP_FIELDS[] = {
+    TASK(env_settings, task.hop.w_height, "w_height", "f8", 1), TASK(env_settings, task.hop.height_scale, "height_scale", "f8", 1),
+    TASK(env_settings, task.hop.w_drift, "w_drift", "f8", 1), TASK(env_settings, task.hop.w_tilt, "w_tilt", "f8", 1),
+    TASK(env_settings, task.hop.w_impact, "w_impact", "f8", 1), TASK(env_settings, task.hop.w_slip, "w_slip", "f8", 1),
+    {NULL, 0, NULL, 0}};
+
+static const field OUT_FIELDS[] = {
+    F(env_out, lam, "f8", 2), F(env_out, base_drift, "f8", 1), F(env_out, foot_error, "f8", 1), F(env_out, normal_force, "f8", 1),
+    F(env_out, impulse, "f8", 2), F(env_out, kick, "f8", 2), F(env_out, stick_time, "f8", 1), F(env_out, slip_time, "f8", 1),
+    F(env_out, flight_time, "f8", 1), F(env_out, slip_distance, "f8", 1), F(env_out, work, "f8", 1),
+    F(env_out, slip_dissipation, "f8", 1), F(env_out, impact_dissipation, "f8", 1), F(env_out, work_load, "f8", 1),
+    F(env_out, energy, "f8", 1), F(env_out, foot_height, "f8", 1), F(env_out, com, "f8", 2), F(env_out, com_velocity, "f8", 2),
+    F(env_out, terms, "f8", MAX_TERMS), F(env_out, events, "i4", 1), F(env_out, painleve, "i4", 1), F(env_out, settles, "i4", 1),
+    F(env_out, mode, "i4", 1), F(env_out, terminated, "?", 1), F(env_out, unilateral_violation, "?", 1),
+    F(env_out, friction_violation, "?", 1), F(env_out, numerical_failure, "?", 1), {NULL, 0, NULL, 0}};
+static const field OUT_PUSH_FIELDS[] = {
+    TASK(env_out, task.push.push_force, "push_force", "f8", 1), TASK(env_out, task.push.work_push, "work_push", "f8", 1),
+    {NULL, 0, NULL, 0}};
 
 static PyObject *layout_of(const field *fields, size_t itemsize)
 {
@@ -780,7 +833,7 @@ static PyObject *layout_of(const field *fields, size_t itemsize)
     if (list == NULL)
         return NULL;
     for (const field *f = fields; f->name; f++) {
-        PyObject *item = Py_BuildValue("(snn)", f->name, (Py_ssize_t)f->offset, (Py_ssize_t)f->size);
+        PyObject *item = Py_BuildValue("(snsn)", f->name, (Py_ssize_t)f->offset, f->type, (Py_ssize_t)f->count);
         if (item == NULL || PyList_Append(list, item) < 0) {
             Py_XDECREF(item);
             Py_DECREF(list);
@@ -788,46 +841,54 @@ static PyObject *layout_of(const field *fields, size_t itemsize)
         }
         Py_DECREF(item);
     }
-    PyObject *out = Py_BuildValue("(nN)", (Py_ssize_t)itemsize, list);
-    return out;
+    return Py_BuildValue("(nN)", (Py_ssize_t)itemsize, list);
 }
 
-#define COLUMN(type, member) {#member, offsetof(type, member) / sizeof(double), sizeof(((type *)0)->member) / sizeof(double)}
-
-static const field STATE_COLUMNS[] = {COLUMN(env_state, q), COLUMN(env_state, qd), COLUMN(env_state, anchor),
-    COLUMN(env_state, action), COLUMN(env_state, trig), COLUMN(env_state, mode), COLUMN(env_state, load),
-    COLUMN(env_state, prev_q), COLUMN(env_state, prev_qd), COLUMN(env_state, prev_mode), COLUMN(env_state, prev_anchor_x),
-    COLUMN(env_state, prev_trig), {NULL, 0, 0}};
-static const field ROBOT_COLUMNS[] = {COLUMN(env_robot, p), COLUMN(env_robot, c), COLUMN(env_robot, c.dt),
-    COLUMN(env_robot, c.substeps), COLUMN(env_robot, c.max_angle), COLUMN(env_robot, c.tau_hip), COLUMN(env_robot, c.tau_knee),
-    COLUMN(env_robot, c.mu), COLUMN(env_robot, c.max_rate), COLUMN(env_robot, c.unilateral), COLUMN(env_robot, q_nom),
-    COLUMN(env_robot, tau_nom), COLUMN(env_robot, com_nom), {NULL, 0, 0}};
-static const field OUT_COLUMNS[] = {COLUMN(env_out, lam), COLUMN(env_out, base_drift), COLUMN(env_out, impulse),
-    COLUMN(env_out, kick), COLUMN(env_out, stick_time), COLUMN(env_out, events), COLUMN(env_out, work_load),
-    COLUMN(env_out, energy), COLUMN(env_out, mode), {NULL, 0, 0}};
-static const field PUSH_COLUMNS[] = {COLUMN(push_state, steps), COLUMN(push_state, x_com0), COLUMN(push_state, start),
-    COLUMN(push_state, force), {NULL, 0, 0}};
-static const field HOP_COLUMNS[] = {COLUMN(hop_state, command), COLUMN(hop_state, x_com0), {NULL, 0, 0}};
-
-/* env_layouts(): the packed rows' columns, {row: (doubles, [(field, first column, columns)])} */
-static PyObject *py_env_layouts(PyObject *self, PyObject *unused)
-{
-    return Py_BuildValue("{sNsNsNsNsN}", "state", layout_of(STATE_COLUMNS, ENV_DOUBLES(env_state)), "robot",
-                         layout_of(ROBOT_COLUMNS, ENV_DOUBLES(env_robot)), "out", layout_of(OUT_COLUMNS, ENV_DOUBLES(env_out)),
-                         "push_state", layout_of(PUSH_COLUMNS, ENV_DOUBLES(push_state)), "hop_state",
-                         layout_of(HOP_COLUMNS, ENV_DOUBLES(hop_state)));
-}
-
+/* layouts(): {struct: (itemsize, [(field, offset, numpy type or struct, count)])}; "env_state.push" and
+ * the like are a task's fields of the struct's union (offsets from the struct's start) */
 static PyObject *py_layouts(PyObject *self, PyObject *unused)
 {
-    PyObject *params = layout_of(PARAMS_FIELDS, sizeof(leg_params));
-    PyObject *record = layout_of(RECORD_FIELDS, sizeof(leg_record));
-    if (params == NULL || record == NULL) {
-        Py_XDECREF(params);
-        Py_XDECREF(record);
+    static const struct {
+        const char *name;
+        const field *fields;
+        size_t size;
+    } structs[] = {
+        {"leg_params", PARAMS_FIELDS, sizeof(leg_params)},
+        {"leg_record", RECORD_FIELDS, sizeof(leg_record)},
+        {"env_state", STATE_FIELDS, sizeof(env_state)},
+        {"env_state.push", STATE_PUSH_FIELDS, sizeof(env_state)},
+        {"env_state.hop", STATE_HOP_FIELDS, sizeof(env_state)},
+        {"env_robot", ROBOT_FIELDS, sizeof(env_robot)},
+        {"env_settings", SETTINGS_FIELDS, sizeof(env_settings)},
+        {"env_settings.push", SETTINGS_PUSH_FIELDS, sizeof(env_settings)},
+        {"env_settings.hop", SETTINGS_HOP_FIELDS, sizeof(env_settings)},
+        {"env_out", OUT_FIELDS, sizeof(env_out)},
+        {"env_out.push", OUT_PUSH_FIELDS, sizeof(env_out)},
+    };
+    PyObject *dict = PyDict_New();
+    if (dict == NULL)
         return NULL;
+    for (size_t k = 0; k < sizeof(structs) / sizeof(structs[0]); k++) {
+        PyObject *layout = layout_of(structs[k].fields, structs[k].size);
+        if (layout == NULL || PyDict_SetItemString(dict, structs[k].name, layout) < 0) {
+            Py_XDECREF(layout);
+            Py_DECREF(dict);
+            return NULL;
+        }
+        Py_DECREF(layout);
     }
-    return Py_BuildValue("{sNsN}", "leg_params", params, "leg_record", record);
+    return dict;
+}
+
+/* observation(): {name: column} of the observation's entries (obs_index of env.h) and the widths */
+static PyObject *py_observation(PyObject *self, PyObject *unused)
+{
+    return Py_BuildValue(
+        "{sisisisisisisisisisisisisisisisisisisisisisi}", "base_x", OBS_BASE_X, "base_y", OBS_BASE_Y, "th_b", OBS_TH_B, "q1",
+        OBS_Q1, "q2", OBS_Q2, "vx_b", OBS_VX_B, "vy_b", OBS_VY_B, "w_b", OBS_W_B, "w_q1", OBS_W_Q1, "w_q2", OBS_W_Q2, "lam_x",
+        OBS_LAM_X, "lam_y", OBS_LAM_Y, "foot_height", OBS_FOOT_HEIGHT, "foot_vx", OBS_FOOT_VX, "foot_vy", OBS_FOOT_VY, "contact",
+        OBS_CONTACT, "slip", OBS_SLIP, "impulse_y", OBS_IMPULSE_Y, "command", OBS_COMMAND, "pinned_dim", OBS_PINNED_DIM,
+        "unilateral_dim", OBS_UNILATERAL_DIM, "hop_dim", OBS_HOP_DIM);
 }
 
 /* ------------------------------------------------------------------------------------------------ */
@@ -855,18 +916,17 @@ static PyMethodDef methods[] = {
          "rk4_step(q, qd, tau, p, load, anchor, dt, substeps, max_angle, stance, lam_mean): one RK4 control step."),
     FAST("hybrid_step", py_hybrid_step,
          "hybrid_step(q, qd, tau, p, load, mu, mode, anchor, dt, substeps, max_angle, record): one hybrid control step."),
-    FAST("physics_range", py_physics_range, "physics_range(lo, hi, state, consts, out, flags): one control step of rows lo .. hi - 1."),
-    FAST("physics_start", py_physics_start, "physics_start(state, consts, out, flags): robots put on their contact."),
-    FAST("physics_start_noisy", py_physics_start_noisy,
-         "physics_start_noisy(noise, scale, state, consts, out, flags): started at the nominal posture plus noise."),
-    FAST("assess", py_assess, "assess(task, state, consts, out, obs, flags): the task after a control step."),
-    FAST("start", py_start, "start(task, state, consts, out, obs, flags): the task at started robots."),
+    FAST("physics_range", py_physics_range, "physics_range(lo, hi, state, robots, settings, out): one control step of rows lo .. hi - 1."),
+    FAST("assess", py_assess, "assess(task, state, robots, settings, out, obs): the task after a control step."),
+    FAST("start", py_start,
+         "start(task, state, robots, settings, out, obs, noise, scale): robots put on their contact (at the nominal posture "
+         "plus noise, or as the state has them if noise is None) and evaluated."),
     FAST("perturbed_starts", py_perturbed_starts, "perturbed_starts(noise, scale, q_nom, p, q, qd, anchor)."),
     FAST("robot_params", py_robot_params, "robot_params(u, spec, base, limits, row) -> accepted."),
     FAST("draw_uniform", py_draw_uniform, "draw_uniform(generators, rows, out): uniforms from each row's generator."),
-    FAST("draw_robots", py_draw_robots, "draw_robots(generators, rows, spec, base, limits, max_draws, consts, rejected)."),
+    FAST("draw_robots", py_draw_robots, "draw_robots(generators, rows, spec, base, limits, max_draws, robots, rejected)."),
     {"layouts", (PyCFunction)py_layouts, METH_NOARGS, "layouts(): {struct: (itemsize, [(field, offset, size)])}."},
-    {"env_layouts", (PyCFunction)py_env_layouts, METH_NOARGS, "env_layouts(): the packed rows' columns."},
+    {"observation", (PyCFunction)py_observation, METH_NOARGS, "observation(): the observation's columns by name."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -889,7 +949,16 @@ PyMODINIT_FUNC PyInit_kernels(void)
         return NULL;
     }
     if (PyModule_AddIntConstant(m, "MAX_SUBSTEPS", LEG_MAX_SUBSTEPS) < 0 || PyModule_AddIntConstant(m, "LOG_SIZE", LEG_LOG_SIZE) < 0
-        || PyModule_AddIntConstant(m, "MAX_EVENTS", LEG_MAX_EVENTS) < 0
+        || PyModule_AddIntConstant(m, "MAX_EVENTS", LEG_MAX_EVENTS) < 0 || PyModule_AddIntConstant(m, "MAX_TERMS", MAX_TERMS) < 0
+        || PyModule_AddIntConstant(m, "PUSH_MAX", PUSH_MAX) < 0
+        || PyModule_AddObject(m, "GROUND_TOL", PyFloat_FromDouble(LEG_GROUND_TOL)) < 0
+        || PyModule_AddObject(m, "SETTLE_SPEED", PyFloat_FromDouble(LEG_SETTLE_SPEED)) < 0
+        || PyModule_AddObject(m, "ROOT_TIME", PyFloat_FromDouble(LEG_ROOT_TIME)) < 0
+        || PyModule_AddObject(m, "REST_SPEED", PyFloat_FromDouble(LEG_REST_SPEED)) < 0
+        || PyModule_AddIntConstant(m, "STICK", LEG_STICK) < 0 || PyModule_AddIntConstant(m, "SLIP_FORWARD", LEG_SLIP_FORWARD) < 0
+        || PyModule_AddIntConstant(m, "SLIP_BACKWARD", LEG_SLIP_BACKWARD) < 0 || PyModule_AddIntConstant(m, "FLIGHT", LEG_FLIGHT) < 0
+        || PyModule_AddIntConstant(m, "LIFTOFF", LEG_LIFTOFF) < 0 || PyModule_AddIntConstant(m, "SLIP_ONSET", LEG_SLIP_ONSET) < 0
+        || PyModule_AddIntConstant(m, "SLIDING_STOP", LEG_SLIDING_STOP) < 0 || PyModule_AddIntConstant(m, "TOUCHDOWN", LEG_TOUCHDOWN) < 0
         || PyModule_AddObject(m, "TURN_MAX", PyFloat_FromDouble(LEG_TURN_MAX)) < 0) {
         Py_DECREF(m);
         return NULL;

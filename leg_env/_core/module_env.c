@@ -1,102 +1,140 @@
 /* leg_env._core.kernels, the environments' half: the control step, the starts, the tasks and the draws
- * on the packed arrays of leg_env.step, and Batch, the single environment's arrays bound once.
+ * on the structured arrays of leg_env.layout (one env_state, env_robot, env_out per row; one
+ * env_settings), and Batch, the single environment's arrays bound once.
  *
  * Included by module.c (the unity build), after the buffer helpers.
  */
 
-/* The packed arrays of a call, checked: (state, consts, out, obs, flags), obs may be NULL (physics only).
- * Every row length is checked against what the task reads and writes, so that no kernel reads or writes
- * past an array whatever it is given. */
-static int batch_of(int task, PyObject *state, PyObject *consts, PyObject *out, PyObject *obs, PyObject *flags, held *h,
-                    env_batch *b)
+/* The rows of a structured array of a C struct of `itemsize` bytes: 1-d, C-contiguous. NULL with a
+ * ValueError naming `name` otherwise. (The dtype's fields are leg_env.layout's, checked against this
+ * file's layouts at import; here only the size can be checked.) */
+static void *rows_of(PyObject *obj, const char *name, Py_ssize_t itemsize, int writable, held *h, Py_ssize_t *rows)
 {
-    if (task < TASK_STANCE || task > TASK_HOP) {
-        PyErr_Format(PyExc_ValueError, "task must be 0 (stance), 1 (push) or 2 (hop), got %d", task);
+    if (h->n >= MAX_BUFFERS) {
+        PyErr_SetString(PyExc_RuntimeError, "leg_env._core.kernels: too many buffers in one call");
+        return NULL;
+    }
+    Py_buffer *v = &h->views[h->n];
+    if (PyObject_GetBuffer(obj, v, PyBUF_C_CONTIGUOUS | (writable ? PyBUF_WRITABLE : 0)) < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_ValueError, "%s must be a C-contiguous%s structured array of leg_env.layout, got %.80R", name,
+                     writable ? ", writable" : "", (PyObject *)Py_TYPE(obj));
+        return NULL;
+    }
+    h->n++;
+    if (v->ndim != 1 || v->itemsize != itemsize) {
+        PyErr_Format(PyExc_ValueError, "%s must be a 1-d array of its leg_env.layout dtype (items of %zd bytes), got %d-d items of %zd bytes",
+                     name, itemsize, v->ndim, v->itemsize);
+        return NULL;
+    }
+    *rows = v->len / itemsize;
+    return v->buf;
+}
+
+/* The values a step relies on, checked: every robot's parameters and friction and the settings (a step
+ * that terminates, no division by zero by construction) and, if `modes`, every state's contact mode and
+ * the one an undone step restores. batch_of checks them at every call; Batch at each of its calls too,
+ * since its arrays can be written between calls. */
+static int batch_values(const env_batch *b, int modes)
+{
+    const env_settings *c = b->settings;
+    if (!(c->dt > 0.0 && c->dt < INFINITY && c->substeps >= 1 && c->substeps <= LEG_MAX_SUBSTEPS && c->max_angle > 0.0
+          && c->max_rate > 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "settings: dt, substeps, max_angle or max_rate out of range");
         return 0;
     }
-    Py_ssize_t task_state, task_constants, task_info, rows, cols;
-    task_columns(task, &task_state, &task_constants, &task_info);
-    b->state = (double *)matrix_of(state, "state", F64, 1, h, &b->n, &b->state_cols);
-    if (b->state == NULL)
-        return 0;
-    if (b->state_cols < ENV_DOUBLES(env_state) + task_state) {
-        PyErr_Format(PyExc_ValueError, "state must have at least %zd columns for this task, got %zd",
-                     ENV_DOUBLES(env_state) + task_state, b->state_cols);
-        return 0;
-    }
-    b->consts = (const double *)matrix_of(consts, "consts", F64, 0, h, &b->consts_rows, &b->consts_cols);
-    if (b->consts == NULL)
-        return 0;
-    if ((b->consts_rows != 1 && b->consts_rows != b->n) || b->consts_cols < ENV_DOUBLES(env_robot) + task_constants) {
-        PyErr_Format(PyExc_ValueError, "consts must have 1 row or one per robot (%zd) and at least %zd columns, got (%zd, %zd)",
-                     b->n, ENV_DOUBLES(env_robot) + task_constants, b->consts_rows, b->consts_cols);
-        return 0;
-    }
-    b->out = (double *)matrix_of(out, "out", F64, 1, h, &rows, &b->out_cols);
-    if (b->out == NULL)
-        return 0;
-    if (rows != b->n || b->out_cols < ENV_DOUBLES(env_out) + task_terms(task) + task_info) {
-        PyErr_Format(PyExc_ValueError, "out must have shape (%zd, >= %zd), got (%zd, %zd)", b->n,
-                     ENV_DOUBLES(env_out) + task_terms(task) + task_info, rows, b->out_cols);
-        return 0;
-    }
-    unsigned char *f = (unsigned char *)matrix_of(flags, "flags", BOOL, 1, h, &rows, &cols);
-    if (f == NULL)
-        return 0;
-    if (rows != b->n || cols != N_FLAGS) {
-        PyErr_Format(PyExc_ValueError, "flags must have shape (%zd, %d), got (%zd, %zd)", b->n, N_FLAGS, rows, cols);
-        return 0;
-    }
-    b->flags = f;
-    b->obs = NULL;
-    b->obs_cols = 0;
-    /* the settings every robot shares, and each robot's parameters, must make a step that terminates */
-    for (Py_ssize_t i = 0; i < b->consts_rows; i++) {
-        const env_robot *r = (const env_robot *)(b->consts + i * b->consts_cols);
+    for (Py_ssize_t i = 0; i < b->robot_rows; i++) {
+        const env_robot *r = b->robots + i;
         const double *pf = (const double *)&r->p;
-        int ok = r->c.dt > 0.0 && r->c.dt < INFINITY && r->c.substeps >= 1.0 && r->c.substeps <= LEG_MAX_SUBSTEPS
-                 && r->c.max_angle > 0.0 && r->c.mu >= 0.0 && r->c.mu < INFINITY;
+        int ok = r->mu >= 0.0 && r->mu < INFINITY && r->p.g >= 0.0 && r->p.g < INFINITY;
         for (int j = 0; j < 10; j++)
             ok = ok && pf[j] > 0.0 && pf[j] < INFINITY;
-        ok = ok && r->p.g >= 0.0 && r->p.g < INFINITY;
         if (!ok) {
-            PyErr_Format(PyExc_ValueError, "consts row %zd: parameters and settings out of range (dt, substeps, max_angle, mu, "
-                         "masses, inertias, lengths, g)", i);
+            PyErr_Format(PyExc_ValueError, "robots row %zd: mu, masses, inertias, lengths or g out of range", i);
             return 0;
         }
     }
-    for (Py_ssize_t i = 0; i < b->n; i++) {
-        const double mode = state_row(b, i)->mode;
-        if (!(mode == LEG_STICK || mode == LEG_SLIP_FORWARD || mode == LEG_SLIP_BACKWARD || mode == LEG_FLIGHT)) {
-            PyErr_Format(PyExc_ValueError, "state row %zd: the contact mode must be 0, 1, 2 or 3, got %g", i, mode);
-            return 0;
-        }
-    }
-    if (obs != NULL) {
-        const Py_ssize_t need = (robot_row(b, 0)->c.unilateral > 0.5 ? 18 : 12) + (task == TASK_HOP ? 1 : 0);
-        b->obs = (float *)matrix_of(obs, "obs", F32, 1, h, &rows, &b->obs_cols);
-        if (b->obs == NULL)
-            return 0;
-        if (rows != b->n || b->obs_cols != need) {
-            PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd), got (%zd, %zd)", b->n, need, rows, b->obs_cols);
+    for (Py_ssize_t i = 0; modes && i < b->n; i++) {
+        const env_state *s = b->state + i;
+        if (s->mode < LEG_STICK || s->mode > LEG_FLIGHT || s->prev_mode < LEG_STICK || s->prev_mode > LEG_FLIGHT) {
+            PyErr_Format(PyExc_ValueError, "state row %zd: the contact modes must be 0, 1, 2 or 3, got %d (prev_mode %d)", i,
+                         (int)s->mode, (int)s->prev_mode);
             return 0;
         }
     }
     return 1;
 }
 
+/* The arrays of a call, checked: (state, robots, settings, out) and obs (NULL for the physics alone). */
+static int batch_of(int task, PyObject *state, PyObject *robots, PyObject *settings, PyObject *out, PyObject *obs, held *h,
+                    env_batch *b, int modes)
+{
+    Py_ssize_t rows, cols;
+    if (task < TASK_STANCE || task >= N_TASKS) {
+        PyErr_Format(PyExc_ValueError, "task must be 0 (stance), 1 (push) or 2 (hop), got %d", task);
+        return 0;
+    }
+    b->state = (env_state *)rows_of(state, "state", sizeof(env_state), 1, h, &b->n);
+    if (b->state == NULL)
+        return 0;
+    b->robots = (const env_robot *)rows_of(robots, "robots", sizeof(env_robot), 0, h, &b->robot_rows);
+    if (b->robots == NULL)
+        return 0;
+    if (b->robot_rows < 1 || (b->robot_rows != 1 && b->robot_rows != b->n)) {
+        PyErr_Format(PyExc_ValueError, "robots must have 1 row or one per robot (%zd), got %zd", b->n, b->robot_rows);
+        return 0;
+    }
+    b->settings = (const env_settings *)rows_of(settings, "settings", sizeof(env_settings), 0, h, &rows);
+    if (b->settings == NULL)
+        return 0;
+    if (rows != 1) {
+        PyErr_Format(PyExc_ValueError, "settings must have 1 row, got %zd", rows);
+        return 0;
+    }
+    b->out = (env_out *)rows_of(out, "out", sizeof(env_out), 1, h, &rows);
+    if (b->out == NULL)
+        return 0;
+    if (rows != b->n) {
+        PyErr_Format(PyExc_ValueError, "out must have one row per robot (%zd), got %zd", b->n, rows);
+        return 0;
+    }
+    b->obs = NULL;
+    b->obs_cols = 0;
+    if (obs != NULL) {
+        b->obs = (float *)matrix_of(obs, "obs", F32, 1, h, &rows, &cols);
+        if (b->obs == NULL)
+            return 0;
+        const Py_ssize_t need = task_obs_dim(task, b->settings->unilateral);
+        if (rows != b->n || cols != need) {
+            PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and ground, got (%zd, %zd)", b->n, need,
+                         rows, cols);
+            return 0;
+        }
+        b->obs_cols = cols;
+    }
+    return batch_values(b, modes);
+}
+
+/* An integer argument: a TypeError naming `name` if `obj` is not an integer, a ValueError if it is out of range. */
 static int int_arg(PyObject *obj, const char *name, Py_ssize_t *out)
 {
-    *out = PyNumber_AsSsize_t(obj, PyExc_OverflowError);
-    if (*out == -1 && PyErr_Occurred()) {
+    PyObject *index = PyNumber_Index(obj);
+    if (index == NULL) {
         PyErr_Clear();
         PyErr_Format(PyExc_TypeError, "%s must be an integer, got %.80R", name, obj);
         return 0;
     }
+    *out = PyLong_AsSsize_t(index);
+    Py_DECREF(index);
+    if (*out == -1 && PyErr_Occurred()) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_ValueError, "%s is out of range, got %.80R", name, obj);
+        return 0;
+    }
     return 1;
 }
 
-/* physics_range(lo, hi, state, consts, out, flags): one control step of rows lo .. hi - 1 (GIL released) */
+/* physics_range(lo, hi, state, robots, settings, out): one control step of rows lo .. hi - 1 (GIL released) */
 static PyObject *py_physics_range(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     held h;
@@ -105,7 +143,7 @@ static PyObject *py_physics_range(PyObject *self, PyObject *const *args, Py_ssiz
     Py_ssize_t lo, hi;
     if (!n_args(nargs, 6, "physics_range") || !int_arg(args[0], "lo", &lo) || !int_arg(args[1], "hi", &hi))
         return NULL;
-    if (!batch_of(TASK_STANCE, args[2], args[3], args[4], NULL, args[5], &h, &b))
+    if (!batch_of(TASK_STANCE, args[2], args[3], args[4], args[5], NULL, &h, &b, 1))
         goto fail;
     if (!(0 <= lo && lo <= hi && hi <= b.n)) {
         PyErr_Format(PyExc_ValueError, "rows lo .. hi must satisfy 0 <= lo <= hi <= %zd, got %zd .. %zd", b.n, lo, hi);
@@ -121,75 +159,46 @@ fail:
     return NULL;
 }
 
-/* physics_start(state, consts, out, flags) and physics_start_noisy(noise, scale, state, consts, out, flags) */
-static PyObject *start_physics(PyObject *const *args, Py_ssize_t nargs, int noisy)
+/* The start noise argument: None (the states are given), or (N, 6) uniforms (not read at scale 0). */
+static int noise_of(PyObject *noise_obj, PyObject *scale_obj, Py_ssize_t n, held *h, const double **noise, double *scale)
 {
-    held h;
-    h.n = 0;
-    env_batch b;
-    const double *noise = NULL;
-    double scale = 0.0;
-    if (!n_args(nargs, noisy ? 6 : 4, noisy ? "physics_start_noisy" : "physics_start"))
-        return NULL;
-    PyObject *const *a = args + (noisy ? 2 : 0);
-    if (!batch_of(TASK_STANCE, a[0], a[1], a[2], NULL, a[3], &h, &b))
-        goto fail;
-    if (noisy) {
-        if (!as_double(args[1], "scale", &scale))
-            goto fail;
-        if (!(scale >= 0.0 && scale < INFINITY)) {
-            PyErr_SetString(PyExc_ValueError, "scale must be finite and >= 0");
-            goto fail;
-        }
-        if (scale > 0.0) {
-            noise = F64_IN(args[0], "noise", b.n * 6);
-            CHECK(noise)
-        } else {
-            static const double zeros[6] = {0.0};
-            noise = zeros; /* not read at scale 0: every row reads its 6 entries from the start */
-            for (Py_ssize_t i = 0; i < b.n; i++) {
-                const env_robot *r = robot_row(&b, i);
-                env_state *s = state_row(&b, i);
-                perturbed_start(zeros, 0.0, r->q_nom, &r->p, s->q, s->qd, s->anchor);
-                start_row(&b, i);
-            }
-            release_all(&h);
-            Py_RETURN_NONE;
-        }
+    static const double zeros[6] = {0.0};
+    *noise = NULL;
+    *scale = 0.0;
+    if (noise_obj == Py_None)
+        return 1;
+    if (!as_double(scale_obj, "scale", scale))
+        return 0;
+    if (!(*scale >= 0.0 && *scale < INFINITY)) {
+        PyErr_SetString(PyExc_ValueError, "scale must be finite and >= 0");
+        return 0;
     }
-    physics_start(&b, noise, scale);
-    release_all(&h);
-    Py_RETURN_NONE;
-fail:
-    release_all(&h);
-    return NULL;
+    *noise = zeros;
+    if (*scale > 0.0) {
+        *noise = (const double *)buffer_of(noise_obj, "noise", F64, 6 * n, 0, h, NULL);
+        if (*noise == NULL)
+            return 0;
+    }
+    return 1;
 }
 
-static PyObject *py_physics_start(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    return start_physics(args, nargs, 0);
-}
-
-static PyObject *py_physics_start_noisy(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    return start_physics(args, nargs, 1);
-}
-
-/* assess(task, state, consts, out, obs, flags) and start(task, ...): the task's kernels over every row */
-static PyObject *task_kernel(PyObject *const *args, Py_ssize_t nargs, int starting)
+/* start(task, state, robots, settings, out, obs, noise, scale): the rows put on their contact (at their
+ * nominal posture plus noise, or where the state has them if noise is None), then the task's evaluation */
+static PyObject *py_start(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     held h;
     h.n = 0;
     env_batch b;
     Py_ssize_t task;
-    if (!n_args(nargs, 6, starting ? "start" : "assess") || !int_arg(args[0], "task", &task))
+    const double *noise;
+    double scale;
+    if (!n_args(nargs, 8, "start") || !int_arg(args[0], "task", &task))
         return NULL;
-    if (!batch_of((int)(task < 0 || task > 2 ? -1 : task), args[1], args[2], args[3], args[4], args[5], &h, &b))
+    if (!batch_of((int)(task < 0 || task >= N_TASKS ? -1 : task), args[1], args[2], args[3], args[4], args[5], &h, &b, 0)
+        || !noise_of(args[6], args[7], b.n, &h, &noise, &scale))
         goto fail;
-    if (starting)
-        task_start((int)task, &b);
-    else
-        task_assess((int)task, &b, 0, b.n);
+    physics_start(&b, noise, scale);
+    task_start((int)task, &b);
     release_all(&h);
     Py_RETURN_NONE;
 fail:
@@ -197,9 +206,24 @@ fail:
     return NULL;
 }
 
-static PyObject *py_assess(PyObject *self, PyObject *const *args, Py_ssize_t nargs) { return task_kernel(args, nargs, 0); }
-
-static PyObject *py_start(PyObject *self, PyObject *const *args, Py_ssize_t nargs) { return task_kernel(args, nargs, 1); }
+/* assess(task, state, robots, settings, out, obs): the task after a control step of every row */
+static PyObject *py_assess(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    held h;
+    h.n = 0;
+    env_batch b;
+    Py_ssize_t task;
+    if (!n_args(nargs, 6, "assess") || !int_arg(args[0], "task", &task))
+        return NULL;
+    if (!batch_of((int)(task < 0 || task >= N_TASKS ? -1 : task), args[1], args[2], args[3], args[4], args[5], &h, &b, 1))
+        goto fail;
+    task_assess((int)task, &b, 0, b.n);
+    release_all(&h);
+    Py_RETURN_NONE;
+fail:
+    release_all(&h);
+    return NULL;
+}
 
 /* perturbed_starts(noise, scale, q_nom, p, q, qd, anchor): perturbed_start of every row of noise */
 static PyObject *py_perturbed_starts(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -228,72 +252,130 @@ static PyObject *py_perturbed_starts(PyObject *self, PyObject *const *args, Py_s
     FAIL
 }
 
-/* The robot spec of a randomisation, checked: (F, 4) rows (column, kind, low, high) with every column
- * inside a consts row of `cols` doubles. */
-static const double *spec_of(PyObject *obj, Py_ssize_t cols, Py_ssize_t *n_spec, held *h)
+#define ROBOT_DOUBLES ((Py_ssize_t)(sizeof(env_robot) / sizeof(double)))
+typedef char env_robot_is_doubles[sizeof(env_robot) % sizeof(double) == 0 ? 1 : -1];
+#define N_LIMITS 7
+
+/* The robot spec of a randomisation, checked: (F, 4) rows (the field's index among env_robot's doubles,
+ * kind, low, high), every index a drawn field's (a parameter, mu or a torque limit: not what follows). */
+static const double *spec_of(PyObject *obj, Py_ssize_t *n_spec, held *h)
 {
     const double *spec = (const double *)buffer_of(obj, "spec", F64, -4, 0, h, n_spec);
     if (spec == NULL)
         return NULL;
+    const double first_derived = (double)(offsetof(env_robot, q_nom) / sizeof(double));
     for (Py_ssize_t f = 0; f < *n_spec; f++) {
         const double col = spec[4 * f], kind = spec[4 * f + 1];
-        if (!(col >= 0.0 && col < (double)cols && col == floor(col)) || !(kind == 0.0 || kind == 1.0 || kind == 2.0)) {
-            PyErr_Format(PyExc_ValueError, "spec row %zd: column must be a whole number in [0, %zd) and kind 0, 1 or 2", f, cols);
+        if (!(col >= 0.0 && col < first_derived && col == floor(col)) || !(kind == 0.0 || kind == 1.0 || kind == 2.0)) {
+            PyErr_Format(PyExc_ValueError, "spec row %zd: the field must be a drawn one's index in [0, %g) and kind 0, 1 or 2", f,
+                         first_derived);
             return NULL;
         }
     }
     return spec;
 }
 
-/* robot_params(u, spec, base, limits, row) -> bool */
+/* robot_params(u, spec, base, limits, row) -> bool: base and row are 1-row arrays of env_robot */
 static PyObject *py_robot_params(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     BEGIN
     if (!n_args(nargs, 5, "robot_params"))
         return NULL;
-    Py_ssize_t cols = 0, n_spec = 0;
-    const double *base = (const double *)buffer_of(args[2], "base", F64, -1, 0, &h, &cols);
-    CHECK(base)
-    if (cols < ENV_DOUBLES(env_robot)) {
-        PyErr_Format(PyExc_ValueError, "base must have at least %zd values", ENV_DOUBLES(env_robot));
-        goto fail;
-    }
-    const double *spec = spec_of(args[1], cols, &n_spec, &h);
+    Py_ssize_t n_spec = 0, rows = 0;
+    const double *spec = spec_of(args[1], &n_spec, &h);
     CHECK(spec)
     const double *u = F64_IN(args[0], "u", n_spec);
     CHECK(u)
-    const double *limits = F64_IN(args[3], "limits", 6);
+    const env_robot *base = (const env_robot *)rows_of(args[2], "base", sizeof(env_robot), 0, &h, &rows);
+    CHECK(base)
+    if (rows != 1) {
+        PyErr_Format(PyExc_ValueError, "base must have 1 row, got %zd", rows);
+        goto fail;
+    }
+    const double *limits = F64_IN(args[3], "limits", N_LIMITS);
     CHECK(limits)
-    double *row = F64_OUT(args[4], "row", cols);
+    env_robot *row = (env_robot *)rows_of(args[4], "row", sizeof(env_robot), 1, &h, &rows);
     CHECK(row)
-    const int accepted = robot_params(u, spec, n_spec, base, limits, row, cols);
+    if (rows != 1) {
+        PyErr_Format(PyExc_ValueError, "row must have 1 row, got %zd", rows);
+        goto fail;
+    }
+    (void)n;
+    const int accepted = robot_params(u, spec, n_spec, base, limits, row);
     release_all(&h);
     return PyBool_FromLong(accepted);
     FAIL
 }
 
-/* The bit generators of `generators` (a list of numpy BitGenerator capsules, or None) at `rows`. */
-static int bitgens_of(PyObject *generators, const int64_t *rows, Py_ssize_t n_rows, bitgen_t **out)
+/* The bit generator of one entry of `generators`: a numpy Generator, a BitGenerator, or a BitGenerator's
+ * capsule. A new reference to what owns it is left in *owner, to be held for as long as it is drawn from:
+ * given a Generator or a BitGenerator the call keeps it alive itself; a bare capsule does not keep its
+ * BitGenerator alive (numpy's capsule holds a pointer into it), so the caller must. NULL with a ValueError. */
+static bitgen_t *bitgen_of(PyObject *entry, long long index, PyObject **owner)
 {
+    PyObject *capsule = NULL, *bit_generator = NULL;
+    *owner = NULL;
+    if (PyCapsule_CheckExact(entry)) {
+        Py_INCREF(entry);
+        capsule = entry;
+        Py_INCREF(entry);
+        *owner = entry;
+    } else if (entry != Py_None) {
+        bit_generator = PyObject_GetAttrString(entry, "bit_generator"); /* a Generator */
+        if (bit_generator == NULL) {
+            PyErr_Clear();
+            Py_INCREF(entry);
+            bit_generator = entry;
+        }
+        capsule = PyObject_GetAttrString(bit_generator, "capsule");
+        if (capsule == NULL)
+            PyErr_Clear();
+        *owner = bit_generator;
+    }
+    bitgen_t *bg = capsule != NULL && PyCapsule_IsValid(capsule, "BitGenerator") ? (bitgen_t *)PyCapsule_GetPointer(capsule, "BitGenerator") : NULL;
+    Py_XDECREF(capsule); /* the owner holds it (a BitGenerator keeps its capsule) */
+    if (bg == NULL || bg->next_double == NULL) {
+        PyErr_Clear();
+        Py_CLEAR(*owner);
+        PyErr_Format(PyExc_ValueError, "generators[%lld] is not a numpy Generator, BitGenerator or BitGenerator capsule", index);
+        return NULL;
+    }
+    return bg;
+}
+
+/* The bit generators of `generators` (a list of numpy Generators, BitGenerators or their capsules) at
+ * `rows`, with a reference to each one's owner in owners[k] (release_owners() frees them). */
+static int bitgens_of(PyObject *generators, const int64_t *rows, Py_ssize_t n_rows, bitgen_t **out, PyObject **owners)
+{
+    for (Py_ssize_t k = 0; k < n_rows; k++)
+        owners[k] = NULL;
     if (!PyList_Check(generators)) {
-        PyErr_SetString(PyExc_TypeError, "generators must be a list of numpy BitGenerator capsules");
+        PyErr_Format(PyExc_TypeError, "generators must be a list of numpy Generators, BitGenerators or BitGenerator capsules, got %.80R",
+                     (PyObject *)Py_TYPE(generators));
         return 0;
     }
     for (Py_ssize_t k = 0; k < n_rows; k++) {
+        /* the list's length is read at each entry: an attribute look-up may run code that changes it */
         if (rows[k] < 0 || rows[k] >= PyList_GET_SIZE(generators)) {
-            PyErr_Format(PyExc_ValueError, "rows[%zd] = %lld is not a generator's index", k, (long long)rows[k]);
+            PyErr_Format(PyExc_ValueError, "rows[%zd] = %lld is not an index of generators", k, (long long)rows[k]);
             return 0;
         }
-        PyObject *capsule = PyList_GET_ITEM(generators, rows[k]);
-        bitgen_t *bg = PyCapsule_IsValid(capsule, "BitGenerator") ? (bitgen_t *)PyCapsule_GetPointer(capsule, "BitGenerator") : NULL;
-        if (bg == NULL || bg->next_double == NULL) {
-            PyErr_Clear();
-            PyErr_Format(PyExc_ValueError, "generator %lld is not a numpy BitGenerator capsule", (long long)rows[k]);
+        PyObject *entry = PyList_GET_ITEM(generators, rows[k]);
+        Py_INCREF(entry);
+        out[k] = bitgen_of(entry, (long long)rows[k], &owners[k]);
+        Py_DECREF(entry);
+        if (out[k] == NULL)
             return 0;
-        }
-        out[k] = bg;
     }
     return 1;
+}
+
+static void release_owners(PyObject **owners, Py_ssize_t n)
+{
+    if (owners == NULL)
+        return;
+    for (Py_ssize_t k = 0; k < n; k++)
+        Py_XDECREF(owners[k]);
 }
 
 /* draw_uniform(generators, rows, out): out[k] = generators[rows[k]]'s next out.shape[1] doubles */
@@ -301,8 +383,9 @@ static PyObject *py_draw_uniform(PyObject *self, PyObject *const *args, Py_ssize
 {
     held h;
     h.n = 0;
-    Py_ssize_t n_rows = 0, rows2, cols;
+    Py_ssize_t n_rows = 0, rows2, cols, n_owners = 0;
     bitgen_t **bg = NULL;
+    PyObject **owners = NULL;
     if (!n_args(nargs, 3, "draw_uniform"))
         return NULL;
     const int64_t *rows = (const int64_t *)buffer_of(args[1], "rows", I64, -1, 0, &h, &n_rows);
@@ -314,83 +397,107 @@ static PyObject *py_draw_uniform(PyObject *self, PyObject *const *args, Py_ssize
         goto fail;
     }
     bg = PyMem_Malloc((n_rows ? n_rows : 1) * sizeof(bitgen_t *));
-    if (bg == NULL) {
+    owners = PyMem_Malloc((n_rows ? n_rows : 1) * sizeof(PyObject *));
+    if (bg == NULL || owners == NULL) {
         PyErr_NoMemory();
         goto fail;
     }
-    if (!bitgens_of(args[0], rows, n_rows, bg))
+    n_owners = n_rows;
+    if (!bitgens_of(args[0], rows, n_rows, bg, owners))
         goto fail;
     for (Py_ssize_t k = 0; k < n_rows; k++)
         for (Py_ssize_t j = 0; j < cols; j++)
             out[k * cols + j] = bg[k]->next_double(bg[k]->state);
+    release_owners(owners, n_owners);
+    PyMem_Free(owners);
     PyMem_Free(bg);
     release_all(&h);
     Py_RETURN_NONE;
 fail:
+    release_owners(owners, n_owners);
+    PyMem_Free(owners);
     PyMem_Free(bg);
     release_all(&h);
     return NULL;
 }
 
-/* draw_robots(generators, rows, spec, base, limits, max_draws, consts, rejected): robot_params for each
+#define DRAWS_MAX 1000000 /* most tries of draw_robots per robot: a bound on the work of one call */
+
+/* draw_robots(generators, rows, spec, base, limits, max_draws, robots, rejected): robot_params for each
  * sub-env rows[k], drawing spec's uniforms per try from its own generator, up to max_draws tries;
- * consts[rows[k]] becomes the first accepted robot (the nominal base if every try is refused) and
+ * robots[rows[k]] becomes the first accepted robot (the nominal base if every try is refused) and
  * rejected[k] the number of refused tries. */
 static PyObject *py_draw_robots(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     held h;
     h.n = 0;
-    Py_ssize_t n_rows = 0, cols = 0, n_spec = 0, consts_rows, consts_cols, max_draws;
+    Py_ssize_t n_rows = 0, n_spec = 0, robot_rows = 0, base_rows = 0, max_draws, n_owners = 0;
     bitgen_t **bg = NULL;
+    PyObject **owners = NULL;
     double *u = NULL;
     if (!n_args(nargs, 8, "draw_robots") || !int_arg(args[5], "max_draws", &max_draws))
         return NULL;
-    const int64_t *rows = (const int64_t *)buffer_of(args[1], "rows", I64, -1, 0, &h, &n_rows);
-    const double *base = rows ? (const double *)buffer_of(args[3], "base", F64, -1, 0, &h, &cols) : NULL;
-    double *consts = base ? (double *)matrix_of(args[6], "consts", F64, 1, &h, &consts_rows, &consts_cols) : NULL;
-    if (consts == NULL)
-        goto fail;
-    if (cols < ENV_DOUBLES(env_robot) || consts_cols != cols || max_draws < 1) {
-        PyErr_SetString(PyExc_ValueError, "base and the rows of consts must have the same length (a robot's constants), max_draws >= 1");
-        goto fail;
+    if (max_draws < 1 || max_draws > DRAWS_MAX) {
+        PyErr_Format(PyExc_ValueError, "max_draws must be in [1, %d], got %zd", DRAWS_MAX, max_draws);
+        return NULL;
     }
-    const double *spec = spec_of(args[2], cols, &n_spec, &h);
-    const double *limits = spec ? F64_IN(args[4], "limits", 6) : NULL;
-    int64_t *rejected = limits ? I64_OUT(args[7], "rejected", n_rows) : NULL;
-    if (rejected == NULL)
+    const int64_t *rows = (const int64_t *)buffer_of(args[1], "rows", I64, -1, 0, &h, &n_rows);
+    if (rows == NULL)
         goto fail;
-    for (Py_ssize_t k = 0; k < n_rows; k++)
-        if (rows[k] < 0 || rows[k] >= consts_rows) {
-            PyErr_Format(PyExc_ValueError, "rows[%zd] = %lld is not a row of consts", k, (long long)rows[k]);
-            goto fail;
-        }
+    /* the generators first: looking them up may run Python code, which could write the arrays checked below */
     bg = PyMem_Malloc((n_rows ? n_rows : 1) * sizeof(bitgen_t *));
-    u = PyMem_Malloc((n_spec ? n_spec : 1) * sizeof(double));
-    if (bg == NULL || u == NULL) {
+    owners = PyMem_Malloc((n_rows ? n_rows : 1) * sizeof(PyObject *));
+    if (bg == NULL || owners == NULL) {
         PyErr_NoMemory();
         goto fail;
     }
-    if (!bitgens_of(args[0], rows, n_rows, bg))
+    n_owners = n_rows;
+    if (!bitgens_of(args[0], rows, n_rows, bg, owners))
         goto fail;
+    const double *spec = spec_of(args[2], &n_spec, &h);
+    const env_robot *base = spec ? (const env_robot *)rows_of(args[3], "base", sizeof(env_robot), 0, &h, &base_rows) : NULL;
+    const double *limits = base ? F64_IN(args[4], "limits", N_LIMITS) : NULL;
+    env_robot *robots = limits ? (env_robot *)rows_of(args[6], "robots", sizeof(env_robot), 1, &h, &robot_rows) : NULL;
+    int64_t *rejected = robots ? I64_OUT(args[7], "rejected", n_rows) : NULL;
+    if (rejected == NULL)
+        goto fail;
+    if (base_rows != 1) {
+        PyErr_Format(PyExc_ValueError, "base must have 1 row, got %zd", base_rows);
+        goto fail;
+    }
+    for (Py_ssize_t k = 0; k < n_rows; k++)
+        if (rows[k] < 0 || rows[k] >= robot_rows) {
+            PyErr_Format(PyExc_ValueError, "rows[%zd] = %lld is not a row of robots", k, (long long)rows[k]);
+            goto fail;
+        }
+    u = PyMem_Malloc((n_spec ? n_spec : 1) * sizeof(double));
+    if (u == NULL) {
+        PyErr_NoMemory();
+        goto fail;
+    }
     for (Py_ssize_t k = 0; k < n_rows; k++) {
-        double *row = consts + rows[k] * cols;
+        env_robot *row = robots + rows[k];
         rejected[k] = max_draws;
         for (Py_ssize_t t = 0; t < max_draws; t++) {
             for (Py_ssize_t j = 0; j < n_spec; j++)
                 u[j] = bg[k]->next_double(bg[k]->state);
-            if (robot_params(u, spec, n_spec, base, limits, row, cols)) {
+            if (robot_params(u, spec, n_spec, base, limits, row)) {
                 rejected[k] = t;
                 break;
             }
         }
         if (rejected[k] == max_draws)
-            memcpy(row, base, cols * sizeof(double));
+            *row = *base;
     }
+    release_owners(owners, n_owners);
+    PyMem_Free(owners);
     PyMem_Free(bg);
     PyMem_Free(u);
     release_all(&h);
     Py_RETURN_NONE;
 fail:
+    release_owners(owners, n_owners);
+    PyMem_Free(owners);
     PyMem_Free(bg);
     PyMem_Free(u);
     release_all(&h);
@@ -398,7 +505,7 @@ fail:
 }
 
 /* ------------------------------------------------------------------------------------------------
- * Batch: one env's packed arrays handed to C once (the single environment's step is one call)
+ * Batch: one env's arrays handed to C once (the single environment's step is one call)
  * ------------------------------------------------------------------------------------------------ */
 
 typedef struct {
@@ -415,20 +522,30 @@ static void Batch_dealloc(BatchObject *self)
 
 static PyObject *Batch_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
 {
-    PyObject *state, *consts, *out, *obs, *flags;
-    int task;
+    PyObject *task_obj, *state, *robots, *settings, *out, *obs;
+    Py_ssize_t task;
     if (kwds != NULL && PyDict_Size(kwds) > 0) {
         PyErr_SetString(PyExc_TypeError, "Batch takes no keyword arguments");
         return NULL;
     }
-    if (!PyArg_ParseTuple(args, "iOOOOO:Batch", &task, &state, &consts, &out, &obs, &flags))
+    if (!PyTuple_Check(args) || PyTuple_GET_SIZE(args) != 6) {
+        PyErr_Format(PyExc_TypeError, "Batch takes 6 arguments (task, state, robots, settings, out, obs), got %zd",
+                     PyTuple_Check(args) ? PyTuple_GET_SIZE(args) : (Py_ssize_t)-1);
+        return NULL;
+    }
+    if (!PyArg_UnpackTuple(args, "Batch", 6, 6, &task_obj, &state, &robots, &settings, &out, &obs) || !int_arg(task_obj, "task", &task))
         return NULL;
     BatchObject *self = (BatchObject *)type->tp_alloc(type, 0);
     if (self == NULL)
         return NULL;
     self->h.n = 0;
-    self->task = task;
-    if (!batch_of(task, state, consts, out, obs, flags, &self->h, &self->b)) {
+    self->task = (int)(task < 0 || task >= N_TASKS ? -1 : task);
+    if (!batch_of(self->task, state, robots, settings, out, obs, &self->h, &self->b, 0)) {
+        Py_DECREF(self);
+        return NULL;
+    }
+    if (self->b.n < 1) { /* step_one steps robot 0 */
+        PyErr_SetString(PyExc_ValueError, "Batch: state must have at least one row (robot 0 is the one stepped)");
         Py_DECREF(self);
         return NULL;
     }
@@ -442,19 +559,17 @@ static PyObject *Batch_step_one(BatchObject *self, PyObject *const *args, Py_ssi
         PyErr_SetString(PyExc_TypeError, "step_one takes 2 arguments (a0, a1)");
         return NULL;
     }
-    const double a0 = PyFloat_AsDouble(args[0]), a1 = PyFloat_AsDouble(args[1]);
-    if ((a0 == -1.0 || a1 == -1.0) && PyErr_Occurred())
+    double a0, a1;
+    if (!as_double(args[0], "a0", &a0) || !as_double(args[1], "a1", &a1))
         return NULL;
     if (!(isfinite(a0) && isfinite(a1))) {
-        PyErr_SetString(PyExc_ValueError, "step_one: the action must be finite");
+        PyErr_Format(PyExc_ValueError, "step_one: the action (a0, a1) must be finite, got (%g, %g)", a0, a1);
         return NULL;
     }
     const env_batch *b = &self->b;
-    env_state *s = state_row(b, 0);
-    if (!(s->mode == LEG_STICK || s->mode == LEG_SLIP_FORWARD || s->mode == LEG_SLIP_BACKWARD || s->mode == LEG_FLIGHT)) {
-        PyErr_SetString(PyExc_ValueError, "step_one: the state's contact mode must be 0, 1, 2 or 3");
+    if (!batch_values(b, 1)) /* the arrays may have been written since the last call */
         return NULL;
-    }
+    env_state *s = state_row(b, 0);
     s->action[0] = a0;
     s->action[1] = a1;
     physics_range(b, 0, 1);
@@ -462,41 +577,23 @@ static PyObject *Batch_step_one(BatchObject *self, PyObject *const *args, Py_ssi
     return PyFloat_FromDouble(summed_terms(self->task, b));
 }
 
-/* physics_start(noise or None, scale): robot 0 started (at its nominal posture plus noise, if given) and
- * evaluated by the task, without stepping */
+/* start(noise or None, scale): every robot started (at its nominal posture plus noise, or where the state
+ * has it if noise is None) and evaluated by the task, without stepping */
 static PyObject *Batch_start(BatchObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     held h;
     h.n = 0;
-    double scale = 0.0;
+    const double *noise;
+    double scale;
     if (nargs != 2) {
         PyErr_SetString(PyExc_TypeError, "start takes 2 arguments (noise or None, scale)");
         return NULL;
     }
-    const double *noise = NULL;
-    if (args[0] != Py_None) {
-        if (!as_double(args[1], "scale", &scale))
-            return NULL;
-        if (!(scale >= 0.0 && scale < INFINITY)) {
-            PyErr_SetString(PyExc_ValueError, "scale must be finite and >= 0");
-            return NULL;
-        }
-        static const double zeros[6] = {0.0};
-        noise = zeros;
-        if (scale > 0.0) {
-            noise = (const double *)buffer_of(args[0], "noise", F64, 6 * self->b.n, 0, &h, NULL);
-            if (noise == NULL)
-                return NULL;
-        }
+    if (!batch_values(&self->b, 0) || !noise_of(args[0], args[1], self->b.n, &h, &noise, &scale)) {
+        release_all(&h);
+        return NULL;
     }
-    for (Py_ssize_t i = 0; i < self->b.n; i++) {
-        if (noise) {
-            const env_robot *r = robot_row(&self->b, i);
-            env_state *s = state_row(&self->b, i);
-            perturbed_start(scale > 0.0 ? noise + 6 * i : noise, scale, r->q_nom, &r->p, s->q, s->qd, s->anchor);
-        }
-        start_row(&self->b, i);
-    }
+    physics_start(&self->b, noise, scale);
     task_start(self->task, &self->b);
     release_all(&h);
     Py_RETURN_NONE;
@@ -515,7 +612,7 @@ static PyTypeObject BatchType = {
     .tp_basicsize = sizeof(BatchObject),
     .tp_dealloc = (destructor)Batch_dealloc,
     .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_doc = "Batch(task, state, consts, out, obs, flags): an env's packed arrays, held for its control steps.",
+    .tp_doc = "Batch(task, state, robots, settings, out, obs): an env's arrays, held for its control steps.",
     .tp_methods = Batch_methods,
     .tp_new = Batch_new,
 };

@@ -8,6 +8,8 @@
 #include "env.h"
 
 #define STANCE_TERMS 5 /* alive, drift, unilateral, friction, ctrl */
+#define PUSH_TERMS 6   /* the balance task's and com */
+#define HOP_TERMS 7    /* alive, height, drift, tilt, impact, slip, ctrl */
 
 /* m g of the robot, or 1 without gravity (the observed force is then in newtons). */
 static inline double weight_of(const leg_params *P)
@@ -22,12 +24,11 @@ static inline double weight_of(const leg_params *P)
 static void stance_assess(const env_batch *b, Py_ssize_t i, double a0, double a1, double *terms)
 {
     const env_robot *r = robot_row(b, i);
-    const env_settings *c = &robot_row(b, 0)->c; /* the shared settings (a robot's own row differs in mu) */
+    const env_settings *c = b->settings;
     const leg_params *P = &r->p;
-    const double mu = r->c.mu, weight = weight_of(P);
+    const double mu = r->mu, weight = weight_of(P);
     env_state *s = state_row(b, i);
     env_out *o = out_row(b, i);
-    unsigned char *flags = b->flags + i * N_FLAGS;
     float *obs = b->obs + i * b->obs_cols;
     const double lam_x = o->lam[0], lam_y = o->lam[1];
     const double dx = s->q[0] - s->anchor[0] - r->q_nom[0];
@@ -39,19 +40,20 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, double a0, double a1
     const double fx = s->q[0] + P->l1 * co1 + P->l2 * co2 - s->anchor[0];
     const double fy = knee_y + P->l2 * s2 - s->anchor[1];
     const double height = s->q[1] - s->anchor[1];
-    const int unilateral_model = c->unilateral > 0.5;
+    const int unilateral_model = c->unilateral;
 
     const double unilateral = fmax(0.0, -lam_y);
     const double friction = fmax(0.0, fabs(lam_x) - mu * lam_y);
     const int fell = height < c->min_base_height || s->q[1] < knee_y || fabs(th_b) > c->max_torso_angle
-                     || s->q[3] < c->hip_lo || s->q[3] > c->hip_hi || s->q[4] < c->knee_lo || s->q[4] > c->knee_hi;
+                     || s->q[3] < c->hip_range[0] || s->q[3] > c->hip_range[1] || s->q[4] < c->knee_range[0]
+                     || s->q[4] > c->knee_range[1];
     int lost;
     double flight_time = 0.0;
     if (unilateral_model) { /* the ground cannot pull: what is charged is time off it and sliding on it */
         flight_time = o->flight_time;
-        lost = c->terminate_on_contact_loss > 0.5 && (flight_time > 0.0 || lam_y < c->contact_loss_threshold);
+        lost = c->terminate_on_contact_loss && (flight_time > 0.0 || lam_y < c->contact_loss_threshold);
     } else {
-        lost = c->terminate_on_contact_loss > 0.5 && lam_y < c->contact_loss_threshold;
+        lost = c->terminate_on_contact_loss && lam_y < c->contact_loss_threshold;
     }
     const int terminated = fell || lost;
 
@@ -61,39 +63,44 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, double a0, double a1
     if (unilateral_model) {
         terms[2] = -c->w_unilateral * flight_time / c->dt;
         terms[3] = -c->w_friction * o->slip_distance / c->dt;
-        flags[FLAG_FRICTION] = friction > 1e-9 * weight; /* a stick force outside the cone: only by the Painleve rule */
+        o->friction_violation = friction > 1e-9 * weight; /* a stick force outside the cone: only by the Painleve rule */
     } else {
         terms[2] = -c->w_unilateral * unilateral / weight;
         terms[3] = -c->w_friction * friction / weight;
-        flags[FLAG_FRICTION] = friction > 0.0;
+        o->friction_violation = friction > 0.0;
     }
     terms[4] = -c->w_ctrl * (a0 * a0 + a1 * a1);
-    flags[FLAG_TERMINATED] = terminated;
-    flags[FLAG_UNILATERAL] = lam_y < 0.0;
-    flags[FLAG_FAILED] = 0;
+    o->terminated = terminated;
+    o->unilateral_violation = lam_y < 0.0;
+    o->numerical_failure = 0;
     o->base_drift = sqrt(dx * dx + dy * dy);
     o->foot_error = sqrt(fx * fx + fy * fy);
     o->normal_force = lam_y;
+    com_of(P, s, o->com, o->com_velocity);
     /* observation */
-    obs[0] = (float)(s->q[0] - s->anchor[0]);
-    obs[1] = (float)height;
-    for (int j = 2; j < 5; j++)
-        obs[j] = (float)s->q[j];
-    for (int j = 0; j < 5; j++)
-        obs[5 + j] = (float)s->qd[j];
-    obs[10] = (float)(lam_x / weight);
-    obs[11] = (float)(lam_y / weight);
+    obs[OBS_BASE_X] = (float)(s->q[0] - s->anchor[0]);
+    obs[OBS_BASE_Y] = (float)height;
+    obs[OBS_TH_B] = (float)s->q[2];
+    obs[OBS_Q1] = (float)s->q[3];
+    obs[OBS_Q2] = (float)s->q[4];
+    obs[OBS_VX_B] = (float)s->qd[0];
+    obs[OBS_VY_B] = (float)s->qd[1];
+    obs[OBS_W_B] = (float)s->qd[2];
+    obs[OBS_W_Q1] = (float)s->qd[3];
+    obs[OBS_W_Q2] = (float)s->qd[4];
+    obs[OBS_LAM_X] = (float)(lam_x / weight);
+    obs[OBS_LAM_Y] = (float)(lam_y / weight);
     if (unilateral_model) {
         const double w1 = s->qd[2] + s->qd[3], w2 = w1 + s->qd[4];
         double vfx, vfy;
         foot_velocity(P, s1, co1, s2, co2, s->qd[0], s->qd[1], w1, w2, &vfx, &vfy);
-        const double m = s->mode;
-        obs[12] = (float)fy;
-        obs[13] = (float)vfx;
-        obs[14] = (float)vfy;
-        obs[15] = m == LEG_FLIGHT ? 0.0f : 1.0f;
-        obs[16] = m == LEG_SLIP_FORWARD ? 1.0f : (m == LEG_SLIP_BACKWARD ? -1.0f : 0.0f);
-        obs[17] = (float)(o->kick[1] / (weight * c->dt));
+        const int m = s->mode;
+        obs[OBS_FOOT_HEIGHT] = (float)fy;
+        obs[OBS_FOOT_VX] = (float)vfx;
+        obs[OBS_FOOT_VY] = (float)vfy;
+        obs[OBS_CONTACT] = m == LEG_FLIGHT ? 0.0f : 1.0f;
+        obs[OBS_SLIP] = m == LEG_SLIP_FORWARD ? 1.0f : (m == LEG_SLIP_BACKWARD ? -1.0f : 0.0f);
+        obs[OBS_IMPULSE_Y] = (float)(o->kick[1] / (weight * c->dt));
         o->energy = energy_core(P, s1, co1, s2, co2, s->q[1] - s->anchor[1], s->qd[0], s->qd[1], s->qd[2], w1, w2);
         o->foot_height = fy;
     }
@@ -104,19 +111,19 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, double a0, double a1
 static void fail_row(const env_batch *b, Py_ssize_t i, double *terms, int n_terms)
 {
     const env_robot *r = robot_row(b, i);
-    const env_state *s = state_row(b, i);
+    env_state *s = state_row(b, i);
     env_out *o = out_row(b, i);
-    unsigned char *flags = b->flags + i * N_FLAGS;
     for (int k = 0; k < n_terms; k++)
         terms[k] = 0.0;
-    flags[FLAG_TERMINATED] = 1;
-    flags[FLAG_UNILATERAL] = 0;
-    flags[FLAG_FRICTION] = 0;
-    flags[FLAG_FAILED] = 1;
+    o->terminated = 1;
+    o->unilateral_violation = 0;
+    o->friction_violation = 0;
+    o->numerical_failure = 1;
     const double dx = s->q[0] - s->anchor[0] - r->q_nom[0], dy = s->q[1] - s->anchor[1] - r->q_nom[1];
     o->base_drift = sqrt(dx * dx + dy * dy);
     o->foot_error = 0.0;
     o->normal_force = 0.0;
+    com_of(&r->p, s, o->com, o->com_velocity);
 }
 
 /* Evaluate robot i after physics_range stepped it: its balance terms into `terms` (n_terms zeroed on a
@@ -125,15 +132,15 @@ static void fail_row(const env_batch *b, Py_ssize_t i, double *terms, int n_term
  * one. Returns whether the robot was evaluated (no numerical failure). */
 static int evaluate(const env_batch *b, Py_ssize_t i, double *terms, int n_terms)
 {
-    if (b->flags[i * N_FLAGS + FLAG_FAILED]) {
+    env_out *o = out_row(b, i);
+    if (o->numerical_failure) {
         fail_row(b, i, terms, n_terms);
         return 0;
     }
     env_state *s = state_row(b, i);
     float *obs = b->obs + i * b->obs_cols;
-    float kept[64];
-    const Py_ssize_t n_obs = b->obs_cols < 64 ? b->obs_cols : 64;
-    for (Py_ssize_t j = 0; j < n_obs; j++)
+    float kept[OBS_HOP_DIM];
+    for (Py_ssize_t j = 0; j < b->obs_cols; j++)
         kept[j] = obs[j];
     const double a0 = fmin(1.0, fmax(-1.0, s->action[0])), a1 = fmin(1.0, fmax(-1.0, s->action[1]));
     stance_assess(b, i, a0, a1, terms);
@@ -143,39 +150,25 @@ static int evaluate(const env_batch *b, Py_ssize_t i, double *terms, int n_terms
     if (isfinite(total))
         return 1;
     /* the state is finite, but the observation overflowed float32 */
-    for (Py_ssize_t j = 0; j < n_obs; j++)
+    for (Py_ssize_t j = 0; j < b->obs_cols; j++)
         obs[j] = kept[j];
     undo_step(s);
-    env_out *o = out_row(b, i);
     o->lam[0] = 0.0;
     o->lam[1] = 0.0;
-    zero_accumulators(o);
+    zero_record(o);
     o->mode = s->mode;
     fail_row(b, i, terms, n_terms);
     return 0;
 }
 
-static inline double *terms_of(const env_batch *b, Py_ssize_t i) { return b->out + i * b->out_cols + ENV_DOUBLES(env_out); }
-
-static inline void *task_state_of(const env_batch *b, Py_ssize_t i) { return b->state + i * b->state_cols + ENV_DOUBLES(env_state); }
-
-static inline const void *task_constants_of(const env_batch *b) { return b->consts + ENV_DOUBLES(env_robot); }
-
 /* ---------------------------------------------------------------- push recovery (leg_env.tasks.push) */
 
-/* The whole-body COM's x from the state's trigonometry. */
-static inline double com_x(const leg_params *P, const env_state *s)
-{
-    const double m = P->m_b + P->m1 + P->m2;
-    return s->q[0] + ((P->m1 * P->c1 + P->m2 * P->l1) * s->trig[1] + P->m2 * P->c2 * s->trig[3]) / m;
-}
-
 /* The push force held over control step number n (0 at the first). */
-static inline double push_load_at(const push_state *t, double n, double push_steps)
+static inline double push_load_at(const push_state *t, int32_t n, int32_t push_steps)
 {
     for (int j = 0; j < PUSH_MAX; j++) {
-        const double start = t->start[j];
-        if (start <= n && n < start + push_steps)
+        const int32_t start = t->start[j];
+        if (start <= n && (int64_t)n < (int64_t)start + push_steps)
             return t->force[j];
     }
     return 0.0;
@@ -183,116 +176,92 @@ static inline double push_load_at(const push_state *t, double n, double push_ste
 
 static void push_assess(const env_batch *b, Py_ssize_t i)
 {
-    const int n_terms = STANCE_TERMS + 1;
-    const push_constants *k = (const push_constants *)task_constants_of(b);
-    const env_robot *r = robot_row(b, i);
     env_state *s = state_row(b, i);
-    push_state *t = (push_state *)task_state_of(b, i);
-    double *terms = terms_of(b, i), *info = terms + n_terms;
+    env_out *o = out_row(b, i);
+    push_state *t = &s->task.push;
     const double force = s->load;
-    if (evaluate(b, i, terms, n_terms)) {
-        const double dx = com_x(&r->p, s) - t->x_com0;
-        terms[n_terms - 1] = -k->w_com * dx * dx;
+    if (evaluate(b, i, o->terms, PUSH_TERMS)) {
+        const double dx = o->com[0] - t->x_com0;
+        o->terms[PUSH_TERMS - 1] = -b->settings->task.push.w_com * dx * dx;
     }
-    info[0] = force;
-    info[1] = force * (s->q[0] - s->prev_q[0]); /* exact: F constant over the step, x_b continuous (0 if undone) */
-    t->steps += 1.0;
-    s->load = push_load_at(t, t->steps, k->push_steps);
+    o->task.push.push_force = force;
+    o->task.push.work_push = force * (s->q[0] - s->prev_q[0]); /* exact: F constant over the step (0 if undone) */
+    t->steps += 1;
+    s->load = push_load_at(t, t->steps, b->settings->task.push.push_steps);
 }
 
 static void push_start(const env_batch *b, Py_ssize_t i)
 {
-    const int n_terms = STANCE_TERMS + 1;
-    const push_constants *k = (const push_constants *)task_constants_of(b);
-    const env_robot *r = robot_row(b, i);
     env_state *s = state_row(b, i);
-    push_state *t = (push_state *)task_state_of(b, i);
-    double *terms = terms_of(b, i), *info = terms + n_terms;
-    stance_assess(b, i, 0.0, 0.0, terms);
-    for (int j = 0; j < n_terms; j++)
-        terms[j] = 0.0;
-    info[0] = 0.0;
-    info[1] = 0.0;
-    t->steps = 0.0;
-    t->x_com0 = com_x(&r->p, s);
-    s->load = push_load_at(t, 0.0, k->push_steps);
+    env_out *o = out_row(b, i);
+    push_state *t = &s->task.push;
+    stance_assess(b, i, 0.0, 0.0, o->terms);
+    for (int j = 0; j < PUSH_TERMS; j++)
+        o->terms[j] = 0.0;
+    o->task.push.push_force = 0.0;
+    o->task.push.work_push = 0.0;
+    t->steps = 0;
+    t->x_com0 = o->com[0];
+    s->load = push_load_at(t, 0, b->settings->task.push.push_steps);
 }
 
 /* ---------------------------------------------------------------- hopping (leg_env.tasks.hop) */
 
-/* The whole-body COM (x, y, y') from the state's trigonometry. */
-static inline void com_state(const leg_params *P, const env_state *s, double *x, double *y, double *vy)
-{
-    const double m = P->m_b + P->m1 + P->m2, a = P->m1 * P->c1 + P->m2 * P->l1, b = P->m2 * P->c2;
-    const double s1 = s->trig[0], co1 = s->trig[1], s2 = s->trig[2], co2 = s->trig[3];
-    const double w1 = s->qd[2] + s->qd[3], w2 = w1 + s->qd[4];
-    *x = s->q[0] + (a * co1 + b * co2) / m;
-    *y = s->q[1] + (a * s1 + b * s2) / m;
-    *vy = s->qd[1] + (a * co1 * w1 + b * co2 * w2) / m;
-}
-
 static void hop_assess(const env_batch *b, Py_ssize_t i)
 {
-    const int n_terms = 7; /* alive, height, drift, tilt, impact, slip, ctrl */
-    const hop_constants *k = (const hop_constants *)task_constants_of(b);
     const env_robot *r = robot_row(b, i);
     const leg_params *P = &r->p;
     env_state *s = state_row(b, i);
-    const env_out *o = out_row(b, i);
-    const hop_state *t = (const hop_state *)task_state_of(b, i);
-    double *terms = terms_of(b, i);
+    env_out *o = out_row(b, i);
+    const hop_state *t = &s->task.hop;
+    double *terms = o->terms;
     double stance_terms[STANCE_TERMS];
     const double m = P->m_b + P->m1 + P->m2, g = P->g, weight = weight_of(P);
     const double y_stand = r->com_nom[1]; /* the standing COM height above the foot */
+    const double w_height = b->settings->task.hop.w_height, height_scale = b->settings->task.hop.height_scale;
     if (!evaluate(b, i, stance_terms, STANCE_TERMS)) {
-        for (int j = 0; j < n_terms; j++)
+        for (int j = 0; j < HOP_TERMS; j++)
             terms[j] = 0.0;
         return;
     }
-    double x_com, y_com, vy_com;
-    com_state(P, s, &x_com, &y_com, &vy_com);
+    const double x_com = o->com[0], y_com = o->com[1], vy_com = o->com_velocity[1];
     const double e_v = 0.5 * m * vy_com * vy_com + m * g * (y_com - s->anchor[1]);
     const double e_star = m * g * (y_stand + t->command);
-    const double err = (e_v - e_star) / (weight * k->height_scale);
+    const double err = (e_v - e_star) / (weight * height_scale);
     const double dx = x_com - t->x_com0;
     const double px = o->kick[0], py = o->kick[1];
     terms[0] = stance_terms[0]; /* alive: the balance task's health predicate */
-    terms[1] = k->w_height * exp(-err * err);
-    terms[2] = -k->w_drift * dx * dx;
-    terms[3] = -k->w_tilt * s->q[2] * s->q[2];
-    terms[4] = -k->w_impact * (px * px + py * py) / (m * m);
-    terms[5] = -k->w_slip * o->slip_distance / robot_row(b, 0)->c.dt;
+    terms[1] = w_height * exp(-err * err);
+    terms[2] = -b->settings->task.hop.w_drift * dx * dx;
+    terms[3] = -b->settings->task.hop.w_tilt * s->q[2] * s->q[2];
+    terms[4] = -b->settings->task.hop.w_impact * (px * px + py * py) / (m * m);
+    terms[5] = -b->settings->task.hop.w_slip * o->slip_distance / b->settings->dt;
     terms[6] = stance_terms[4]; /* ctrl */
-    if (b->flags[i * N_FLAGS + FLAG_TERMINATED]) /* terminated: nothing but the penalties */
+    if (o->terminated) /* terminated: nothing but the penalties */
         terms[1] = 0.0;
 }
 
 static void hop_start(const env_batch *b, Py_ssize_t i)
 {
-    const int n_terms = 7;
-    const env_robot *r = robot_row(b, i);
     env_state *s = state_row(b, i);
-    hop_state *t = (hop_state *)task_state_of(b, i);
-    double *terms = terms_of(b, i);
-    double stance_terms[STANCE_TERMS], y, vy;
+    env_out *o = out_row(b, i);
+    double stance_terms[STANCE_TERMS];
     stance_assess(b, i, 0.0, 0.0, stance_terms);
-    for (int j = 0; j < n_terms; j++)
-        terms[j] = 0.0;
-    b->obs[i * b->obs_cols + b->obs_cols - 1] = (float)t->command;
-    com_state(&r->p, s, &t->x_com0, &y, &vy);
+    for (int j = 0; j < HOP_TERMS; j++)
+        o->terms[j] = 0.0;
+    b->obs[i * b->obs_cols + OBS_COMMAND] = (float)s->task.hop.command;
+    s->task.hop.x_com0 = o->com[0];
 }
 
 /* ---------------------------------------------------------------- dispatch */
 
 /* The number of reward terms of each task. */
-static int task_terms(int task) { return task == TASK_STANCE ? STANCE_TERMS : (task == TASK_PUSH ? STANCE_TERMS + 1 : 7); }
+static int task_terms(int task) { return task == TASK_STANCE ? STANCE_TERMS : (task == TASK_PUSH ? PUSH_TERMS : HOP_TERMS); }
 
-/* The task's own state columns, constants and info columns (doubles) after the shared ones. */
-static void task_columns(int task, Py_ssize_t *state, Py_ssize_t *constants, Py_ssize_t *info)
+/* The observation's width of a task on its ground. */
+static Py_ssize_t task_obs_dim(int task, int unilateral)
 {
-    *state = task == TASK_PUSH ? ENV_DOUBLES(push_state) : (task == TASK_HOP ? ENV_DOUBLES(hop_state) : 0);
-    *constants = task == TASK_PUSH ? ENV_DOUBLES(push_constants) : (task == TASK_HOP ? ENV_DOUBLES(hop_constants) : 0);
-    *info = task == TASK_PUSH ? 2 : 0;
+    return task == TASK_HOP ? OBS_HOP_DIM : (unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM);
 }
 
 /* The task after a control step of robots lo .. hi - 1. */
@@ -304,7 +273,7 @@ static void task_assess(int task, const env_batch *b, Py_ssize_t lo, Py_ssize_t 
         else if (task == TASK_HOP)
             hop_assess(b, i);
         else
-            evaluate(b, i, terms_of(b, i), STANCE_TERMS);
+            evaluate(b, i, out_row(b, i)->terms, STANCE_TERMS);
     }
 }
 
@@ -317,7 +286,7 @@ static void task_start(int task, const env_batch *b)
         } else if (task == TASK_HOP) {
             hop_start(b, i);
         } else {
-            double *terms = terms_of(b, i);
+            double *terms = out_row(b, i)->terms;
             stance_assess(b, i, 0.0, 0.0, terms);
             for (int k = 0; k < STANCE_TERMS; k++)
                 terms[k] = 0.0;
@@ -328,9 +297,21 @@ static void task_start(int task, const env_batch *b)
 /* Robot 0's reward: its reward terms summed in order. */
 static double summed_terms(int task, const env_batch *b)
 {
-    const double *terms = terms_of(b, 0);
+    const double *terms = out_row(b, 0)->terms;
     double reward = terms[0];
     for (int k = 1; k < task_terms(task); k++)
         reward += terms[k];
     return reward;
+}
+
+/* Every robot's reward: its terms summed in order (the single env's sum, row by row). */
+static void summed_rewards(int task, const env_batch *b, double *reward)
+{
+    for (Py_ssize_t i = 0; i < b->n; i++) {
+        const double *terms = out_row(b, i)->terms;
+        double sum = terms[0];
+        for (int k = 1; k < task_terms(task); k++)
+            sum += terms[k];
+        reward[i] = sum;
+    }
 }

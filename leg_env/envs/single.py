@@ -15,10 +15,9 @@ from ..params import PARAM_NAMES, LegParams
 from ..hybrid import GROUND_TOL
 from .. import tasks
 from .._core import kernels
-from ..step import FLAG_NAMES, OUT_EXTRA, OUT_LAM, STATE_ACTION, STATE_ANCHOR, STATE_MODE, STATE_Q, STATE_QD
-from ..step import C_MU, OUT_BASE
+from ..info import InfoBuilder
 from ..randomize import Robots, params_of_row
-from ..tasks.stance import OUT_KICK, StanceConfig, info_template, nominal_state, row_info, task_constants
+from ..tasks.stance import StanceConfig, nominal_state, robot_row
 
 __all__ = ["LegEnv"]
 
@@ -28,10 +27,8 @@ QPOS_BOUND = 1.0e6
 MAX_PIXELS = 16384  # largest frame width or height
 # attributes that are views of the buffers (rebuilt by _bind, never pickled)
 _NO_NOISE = np.zeros((1, 6))  # the posture noise of a start without noise (not read)
-_VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_action_row", "_out_row", "_flag_row", "_obs_row", "_kernel_args", "_force_row", "_kick_row",
-          "_core", "_step_kernel", "_task_columns", "task", "_physics_args",
-          "_tail_keys", "_template", "_reset_keys", "_reset_template", "_reset_columns", "_task_draws", "_out_info",
-          "_human")  # fmt: skip
+_VIEWS = ("_q", "_qd", "_anchor", "_out_row", "_state_row", "_obs_row", "_core", "_step_kernel", "task", "_info",
+          "_task_draws", "_human")  # fmt: skip
 
 
 class LegEnv(gym.Env):
@@ -73,21 +70,21 @@ class LegEnv(gym.Env):
 
         self.unilateral = self.config.contact == "unilateral"
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
-        # the kernel's packed arrays (leg_env.task), one row, shared with nothing; _bind() makes the views
-        self._consts = task_constants(self.params, self.config, self.nominal)
-        self.robots = Robots(randomize, self._consts[0], self.config)  # leg_env.randomize
+        # the compiled core's arrays (leg_env.layout), one row, shared with nothing; _bind() hands them to C
+        self._robots = robot_row(self.params, self.config, self.nominal)
+        self.robots = Robots(randomize, self._robots, self.config)  # leg_env.randomize
         self.observation_space = self.task.observation_space(self.robots.longest(self.params), self.config)
         self._custom_robot = False  # whether the robot is not the nominal one
-        self._state = np.zeros((1, self.task.state_dim))  # leg_env.step's layout, then the task's columns
-        self._out = np.zeros((1, self.task.out_dim))  # leg_env.step's layout, then reward terms and task info
+        self._settings = self.config.settings(self.task.name)
+        self._state = np.zeros(1, dtype=self.task.state_dtype)
+        self._out = np.zeros(1, dtype=self.task.out_dtype)
         self._obs = np.zeros((1, self.observation_space.shape[0]), dtype=np.float32)
-        self._flags = np.zeros((1, len(FLAG_NAMES)), dtype=np.bool_)
         self._bind()
         self._viewer = None
 
         # start at the nominal posture, so that it can be checked against the termination limits
-        self._start(self.nominal.q, np.zeros(5), np.zeros(2), self.task.task_columns(np.full((1, self.task.draws(self.config)), 0.5), self.config)[0])
-        if self._flags[0, 0]:
+        self._start(self.nominal.q, np.zeros(5), np.zeros(2), self.task.task_columns(np.full((1, self.task.draws(self.config)), 0.5), self.config))
+        if self._out["terminated"][0]:
             raise ValueError(
                 "the nominal posture is already terminal under these limits "
                 f"(q = {np.round(self.nominal.q, 3).tolist()}; check min_base_height, max_torso_angle, hip_range, knee_range, contact_loss_threshold)"
@@ -105,26 +102,25 @@ class LegEnv(gym.Env):
         super().reset(seed=seed)
         rejected = None
         if robot is not None:  # the robot first: the nominal posture is the robot's
-            self._consts[0] = robot
+            self._robots[0] = robot
         elif self.robots.active:
-            rejected = self.robots.draw_one(self.np_random, self._consts[0])
+            rejected = self.robots.draw_one(self.np_random, self._robots)
         elif self._custom_robot:
-            self._consts[0] = self.robots.base
+            self._robots[0] = self.robots.base[0]
         self._custom_robot = robot is not None or self.robots.active
         posture = 6 if start is None and self.config.reset_noise_scale > 0.0 else 0  # uniforms of the posture noise
         k = posture + self._task_draws
         draws = self.np_random.random((1, k)) if k else np.empty((1, 0))  # rng.random(out=...)'s numbers
-        columns = self.task.task_columns(draws[:, posture:], self.config)[0] if self._reset_columns else None
-        if start is None:  # the posture noise, the contact and the task's evaluation in two compiled calls
-            if columns is not None:
-                self._task_columns[:] = columns
+        for field, values in self.task.task_columns(draws[:, posture:], self.config).items():
+            self._state[field] = values
+        if start is None:  # the posture noise, the contact and the task's evaluation in one compiled call
             self._core.start(draws[:, :posture] if posture else _NO_NOISE, self.config.reset_noise_scale)
         else:
             q, qd = start
-            self._start(q, qd, start_anchor(q, self.robot_params, self.unilateral), columns)
-        info = self._info(self._out_row.tolist(), self._flag_row.tolist())
+            self._start(q, qd, start_anchor(q, self.robot_params, self.unilateral), {})
+        info = self._info(rewards=False)
         if self._custom_robot:
-            info["params"] = params_of_row(self._consts[0])
+            info["params"] = params_of_row(self._robots[0])
             if rejected is not None:
                 info["params_rejected"] = rejected
         if self.render_mode == "human":
@@ -141,15 +137,10 @@ class LegEnv(gym.Env):
         if self._human and self._viewer is None:
             self._open_window()  # before the state changes
         reward = self._step_kernel(a0, a1)  # the action, physics, the task in one call; the terms summed
-        out, flags = self._out_row.tolist(), self._flag_row.tolist()  # one conversion each serves every key
-        if self.unilateral:
-            info = row_info(out, flags, self._force_row, self._template, self._kick_row)
-        else:
-            info = row_info(out, flags, self._force_row, self._template)
-        info.update(zip(self._tail_keys, out[OUT_BASE:]))  # the reward terms, then the task's own info
+        info = self._info()
         if self._human:
             self.render()
-        return self._obs_row.copy(), reward, flags[0], False, info
+        return self._obs_row.copy(), reward, bool(self._out_row["terminated"]), False, info
 
     def render(self):
         if self.render_mode is None:
@@ -160,16 +151,14 @@ class LegEnv(gym.Env):
             return None
         from .. import render
 
-        violated = bool(self._flags[0, 1] or self._flags[0, 2])
-        mode, impulse = contact_marks(self._state, self._out, 0, self.unilateral)
-        push = push_mark(self.task, self._out, 0)
+        violated, mode, impulse, push = render_marks(self._out, 0, self.unilateral)
+        lam = self._out["lam"][0]
         if self.render_mode == "rgb_array":
             return render.draw(
-                self._q[0], self._anchor[0], self._lam[0], self.robot_params, violated, self.width, self.height, self._robot_mu(), mode, impulse,
-                push,
+                self._q[0], self._anchor[0], lam, self.robot_params, violated, self.width, self.height, self._robot_mu(), mode, impulse, push,
             )  # fmt: skip
         self._open_window()
-        self._viewer.show(self._q[0], self._anchor[0], self._lam[0], self.robot_params, violated, self._robot_mu(), mode, impulse, push)
+        self._viewer.show(self._q[0], self._anchor[0], lam, self.robot_params, violated, self._robot_mu(), mode, impulse, push)
         return None
 
     def _open_window(self) -> None:
@@ -197,57 +186,38 @@ class LegEnv(gym.Env):
         return self._q[0].copy(), self._qd[0].copy(), self._anchor[0].copy()
 
     def _robot_mu(self) -> float:
-        return robot_of_row(self._consts[0])[1]
+        return float(self._robots["mu"][0])
 
     @property
     def robot_params(self) -> LegParams:
         """The ``LegParams`` of the robot being simulated: ``params`` unless randomised or set by a reset."""
         if not self._custom_robot:
             return self.params
-        return robot_of_row(self._consts[0])[0]
+        return robot_of_row(self._robots[0])[0]
 
     # ------------------------------------------------------------ helpers
 
     def _bind(self) -> None:
-        """Named views of the packed buffers and the kernel's argument tuple (rebuilt after unpickling)."""
-        state, out = self._state, self._out
+        """The arrays handed to C (``kernels.Batch``) and named views of them (rebuilt after unpickling)."""
+        state = self._state
         self.task = tasks.get(self.task_name)
-        self._q, self._qd, self._anchor, self._action = state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR], state[:, STATE_ACTION]
-        self._lam, self._terms, self._extra = out[:, OUT_LAM], out[:, self.task.out_terms], out[:, OUT_EXTRA]
-        self._action_row, self._out_row, self._flag_row, self._obs_row = self._action[0], out[0], self._flags[0], self._obs[0]
-        self._force_row, self._kick_row = out[0, OUT_LAM], out[0, OUT_KICK]
-        self._kernel_args = (state, self._consts, out, self._obs, self._flags)
-        self._physics_args = (state, self._consts, out, self._flags)
-        self._core = kernels.Batch(self.task.kernel, state, self._consts, out, self._obs, self._flags)  # the arrays, held by C
+        self._q, self._qd, self._anchor = state["q"], state["qd"], state["anchor"]
+        self._out_row, self._state_row, self._obs_row = self._out[0], state[0], self._obs[0]
+        self._core = kernels.Batch(self.task.kernel, state, self._robots, self._settings, self._out, self._obs)  # held by C
         self._step_kernel = self._core.step_one
-        self._tail_keys = self.task.reward_keys + self.task.info_names  # the columns out[OUT_BASE:]
-        self._template = info_template(self.unilateral, self._tail_keys)
-        self._reset_keys = self.task.info_names  # a reset's info has no reward terms: the columns after them
-        self._out_info = self.task.out_info
-        self._reset_template = info_template(self.unilateral, self._reset_keys)
-        self._reset_columns = bool(self.task.state_names)
+        self._info = InfoBuilder(self.task, self.unilateral).reader(self._out, state)
         self._task_draws = self.task.draws(self.config)
         self._human = self.render_mode == "human"
-        self._task_columns = state[0, len(state[0]) - len(self.task.state_names):] if self.task.state_names else None
 
-    def _start(self, q, qd, anchor, columns) -> None:
+    def _start(self, q, qd, anchor, columns: dict) -> None:
         """Put the robot at ``(q, qd)`` with its foot on ``anchor`` and the task's state ``columns``, and
         evaluate it without stepping."""
         self._q[0] = q
         self._qd[0] = qd
         self._anchor[0] = anchor
-        if self._task_columns is not None:
-            self._task_columns[:] = columns
+        for field, values in columns.items():
+            self._state[field] = values
         self._core.start(None, 0.0)
-
-    def _info(self, out: list, flags: list) -> dict:
-        """``info`` of a reset (no reward terms) from the output row and the flags, as lists."""
-        if self.unilateral:
-            info = row_info(out, flags, self._force_row, self._reset_template, self._kick_row)
-        else:
-            info = row_info(out, flags, self._force_row, self._reset_template)
-        info.update(zip(self._reset_keys, out[self._out_info]))
-        return info
 
     def _explicit_state(self, options: dict | None) -> tuple[np.ndarray, np.ndarray] | None:
         """The checked ``(q, qd)`` of the ``qpos`` / ``qvel`` reset options, or None without them."""
@@ -276,9 +246,9 @@ class LegEnv(gym.Env):
         self._bind()
 
 
-def robot_of_row(row: np.ndarray) -> tuple[LegParams, float]:
-    """The ``LegParams`` and friction coefficient of the robot whose ``consts`` row is ``row``."""
-    return LegParams(**{name: float(v) for name, v in zip(PARAM_NAMES, row[:len(PARAM_NAMES)])}), float(row[len(PARAM_NAMES) + C_MU])
+def robot_of_row(row) -> tuple[LegParams, float]:
+    """The ``LegParams`` and friction coefficient of a robot (a row of ``leg_env.layout.ROBOT``)."""
+    return LegParams(**dict(zip(PARAM_NAMES, row["p"].item()))), float(row["mu"])
 
 
 def explicit_start(options: dict, q_nominal: np.ndarray, max_rate: float, rows: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -297,19 +267,16 @@ def explicit_start(options: dict, q_nominal: np.ndarray, max_rate: float, rows: 
     return out[0], out[1]
 
 
-def contact_marks(state: np.ndarray, out: np.ndarray, i: int, unilateral: bool):
-    """``(mode, impulse)`` of row ``i`` for the renderer: ``(None, None)`` in the pinned model."""
+def render_marks(out: np.ndarray, i: int, unilateral: bool):
+    """What the renderer marks for robot ``i`` from its ``out`` row: ``(violated, mode, impulse, push)``: whether
+    its force broke the ground's limits, its contact mode and impact impulse (None on the pinned foot) and the
+    push on its torso over the last step [N] (0 for a task without pushes)."""
+    o = out[i]
+    violated = bool(o["unilateral_violation"] or o["friction_violation"])
+    push = float(o["push_force"]) if "push_force" in out.dtype.names else 0.0
     if not unilateral:
-        return None, None
-    return int(state[i, STATE_MODE]), out[i, OUT_KICK]
-
-
-def push_mark(task, out: np.ndarray, i: int) -> float:
-    """The push on robot ``i``'s torso over its last step [N] for the renderer (the task's ``push_force``
-    info column), 0 for a task without pushes."""
-    if "push_force" not in task.info_names:
-        return 0.0
-    return float(out[i, task.out_info.start + task.info_names.index("push_force")])
+        return violated, None, None, push
+    return violated, int(o["mode"]), o["kick"].copy(), push
 
 
 def start_anchor(q: np.ndarray, params: LegParams, unilateral: bool) -> np.ndarray:

@@ -6,7 +6,7 @@ from typing import Any
 
 from ..params import LegParams
 from ..tasks.stance import StanceConfig, observation_space  # noqa: F401  (re-exported)
-from .single import LegEnv, QPOS_BOUND, contact_marks, explicit_start, start_anchor  # noqa: F401  (re-exported)
+from .single import LegEnv, QPOS_BOUND, explicit_start, render_marks, start_anchor  # noqa: F401  (re-exported)
 
 __all__ = ["PlanarLegStanceEnv"]
 
@@ -120,7 +120,7 @@ class PlanarLegStanceEnv(LegEnv):
     charge what asking for it does instead: ``reward_unilateral = -unilateral_weight flight_time / dt``
     (the share of the step spent off the ground) and ``reward_friction = -friction_weight
     slip_distance / dt`` (the mean slip speed over the step, m/s). ``info`` then also has
-    ``leg_env.task.UNILATERAL_KEYS`` (``leg_env.task.unilateral_info`` documents them): ``contact_mode``
+    the unilateral keys of ``leg_env.info`` (which documents every key): ``contact_mode``
     (``"stick"``, ``"slip"``, ``"flight"`` at the end of the step), ``foot_height``, ``impulse``, the time in
     each mode, ``slip_distance``, ``work_actuators``, ``dissipation_slip``, ``dissipation_impacts``,
     ``energy`` and the counts ``contact_events``, ``painleve_fallbacks``, ``zeno_settles``;
@@ -129,8 +129,9 @@ class PlanarLegStanceEnv(LegEnv):
 
     ``info`` also has ``contact_force`` (``lam`` [N], shape (2,)), ``normal_force`` (``lam_y`` [N]),
     ``unilateral_violation`` (``lam_y < 0``), ``friction_violation`` (``|lam_x| > mu lam_y``),
-    ``numerical_failure``, ``base_drift`` (``|p_b - p_nom|`` [m]) and ``foot_error`` (the foot's
-    distance from its contact point [m]). ``reset`` returns the same keys except the reward terms.
+    ``numerical_failure``, ``base_drift`` (``|p_b - p_nom|`` [m]), ``foot_error`` (the foot's distance from
+    its contact point [m]) and ``com_position``, ``com_velocity`` (the whole-body centre of mass and its
+    velocity, world frame [m, m/s], shape (2,) each). ``reset`` returns the same keys except the reward terms.
 
     ## Starting State
     The nominal posture plus uniform noise in ``[-reset_noise_scale, reset_noise_scale]`` on the torso,

@@ -1,11 +1,11 @@
 """``leg_env/PlanarLegStance-v0`` as a natively batched ``gymnasium.vector.VectorEnv``.
 
 ``gymnasium.make_vec("leg_env/PlanarLegStance-v0", num_envs=N)`` builds this class (it is the id's
-``vector_entry_point``). One call of the task kernel ``leg_env.task.step_batch`` advances all N robots,
-the same kernel the single environment calls with N = 1, and resets build their start states with the
-same ``leg_env.step.physics_start_noisy`` and task ``start`` kernels (the noise, and with ``randomize`` the
-robot, drawn in compiled code from each sub-env's own generator, ``BitGeneratorRows``, the same numbers
-as ``rng.random``): sub-env ``i`` of a batch reset with
+``vector_entry_point``). Two calls of the compiled core advance all N robots (``leg_env.step.physics_range``
+and the task's ``assess``), the same kernels the single environment calls with N = 1, and resets build their
+start states with the same task ``start`` kernel (the noise, and with ``randomize`` the robot, drawn in
+compiled code from each sub-env's own generator, ``BitGeneratorRows``, the same numbers as ``rng.random``):
+sub-env ``i`` of a batch reset with
 ``seed=s`` is exactly a ``PlanarLegStanceEnv`` reset with ``seed=s + i`` under ``TimeLimit``, step for
 step and across autoresets. Observations, rewards, terminations, truncations and ``info`` (keys,
 values and ``_key`` masks) equal, bit for bit, those of ``gymnasium.vector.SyncVectorEnv`` over N
@@ -29,47 +29,25 @@ from gymnasium.vector.utils import batch_space
 from .. import checks
 from ..params import LegParams
 from .. import tasks
-from ..step import (
-    FLAG_NAMES,
-    OUT_EXTRA,
-    OUT_LAM,
-    STATE_ACTION,
-    STATE_ANCHOR,
-    STATE_Q,
-    STATE_QD,
-    STATE_MODE,
-    BitGeneratorRows,
-    physics_range,
-    physics_start,
-    physics_start_noisy,
-)
+from ..info import KEYS, InfoBuilder
 from ..randomize import FIELD_COLUMNS, FIELDS
-from ..tasks.stance import INFO_NAMES, REWARD_TERMS, UNILATERAL_KEYS, StanceConfig, unilateral_columns
-from .single import LegEnv, contact_marks, explicit_start, push_mark, robot_of_row, start_anchor
+from ..step import BitGeneratorRows, physics_range
+from ..tasks.stance import REWARD_TERMS, StanceConfig
+from .single import LegEnv, explicit_start, render_marks, robot_of_row, start_anchor
 
 __all__ = ["LegVectorEnv", "PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
 
 REWARD_KEYS = tuple(f"reward_{name}" for name in REWARD_TERMS)
 """``info`` keys of the balance task's reward terms (after a step only); they sum to the reward
 (a task's own: ``env.reward_keys``)."""
-STATE_KEYS = (
-    "contact_force",
-    "normal_force",
-    "unilateral_violation",
-    "friction_violation",
-    "numerical_failure",
-    "base_drift",
-    "foot_error",
-)
-"""``info`` keys after both ``reset`` and ``step``, as in the single environment (and, with
-``contact="unilateral"``, ``leg_env.task.UNILATERAL_KEYS`` after them: ``state_keys``)."""
+STATE_KEYS = tuple(key for key, _ in KEYS)
+"""``info`` keys of every task after both ``reset`` and ``step``, as in the single environment (``leg_env.info``;
+an env's own, with those of its ground and task: ``state_keys``)."""
 
-_FLAG = {name: k for k, name in enumerate(FLAG_NAMES)}
-_EXTRA = {name: k for k, name in enumerate(INFO_NAMES)}
 _RESET_OPTIONS = ("qpos", "qvel", "reset_mask", "params")
 MAX_ENVS = 2**31 - 1  # bound of num_envs and render_envs
 MAX_THREADS = 256  # bound of num_threads
-_VIEWS = ("_q", "_qd", "_anchor", "_action", "_lam", "_terms", "_extra", "_kernel_args", "_physics_args", "task")  # rebuilt by _bind, never pickled
+_VIEWS = ("_q", "_qd", "_anchor", "_action", "task", "_info_builder")  # rebuilt by _bind, never pickled
 _UNPICKLED = _VIEWS + ("_pool",)  # the thread pool is made anew where it is used
 
 
@@ -199,7 +177,8 @@ class LegVectorEnv(VectorEnv):
         self._pool: tuple[int, ThreadPoolExecutor] | None = None  # (pid, pool), made at the first threaded step
         self.width, self.height = single.width, single.height
         self.unilateral = single.unilateral
-        self.state_keys = STATE_KEYS + (UNILATERAL_KEYS if self.unilateral else ()) + self.task.info_names
+        self._info_builder = InfoBuilder(self.task, self.unilateral)
+        self.state_keys = self._info_builder.keys
         self.params, self.config, self.nominal = single.params, single.config, single.nominal
         self.metadata = {**type(self).metadata, "render_fps": single.metadata["render_fps"], "autoreset_mode": autoreset_mode}
         self.single_observation_space = single.observation_space
@@ -207,14 +186,14 @@ class LegVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, n)
         self.action_space = batch_space(self.single_action_space, n)
 
-        # the kernel's packed arrays (leg_env.task), row i is sub-env i; _bind() makes the views
-        # one consts row for every robot, or a row per robot when robots are drawn or set by a reset
-        self._consts = np.repeat(self.robots.base[None, :], n if self.robots.active else 1, axis=0)
+        # the compiled core's arrays (leg_env.layout), row i is sub-env i; _bind() makes the views
+        # one robot for every row, or a row per robot when robots are drawn or set by a reset
+        self._robots = np.repeat(self.robots.base, n if self.robots.active else 1)
         self._custom = np.zeros(n, dtype=np.bool_)  # rows whose robot is not the nominal one
-        self._state = np.zeros((n, self.task.state_dim))  # leg_env.step's layout, then the task's columns
-        self._out = np.zeros((n, self.task.out_dim))  # leg_env.step's layout, then reward terms and task info
+        self._settings = single._settings
+        self._state = np.zeros(n, dtype=self.task.state_dtype)
+        self._out = np.zeros(n, dtype=self.task.out_dtype)
         self._obs = np.zeros((n, self.single_observation_space.shape[0]), dtype=np.float32)
-        self._flags = np.zeros((n, len(FLAG_NAMES)), dtype=np.bool_)
         self._bind()
         nominal_columns = self.task.task_columns(np.full((n, self.task.draws(self.config)), 0.5), self.config)
         self._start(None, (self.nominal.q, np.zeros(5), np.zeros(2)), None, nominal_columns)  # every row at the nominal posture
@@ -253,9 +232,9 @@ class LegVectorEnv(VectorEnv):
         self._needs_reset = any(rng is None for rng in self._rngs.generators)  # a reset_mask may leave some never reset
         info = {}
         if rows.size == n:
-            self._add_state_info(info, self._out, self._flags, self._state[:, STATE_MODE])
+            self._add_state_info(info, self._out, self._state)
         else:
-            self._add_state_info(info, self._out[rows], self._flags[rows], self._state[rows, STATE_MODE], rows)
+            self._add_state_info(info, self._out[rows], self._state[rows], rows)
         self._add_params_info(info, rows, rejected)
         return self._obs.copy(), info
 
@@ -268,7 +247,7 @@ class LegVectorEnv(VectorEnv):
             stepped[t.restarted] = False
         info = {}
         self._add_reward_info(info, stepped, t.terms)
-        self._add_state_info(info, self._out, self._flags, self._state[:, STATE_MODE])
+        self._add_state_info(info, self._out, self._state)
         if t.restarted is not None:  # their reset's robot, as SyncVectorEnv passes a reset's info on
             self._add_params_info(info, t.restarted, t.rejected)
         if t.final is not None:  # SAME_STEP: the ended rows report their reset, their last step goes to final_*
@@ -278,7 +257,7 @@ class LegVectorEnv(VectorEnv):
                 final_obs[i] = t.final.obs[k]
             final_info = {}
             self._add_reward_info(final_info, ended, t.terms)
-            self._add_state_info(final_info, t.final.out, t.final.flags, t.final.mode, t.restarted)
+            self._add_state_info(final_info, t.final.out, t.final.state, t.restarted)
             info["final_obs"] = final_obs
             info["_final_obs"] = ended
             info["final_info"] = final_info
@@ -303,14 +282,10 @@ class LegVectorEnv(VectorEnv):
 
         frames = []
         for i in range(self.num_envs if self.render_envs is None else min(self.render_envs, self.num_envs)):
-            violated = bool(self._flags[i, _FLAG["unilateral_violation"]] or self._flags[i, _FLAG["friction_violation"]])
-            mode, impulse = contact_marks(self._state, self._out, i, self.unilateral)
-            params, mu = robot_of_row(self._consts[i if self._consts.shape[0] > 1 else 0])  # each robot drawn as it is
+            violated, mode, impulse, push = render_marks(self._out, i, self.unilateral)
+            params, mu = robot_of_row(self._robots[i if self._robots.shape[0] > 1 else 0])  # each robot drawn as it is
             frames.append(
-                render.draw(
-                    self._q[i], self._anchor[i], self._lam[i], params, violated, self.width, self.height, mu,
-                    mode, impulse, push_mark(self.task, self._out, i),
-                )
+                render.draw(self._q[i], self._anchor[i], self._out["lam"][i], params, violated, self.width, self.height, mu, mode, impulse, push)
             )  # fmt: skip
         return tuple(frames)
 
@@ -367,19 +342,19 @@ class LegVectorEnv(VectorEnv):
                 'with reset(options={"reset_mask": mask}) before stepping them again'
             )
         if self.num_threads == 1:
-            physics_range(0, self.num_envs, *self._physics_args)
+            physics_range(0, self.num_envs, self._state, self._robots, self._settings, self._out)
         else:
             self._physics_threaded()
-        self.task.assess(*self._kernel_args)
+        self.task.assess(self._state, self._robots, self._settings, self._out, self._obs)
         self._elapsed += 1
         if restarted is not None:
             self._start(restarted, *starts)  # zeroes their reward terms too
             self._elapsed[restarted] = 0
-        terms = self._terms.copy()  # the step's, before a SAME_STEP reset zeroes the reset rows' terms
+        terms = self._out["terms"][:, :len(self.reward_keys)].copy()  # the step's, before a SAME_STEP reset zeroes the reset rows'
         reward = terms[:, 0].copy()
         for k in range(1, terms.shape[1]):  # summed in order, as the single env does
             reward += terms[:, k]
-        terminated = self._flags[:, 0].copy()
+        terminated = self._out["terminated"].copy()
         if self.max_episode_steps is None:
             truncated = np.zeros(self.num_envs, dtype=np.bool_)
         else:
@@ -390,7 +365,7 @@ class LegVectorEnv(VectorEnv):
         final = None
         if mode == AutoresetMode.SAME_STEP and ended.any():
             restarted = np.flatnonzero(ended)
-            final = _Final(self._obs[restarted], self._flags[restarted], self._out[restarted], self._state[restarted, STATE_MODE])
+            final = _Final(self._obs[restarted], self._out[restarted], self._state[restarted])
             rejected = self._set_robots(restarted)
             self._start(restarted, *self._draw_starts(restarted))
             self._elapsed[restarted] = 0
@@ -409,7 +384,7 @@ class LegVectorEnv(VectorEnv):
         pid = os.getpid()
         if self._pool is None or self._pool[0] != pid:
             self._pool = (pid, ThreadPoolExecutor(self.num_threads, thread_name_prefix="leg_env"))
-        n, k, args = self.num_envs, self.num_threads, self._physics_args
+        n, k, args = self.num_envs, self.num_threads, (self._state, self._robots, self._settings, self._out)
         chunks = [self._pool[1].submit(physics_range, j * n // k, (j + 1) * n // k, *args) for j in range(k)]
         for chunk in chunks:
             chunk.result()
@@ -437,15 +412,14 @@ class LegVectorEnv(VectorEnv):
         before the start state, as the single env draws them; returns the refused draws (None if none drawn)."""
         rejected = None
         if robots is not None or self.robots.active or self._custom[rows].any():
-            if self._consts.shape[0] == 1:  # from now on a row per robot
-                self._consts = np.repeat(self._consts, self.num_envs, axis=0)
-                self._bind()
+            if self._robots.shape[0] == 1:  # from now on a row per robot
+                self._robots = np.repeat(self._robots, self.num_envs)
             if robots is not None:
-                self._consts[rows] = robots
+                self._robots[rows] = robots
             elif self.robots.active:
-                rejected = self.robots.draw_rows(self._rngs, rows, self._consts)
+                rejected = self.robots.draw_rows(self._rngs, rows, self._robots)
             else:
-                self._consts[rows] = self.robots.base
+                self._robots[rows] = self.robots.base[0]
             self._custom[rows] = robots is not None or self.robots.active
         return rejected
 
@@ -457,7 +431,7 @@ class LegVectorEnv(VectorEnv):
             return
         n = self.num_envs
         columns = np.zeros((len(FIELDS), n))  # one block for every field's column, one for every mask
-        columns[:, custom] = self._consts[custom][:, FIELD_COLUMNS].T
+        columns[:, custom] = self._robots[custom].view(np.float64).reshape(custom.size, -1)[:, FIELD_COLUMNS].T
         masks = np.zeros((len(FIELDS) + 1, n), dtype=np.bool_)
         masks[:, custom] = True
         params = {}
@@ -484,44 +458,40 @@ class LegVectorEnv(VectorEnv):
         noise = None if explicit is not None else np.ascontiguousarray(draws[:, :posture])
         return explicit, noise, columns
 
-    def _start(self, rows: np.ndarray | None, explicit, noise, columns) -> None:
+    def _start(self, rows: np.ndarray | None, explicit, noise, columns: dict) -> None:
         """Start ``rows`` (all if None) with the task's state ``columns`` and evaluate them without stepping.
 
-        ``explicit``: ``(q, qd, anchor)`` (each broadcast to ``(len(rows), .)``), put on their contact by
-        ``physics_start``; else the nominal posture plus the posture ``noise`` (``(len(rows), 6 or 0)``
-        uniforms), by ``physics_start_noisy``, each robot from its own row of ``consts``. Their reward
-        terms become zero.
+        ``explicit``: ``(q, qd, anchor)`` (each broadcast to ``(len(rows), .)``), put on their contact as they
+        are; else the nominal posture plus the posture ``noise`` (``(len(rows), 6 or 0)`` uniforms), each robot
+        from its own row of ``robots``. Their reward terms become zero.
         """
-        first = self._state.shape[1] - len(self.task.state_names)  # the task's first state column
         if rows is None:
-            state, consts, out, obs, flags = self._kernel_args
+            state, robots, out, obs = self._state, self._robots, self._out, self._obs
         else:
             k = rows.size
-            state, out = np.zeros((k, self._state.shape[1])), np.zeros((k, self._out.shape[1]))
-            obs, flags = np.empty((k, self._obs.shape[1]), dtype=np.float32), np.empty((k, len(FLAG_NAMES)), dtype=np.bool_)
-            consts = self._consts if self._consts.shape[0] == 1 else self._consts[rows]
-        state[:, first:] = columns
-        if explicit is None:
-            physics_start_noisy(noise, self.config.reset_noise_scale, state, consts, out, flags)
-        else:
-            state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR] = explicit
-            physics_start(state, consts, out, flags)
-        self.task.start(state, consts, out, obs, flags)
+            state, out = np.zeros(k, dtype=self._state.dtype), np.zeros(k, dtype=self._out.dtype)
+            obs = np.empty((k, self._obs.shape[1]), dtype=np.float32)
+            robots = self._robots if self._robots.shape[0] == 1 else self._robots[rows]
+        for field, values in columns.items():
+            state[field] = values
+        if explicit is not None:
+            state["q"], state["qd"], state["anchor"] = explicit
+            noise = None
+        elif noise.shape[1] == 0:
+            noise = np.zeros((state.shape[0], 6))  # no posture noise: not read
+        self.task.start(state, robots, self._settings, out, obs, noise, self.config.reset_noise_scale)
         if rows is None:
             return
         self._state[rows] = state
         self._out[rows] = out
         self._obs[rows] = obs
-        self._flags[rows] = flags
 
     def _bind(self) -> None:
-        """Named views of the packed buffers and the kernel's argument tuple (rebuilt after unpickling)."""
-        state, out = self._state, self._out
+        """Named views of the arrays (rebuilt after unpickling)."""
+        state = self._state
         self.task = tasks.get(self.task_name)
-        self._q, self._qd, self._anchor, self._action = state[:, STATE_Q], state[:, STATE_QD], state[:, STATE_ANCHOR], state[:, STATE_ACTION]
-        self._lam, self._terms, self._extra = out[:, OUT_LAM], out[:, self.task.out_terms], out[:, OUT_EXTRA]
-        self._kernel_args = (state, self._consts, out, self._obs, self._flags)
-        self._physics_args = (state, self._consts, out, self._flags)
+        self._q, self._qd, self._anchor, self._action = state["q"], state["qd"], state["anchor"], state["action"]
+        self._info_builder = InfoBuilder(self.task, self.unilateral)
 
     def __getstate__(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if k not in _UNPICKLED}
@@ -561,20 +531,6 @@ class LegVectorEnv(VectorEnv):
         q, qd = explicit_start(options, self.nominal.q, self.config.max_rate, rows=k)
         return q, qd, start_anchor(q, self.params, self.unilateral)
 
-    def _step_info_columns(self, t: "_Transition") -> dict:
-        """Every ``info`` key of the step itself, one array per key over all rows.
-
-        Rows that SAME_STEP reset during the step report their last step, not their reset
-        (what Stable-Baselines3 puts in a sub-env's ``info``). Shared with ``leg_env.sb3``.
-        """
-        columns = {key: t.terms[:, k] for k, key in enumerate(self.reward_keys)}
-        state = self._state_columns(self._out, self._flags, self._state[:, STATE_MODE])
-        if t.final is not None:
-            for key, rows_values in self._state_columns(t.final.out, t.final.flags, t.final.mode).items():
-                state[key][t.restarted] = rows_values
-        columns.update(state)
-        return columns
-
     def _add_reward_info(self, info: dict, mask: np.ndarray | None, terms: np.ndarray) -> None:
         """The reward terms of the rows in ``mask`` (all if None), zeros elsewhere.
 
@@ -591,15 +547,16 @@ class LegVectorEnv(VectorEnv):
             info[key] = columns[k]
             info["_" + key] = masks[k]
 
-    def _add_state_info(self, info: dict, out, flags, modes, rows: np.ndarray | None = None) -> None:
-        """The state keys from row-aligned ``out, flags, modes`` of ``rows`` (all if None); zeros elsewhere."""
+    def _add_state_info(self, info: dict, out, state, rows: np.ndarray | None = None) -> None:
+        """The state keys (``leg_env.info``) from row-aligned ``out`` and ``state`` of ``rows`` (all if None);
+        zeros elsewhere."""
         n = self.num_envs
         if rows is None:
             masks = np.ones((len(self.state_keys), n), dtype=np.bool_)
         else:
             masks = np.zeros((len(self.state_keys), n), dtype=np.bool_)
             masks[:, rows] = True
-        for k, (key, values) in enumerate(self._state_columns(out, flags, modes).items()):
+        for k, (key, values) in enumerate(self._info_builder.columns(out, state).items()):
             if rows is not None:
                 column = np.zeros((n, *values.shape[1:]), dtype=values.dtype)
                 column[rows] = values
@@ -607,33 +564,13 @@ class LegVectorEnv(VectorEnv):
             info[key] = values
             info["_" + key] = masks[k]
 
-    def _state_columns(self, out, flags, modes) -> dict:
-        """The state keys as fresh arrays over the rows of ``out (k, OUT_DIM), flags (k, 4), modes (k,)``."""
-        flag_rows, extra_rows = flags.T.copy(), out[:, OUT_EXTRA].T.copy()  # two copies serve six keys
-        columns = {
-            "contact_force": out[:, OUT_LAM].copy(),
-            "normal_force": extra_rows[_EXTRA["normal_force"]],
-            "unilateral_violation": flag_rows[_FLAG["unilateral_violation"]],
-            "friction_violation": flag_rows[_FLAG["friction_violation"]],
-            "numerical_failure": flag_rows[_FLAG["numerical_failure"]],
-            "base_drift": extra_rows[_EXTRA["base_drift"]],
-            "foot_error": extra_rows[_EXTRA["foot_error"]],
-        }
-        if self.unilateral:
-            columns.update(unilateral_columns(out, modes))
-        if self.task.info_names:
-            task_info = out[:, self.task.out_info].T.copy()
-            columns.update(zip(self.task.info_names, task_info))
-        return columns
-
 
 class _Final(NamedTuple):
     """The last step of the rows that SAME_STEP reset, before the reset (row-aligned with ``restarted``)."""
 
     obs: np.ndarray
-    flags: np.ndarray
     out: np.ndarray
-    mode: np.ndarray
+    state: np.ndarray
 
 
 class _Transition(NamedTuple):

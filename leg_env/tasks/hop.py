@@ -63,7 +63,6 @@ __all__ = ["HopConfig", "TASK", "REWARD_TERMS", "OBS_DIM"]
 REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl")
 N_TERMS = len(REWARD_TERMS)
 OBS_DIM = OBS_DIM_UNILATERAL + 1
-STATE_NAMES = ("command", "x_com0")
 _BIG = 1.0e6
 
 
@@ -96,18 +95,10 @@ class HopConfig(StanceConfig):
             object.__setattr__(self, name, checks.real(f"HopConfig.{name}", getattr(self, name), 0.0, _BIG))
         object.__setattr__(self, "height_scale", checks.real("HopConfig.height_scale", self.height_scale, 0.0, _BIG, lo_open=True, unit="m"))
 
-    def task_array(self, p, nominal) -> np.ndarray:
-        """``consts`` after the nominal COM: the weights (the standing height is the robot's nominal COM)."""
-        return np.array(
-            [
-                self.height_weight,
-                self.height_scale,
-                self.drift_com_weight,
-                self.tilt_weight,
-                self.impact_weight,
-                self.slip_weight,
-            ]
-        )
+    def task_settings(self, row: np.ndarray) -> None:
+        """The hop's weights in its ``settings`` row (the standing height is each robot's nominal COM)."""
+        row["w_height"], row["height_scale"], row["w_drift"] = self.height_weight, self.height_scale, self.drift_com_weight
+        row["w_tilt"], row["w_impact"], row["w_slip"] = self.tilt_weight, self.impact_weight, self.slip_weight
 
 
 def observation_space(params, config: HopConfig):
@@ -124,11 +115,10 @@ def _draws(config: HopConfig) -> int:
     return 1
 
 
-def _columns(draws: np.ndarray, config: HopConfig) -> np.ndarray:
+def _columns(draws: np.ndarray, config: HopConfig) -> dict:
+    """The command of ``k`` robots from their ``(k, 1)`` uniforms."""
     lo, hi = config.command_range
-    out = np.zeros((draws.shape[0], len(STATE_NAMES)))
-    out[:, 0] = lo + (hi - lo) * draws[:, 0]
-    return out
+    return {"command": lo + (hi - lo) * draws[:, 0]}
 
 
 TASK = Task(
@@ -137,7 +127,7 @@ TASK = Task(
     reward_terms=REWARD_TERMS,
     kernel=2,
     observation_space=observation_space,
-    state_names=STATE_NAMES,
+    state_info=("command",),
     draws=_draws,
     columns=_columns,
 )

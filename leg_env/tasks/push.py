@@ -75,18 +75,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import checks
+from .._core import kernels
 from .base import Task
 from .stance import REWARD_TERMS as _STANCE_TERMS, StanceConfig, observation_space
 
 __all__ = ["PushConfig", "TASK", "MAX_PUSHES", "REWARD_TERMS", "INFO_NAMES"]
 
-MAX_PUSHES = 8  # pushes scheduled per episode: at least 0.8 + 7 x 2 s = 14.8 s of them
+MAX_PUSHES = kernels.PUSH_MAX  # pushes scheduled per episode (8): at least 0.8 + 7 x 2 s = 14.8 s of them
 REWARD_TERMS = _STANCE_TERMS + ("com",)
 N_TERMS = len(REWARD_TERMS)
 INFO_NAMES = ("push_force", "work_push")
-STATE_NAMES = ("steps", "x_com0") + tuple(f"push_start_{k}" for k in range(MAX_PUSHES)) + tuple(
-    f"push_force_{k}" for k in range(MAX_PUSHES)
-)
 _DRAWS_PER_PUSH = 3  # start time, sign, magnitude
 _BIG = 1.0e6
 PUSH_RANGES = {
@@ -135,17 +133,17 @@ class PushConfig(StanceConfig):
         """Control steps of one push: ``push_duration / dt`` rounded, at least one."""
         return max(1, int(round(self.push_duration / self.dt)))
 
-    def task_array(self, p, nominal) -> np.ndarray:
-        """``consts`` after the nominal torques: push length in steps, COM weight."""
-        return np.array([float(self.push_steps), self.com_weight])
+    def task_settings(self, row: np.ndarray) -> None:
+        """The push's length in control steps and the COM weight in its ``settings`` row."""
+        row["push_steps"], row["w_com"] = self.push_steps, self.com_weight
 
 
 def _draws(config: PushConfig) -> int:
     return _DRAWS_PER_PUSH * MAX_PUSHES
 
 
-def _columns(draws: np.ndarray, config: PushConfig) -> np.ndarray:
-    """The schedule of ``k`` robots from their ``(k, 3 MAX_PUSHES)`` uniforms: steps, x_com0, starts, forces.
+def _columns(draws: np.ndarray, config: PushConfig) -> dict:
+    """The schedule of ``k`` robots from their ``(k, 3 MAX_PUSHES)`` uniforms: each push's start and force.
 
     Push ``j`` uses draws ``3 j`` (start time), ``3 j + 1`` (sign) and ``3 j + 2`` (magnitude). Row by row
     the same arithmetic whatever ``k`` is, so a batch's schedules are the single env's bit for bit.
@@ -157,11 +155,9 @@ def _columns(draws: np.ndarray, config: PushConfig) -> np.ndarray:
     gaps[:, 0] = f0 + (f1 - f0) * u[:, 0, 0]
     gaps[:, 1:] = i0 + (i1 - i0) * u[:, 1:, 0]
     times = np.cumsum(gaps, axis=1)
-    out = np.zeros((k, len(STATE_NAMES)))
-    out[:, 2:2 + MAX_PUSHES] = np.rint(times / config.dt)
     sign = np.where(u[:, :, 1] < 0.5, 1.0, -1.0)
-    out[:, 2 + MAX_PUSHES:] = sign * (m0 + (m1 - m0) * u[:, :, 2])
-    return out
+    # the start's control step (a push past 2^30 steps, 124 days at 100 Hz, never comes)
+    return {"push_start": np.minimum(np.rint(times / config.dt), 2.0**30), "push_force": sign * (m0 + (m1 - m0) * u[:, :, 2])}
 
 
 TASK = Task(
@@ -171,7 +167,6 @@ TASK = Task(
     kernel=1,
     observation_space=observation_space,
     info_names=INFO_NAMES,
-    state_names=STATE_NAMES,
     draws=_draws,
     columns=_columns,
 )

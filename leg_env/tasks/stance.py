@@ -1,12 +1,14 @@
-"""The balance task (``leg_env/PlanarLegStance-v0`` and ``-v1``): configuration, observation, reward, termination.
+"""The balance task (``leg_env/PlanarLegStance-v0``, ``leg_env/PlanarLegBalance-v0``): configuration,
+observation, reward, termination.
 
-A control step is two calls of the compiled core on the packed arrays of ``leg_env.step``: the shared
+A control step is two calls of the compiled core on the structured arrays of ``leg_env.layout``: the shared
 physics (``leg_env.step.physics_range``) and this task's kernel ``assess`` (``leg_env/_core/tasks.c``:
-observation, every reward term, every termination flag). The single environment calls them with a batch of one and the vector
-environment with a batch of N, so the two cannot disagree. ``StanceConfig`` holds every setting; tasks
-built on this one (``leg_env.tasks.push``) extend it and call ``_assess``.
+observation, every reward term, every termination flag). The single environment calls them with a batch of
+one and the vector environment with a batch of N, so the two cannot disagree. ``StanceConfig`` holds every
+setting; tasks built on this one (``leg_env.tasks.push``, ``hop``) extend it, and their kernels call this
+one's.
 
-Observation (float32, ``OBS_DIM = 12``):
+Observation (float32, ``OBS_DIM = 12``; ``Obs`` names the columns):
 
 ===== ======================================== ======
 index meaning                                  unit
@@ -29,38 +31,29 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, fields, replace
+from enum import IntEnum
 
 import numpy as np
 
 from .._core import kernels
-from ..contact import MODE_NAMES
-from ..dynamics import NP, com_position, static_equilibrium
-from ..hybrid import (
-    ACC_DIM, ACC_EVENTS, ACC_FLIGHT_TIME, ACC_IMPACT_DISSIPATION, ACC_KICK_X, ACC_KICK_Y,
-    ACC_PAINLEVE, ACC_SETTLES, ACC_SLIP_DISSIPATION, ACC_SLIP_DISTANCE, ACC_SLIP_TIME, ACC_STICK_TIME, ACC_WORK,
-    ACC_WORK_LOAD,
-)  # fmt: skip
-from .. import checks
+from .. import checks, layout
+from ..dynamics import com_position, static_equilibrium
 from ..integrate import MAX_ANGLE, MAX_SUBSTEPS, SUBSTEPS, DT
 from ..params import LegParams
-from ..step import (
-    ACC0, CONSTS_BASE, FLAG_NAMES, NC, NOM0, OUT_BASE, OUT_MODE, OUT_EXTRA, OUT_LAM, STATE_DIM, TAU0,
-    BitGeneratorRows, physics_range, physics_start,
-)  # fmt: skip
+from ..step import FLAG_NAMES, BitGeneratorRows, physics_range
 
 __all__ = [
     "StanceConfig",
     "FIELD_RANGES",
     "OBS_DIM",
+    "OBS_DIM_UNILATERAL",
+    "Obs",
     "REWARD_TERMS",
     "FLAG_NAMES",
-    "INFO_NAMES",
     "Nominal",
     "nominal_state",
-    "STATE_DIM",
-    "OUT_DIM",
-    "CONSTS_DIM",
-    "task_constants",
+    "robot_row",
+    "settings_row",
     "step_batch",
     "step_range",
     "start_batch",
@@ -68,19 +61,17 @@ __all__ = [
     "reset_states",
     "starts_from_noise",
     "BitGeneratorRows",
-    "OBS_DIM_UNILATERAL",
     "CONTACT_MODELS",
     "DEFAULT_MU",
     "UNILATERAL_KEYS",
-    "unilateral_info",
-    "row_info",
-    "info_template",
-    "REWARD_INFO_KEYS",
-    "unilateral_columns",
+    "observation_space",
 ]
 
-OBS_DIM = 12
-OBS_DIM_UNILATERAL = 18  # the pinned observation and the foot's height, velocity, contact, slip and impulse
+OBS_DIM = layout.OBS["pinned_dim"]  # 12
+OBS_DIM_UNILATERAL = layout.OBS["unilateral_dim"]  # 18: the foot's height, velocity, contact, slip and impulse after them
+Obs = IntEnum("Obs", {name: i for name, i in layout.OBS.items() if not name.endswith("_dim")})
+"""The observation's columns by name (``obs[:, Obs.contact]``), as the compiled core writes them: the 12 of the
+pinned foot, the 6 of the unilateral ground, and the hop task's ``command`` last."""
 CONTACT_MODELS = ("pinned", "unilateral")
 DEFAULT_MU = {"pinned": 0.8, "unilateral": 0.5}
 """Default friction coefficient per contact model. Pinned: the cone of the violation check (as in v0).
@@ -88,23 +79,13 @@ Unilateral: 0.5, below the Painleve bound ``mu_critical`` everywhere in the join
 parameters (its minimum there is about 0.52; 0.8 would leave about 8% of postures past it), so
 sliding is always well posed and the Painleve rule stays a fallback."""
 REWARD_TERMS = ("alive", "drift", "unilateral", "friction", "ctrl")
-INFO_NAMES = ("base_drift", "foot_error", "normal_force")
-HYBRID_NAMES = ("energy", "foot_height")  # unilateral extras after the step's accumulators (leg_env.hybrid.ACC_*)
 UNILATERAL_KEYS = (
     "contact_mode", "foot_height", "impulse", "stick_time", "slip_time", "flight_time", "slip_distance",
     "work_actuators", "dissipation_slip", "dissipation_impacts", "energy", "contact_events", "painleve_fallbacks",
     "zeno_settles",
 )  # fmt: skip
-"""``info`` keys of the unilateral contact model, after ``reset`` and ``step`` (``unilateral_info``)."""
+"""``info`` keys of the unilateral contact model, after ``reset`` and ``step`` (``leg_env.info``)."""
 
-# The packed arrays are those of ``leg_env.step`` (state, consts, out, obs, flags). This task's columns:
-#   out: ... | reward terms (REWARD_TERMS order, from OUT_BASE) ; no state columns, no task constants.
-#   obs (N, OBS_DIM or OBS_DIM_UNILATERAL) float32
-_TERMS0 = OUT_BASE
-OUT_DIM = OUT_BASE + len(REWARD_TERMS)
-N_TERMS = len(REWARD_TERMS)
-OUT_TERMS = slice(_TERMS0, OUT_DIM)
-OUT_KICK = slice(ACC0 + ACC_KICK_X, ACC0 + ACC_KICK_Y + 1)
 _INF = math.inf
 _BIG = 1.0e6  # bound of lengths, angles, torques, rates and reward weights: far beyond any use, far below overflow
 FIELD_RANGES = {
@@ -136,8 +117,6 @@ FIELD_RANGES = {
 ``reset_noise_scale`` at most pi (a wider noise wraps the angles); ``max_angle`` may be ``inf`` (fixed
 steps). The other bounds only keep products and the float32 observation from overflowing."""
 
-_NP, _NC, _NOM0, _TAU0 = NP, NC, NOM0, TAU0
-CONSTS_DIM = CONSTS_BASE
 
 
 @dataclass(frozen=True)
@@ -234,40 +213,22 @@ class StanceConfig:
         """A copy with ``changes`` (checked as at construction)."""
         return replace(self, **changes)
 
-    def task_array(self, p: LegParams, nominal: "Nominal") -> np.ndarray:
-        """Constants of a task built on this one, after the nominal torques in ``consts`` (none here)."""
-        return np.zeros(0)
+    def task_settings(self, row: np.ndarray) -> None:
+        """Write a task's own settings into its ``settings_row`` (none for the balance task)."""
 
-    def array(self) -> np.ndarray:
-        """The numeric settings in the order the kernels read them (``_C_*`` indices; ``leg_env.step.C_*``)."""
-        return np.array(
-            [
-                self.dt,
-                self.substeps,
-                self.max_angle,
-                self.torque_limit[0],
-                self.torque_limit[1],
-                self.alive_bonus,
-                self.drift_position_weight,
-                self.drift_angle_weight,
-                self.drift_velocity_weight,
-                self.unilateral_weight,
-                self.friction_weight,
-                self.ctrl_cost_weight,
-                self.mu,
-                self.min_base_height,
-                self.max_torso_angle,
-                self.hip_range[0],
-                self.hip_range[1],
-                self.knee_range[0],
-                self.knee_range[1],
-                float(self.terminate_on_contact_loss),
-                self.contact_loss_threshold,
-                self.max_rate,
-                float(self.contact == "unilateral"),
-            ],
-            dtype=np.float64,
-        )
+    def settings(self, task: str = "stance") -> np.ndarray:
+        """The settings the compiled core reads, as a 1-row array of ``leg_env.layout.settings_dtype(task)``."""
+        row = np.zeros(1, dtype=layout.settings_dtype(task))
+        row["dt"], row["max_angle"], row["max_rate"], row["substeps"] = self.dt, self.max_angle, self.max_rate, self.substeps
+        row["alive_bonus"] = self.alive_bonus
+        row["w_position"], row["w_angle"], row["w_velocity"] = self.drift_position_weight, self.drift_angle_weight, self.drift_velocity_weight
+        row["w_unilateral"], row["w_friction"], row["w_ctrl"] = self.unilateral_weight, self.friction_weight, self.ctrl_cost_weight
+        row["min_base_height"], row["max_torso_angle"] = self.min_base_height, self.max_torso_angle
+        row["hip_range"], row["knee_range"] = self.hip_range, self.knee_range
+        row["terminate_on_contact_loss"], row["contact_loss_threshold"] = self.terminate_on_contact_loss, self.contact_loss_threshold
+        row["unilateral"] = self.contact == "unilateral"
+        self.task_settings(row)
+        return row
 
 
 if set(FIELD_RANGES) | {"terminate_on_contact_loss", "contact"} != {f.name for f in fields(StanceConfig)}:
@@ -299,50 +260,56 @@ def nominal_state(p: LegParams, config: StanceConfig) -> Nominal:
     return Nominal(q=q, tau=tau, lam=lam)
 
 
-def task_constants(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.ndarray:
-    """The kernels' ``consts`` of one robot (they only read it), shape ``(1, CONSTS_DIM + task constants)``: parameters,
-    settings, nominal posture, holding torques and COM, task constants (``leg_env.step``)."""
-    parts = (p.array, config.array(), nominal.q, nominal.tau, com_position(nominal.q, p), config.task_array(p, nominal))
-    if [len(x) for x in parts[:5]] != [_NP, _NC, 5, 2, 2]:
-        raise RuntimeError(f"task_constants: layout mismatch {[len(x) for x in parts]}")  # a developer error
-    return np.concatenate(parts).astype(np.float64)[None, :]  # writable: a reset may put another robot in a row
+def robot_row(p: LegParams, config: StanceConfig, nominal: Nominal) -> np.ndarray:
+    """A robot as the compiled core reads it, a 1-row array of ``leg_env.layout.ROBOT``: its parameters, the task's
+    friction and torque limits, its nominal posture, holding torques and COM (writable: a reset may put another
+    robot in it)."""
+    row = np.zeros(1, dtype=layout.ROBOT)
+    row["p"] = tuple(p.array)
+    row["mu"], row["torque_limit"] = config.mu, config.torque_limit
+    row["q_nom"], row["tau_nom"], row["com_nom"] = nominal.q, nominal.tau, com_position(nominal.q, p)
+    return row
 
 
-def step_batch(state, consts, out, obs, flags):
+def settings_row(config: StanceConfig, task: str = "stance") -> np.ndarray:
+    """``config.settings(task)``: the task's settings as the compiled core reads them."""
+    return config.settings(task)
+
+
+def step_batch(state, robots, settings, out, obs):
     """Advance every robot one control step and evaluate the task, in place (one thread).
 
     Args:
-        state: ``(N, STATE_DIM)`` float64 packed state (``leg_env.step``); ``q`` and ``qd`` are
-            overwritten (left unchanged on numerical failure); the actions must already be checked
-            finite and are clipped here to [-1, 1].
-        consts: ``task_constants(...)``.
-        out: ``(N, OUT_DIM)`` float64 out: mean contact force over the step [N], the extras, the
-            hybrid step's accumulators and the reward terms (columns ``OUT_*``).
+        state: ``(N,)`` array of ``leg_env.layout.state_dtype("stance")``; ``q`` and ``qd`` are overwritten (left
+            unchanged on numerical failure); the actions (``state["action"]``) must already be checked finite and
+            are clipped here to [-1, 1].
+        robots: ``robot_row(...)`` (one robot for all), or a row per robot.
+        settings: ``settings_row(config)``.
+        out: ``(N,)`` array of ``leg_env.layout.out_dtype("stance")``: the mean contact force over the step [N],
+            the extras, what the hybrid step did, the flags and the reward terms.
         obs: ``(N, 12 or 18)`` float32 out (left at the previous observation on numerical failure).
-        flags: ``(N, 4)`` bool out, in ``FLAG_NAMES`` order.
     """
-    physics_range(0, state.shape[0], state, consts, out, flags)
-    TASK.assess(state, consts, out, obs, flags)
+    physics_range(0, state.shape[0], state, robots, settings, out)
+    TASK.assess(state, robots, settings, out, obs)
 
 
-def step_range(lo, hi, state, consts, out, obs, flags):
+def step_range(lo, hi, state, robots, settings, out, obs):
     """``step_batch`` of the rows ``lo <= i < hi`` only (the physics releases the GIL).
 
     Robots are independent: the rows of a batch stepped in any split are bitwise those of ``step_batch``.
     """
-    physics_range(lo, hi, state, consts, out, flags)
-    TASK.assess(state[lo:hi], consts if consts.shape[0] == 1 else consts[lo:hi], out[lo:hi], obs[lo:hi], flags[lo:hi])
+    physics_range(lo, hi, state, robots, settings, out)
+    TASK.assess(state[lo:hi], robots if robots.shape[0] == 1 else robots[lo:hi], settings, out[lo:hi], obs[lo:hi])
 
 
-def start_batch(state, consts, out, obs, flags):
+def start_batch(state, robots, settings, out, obs):
     """Put freshly reset robots on their contact and evaluate them without stepping.
 
-    ``leg_env.step.physics_start`` (its docstring says how each contact model starts), then ``start``:
-    the reward terms are zero and ``flags[:, 0]`` tells whether the start state is already terminal.
-    Arguments as in ``step_batch`` (the actions are not read).
+    ``state["q"], state["qd"], state["anchor"]`` hold the start states; ``leg_env.step`` says how each contact
+    model starts. The reward terms are zero and ``out["terminated"]`` tells whether the start state is already
+    terminal. Arguments as in ``step_batch`` (the actions are not read).
     """
-    physics_start(state, consts, out, flags)
-    TASK.start(state, consts, out, obs, flags)
+    TASK.start(state, robots, settings, out, obs)
 
 
 def reset_state(rng: np.random.Generator, p: LegParams, config: StanceConfig, nominal: Nominal):
@@ -387,112 +354,6 @@ def starts_from_noise(noise: np.ndarray, p: LegParams, config: StanceConfig, nom
     return q, qd, anchor
 
 
-# ``row_info`` unpacks a whole output row at once: it relies on this layout of ``out``
-assert (OUT_EXTRA.start, ACC0, OUT_MODE, OUT_BASE) == (2, 5, 22, 23) and (ACC_KICK_X, ACC_STICK_TIME, ACC_EVENTS, ACC_WORK_LOAD, ACC_DIM) == (2, 4, 11, 14, 15)
-
-
-def info_template(unilateral: bool, tail_keys: tuple = ()) -> dict:
-    """The keys of ``row_info``'s dict, in its order, each None: ``row_info`` copies it and fills it.
-
-    ``tail_keys`` are the names of the output columns from ``OUT_BASE`` on (a task's reward keys, then its
-    own info names), as ``row_info`` writes them.
-    """
-    keys = ("contact_force", "normal_force", "unilateral_violation", "friction_violation", "numerical_failure", "base_drift", "foot_error")
-    return dict.fromkeys(keys + (UNILATERAL_KEYS if unilateral else ()) + tuple(tail_keys))
-
-
-def row_info(out: list, flags: list, force: np.ndarray, template: dict, impulse: np.ndarray | None = None) -> dict:
-    """``info`` of one robot after a step, from its output row and flags (each as a list).
-
-    ``force`` and ``impulse`` are the row's ``OUT_LAM`` and ``OUT_KICK`` columns (views, copied here:
-    Gymnasium asks for new info data on every call); ``template`` is ``info_template(...)`` of the env.
-    The keys are ``contact_force`` (shape (2,)), ``normal_force``, the three violation / failure flags,
-    ``base_drift`` and ``foot_error``; with an ``impulse`` (the unilateral model) also the
-    ``UNILATERAL_KEYS`` of ``unilateral_info`` (``contact_mode`` from the ``OUT_MODE`` column); the template's tail keys
-    are left for the caller to fill (from the columns ``out[OUT_BASE:]``). This runs at every ``env.step``: a copy of a template does not grow its table item by item as a large dict
-    display would.
-    """
-    (
-        base_drift, foot_error, normal_force,
-        _, _, _, _, stick_time, slip_time, flight_time, slip_distance, work, d_slip, d_impacts,
-        events, painleve, settles, _, energy, foot_height,
-        mode,
-    ) = out[2:OUT_BASE]  # fmt: skip
-    _, unilateral_violation, friction_violation, failure = flags
-    info = template.copy()
-    info["contact_force"] = force.copy()
-    info["normal_force"] = normal_force
-    info["unilateral_violation"] = unilateral_violation
-    info["friction_violation"] = friction_violation
-    info["numerical_failure"] = failure
-    info["base_drift"] = base_drift
-    info["foot_error"] = foot_error
-    if impulse is not None:
-        info["contact_mode"] = _MODE_NAME_OF[mode]
-        info["foot_height"] = foot_height
-        info["impulse"] = impulse.copy()
-        info["stick_time"] = stick_time
-        info["slip_time"] = slip_time
-        info["flight_time"] = flight_time
-        info["slip_distance"] = slip_distance
-        info["work_actuators"] = work
-        info["dissipation_slip"] = d_slip
-        info["dissipation_impacts"] = d_impacts
-        info["energy"] = energy
-        info["contact_events"] = int(events) if events else 0
-        info["painleve_fallbacks"] = int(painleve) if painleve else 0
-        info["zeno_settles"] = int(settles) if settles else 0
-    return info
-
-
-_MODE_NAME_OF = {float(mode): name for mode, name in enumerate(MODE_NAMES)}  # the mode column's value -> name
-_UNILATERAL_TEMPLATE = info_template(True)
-REWARD_INFO_KEYS = tuple(f"reward_{name}" for name in REWARD_TERMS)
-"""``info`` keys of the balance task's reward terms, after a step only (they sum to the reward)."""
-
-
-def unilateral_info(out: list, mode: float) -> dict:
-    """The ``UNILATERAL_KEYS`` of one robot from its output row (as a list) and its mode.
-
-    ``contact_mode`` is ``"stick"``, ``"slip"`` or ``"flight"`` at the end of the step; ``foot_height`` [m];
-    ``impulse`` the sum of impact impulses on the foot in the step [N s], shape (2,); ``stick_time``,
-    ``slip_time``, ``flight_time`` [s] (they sum to ``dt``); ``slip_distance`` [m]; ``work_actuators``,
-    ``dissipation_slip``, ``dissipation_impacts`` [J] (``energy(t) - energy(0)`` is the sum over the steps
-    of the first minus the other two) and ``energy`` (kinetic + potential, [J]); ``contact_events``,
-    ``painleve_fallbacks``, ``zeno_settles`` (ints) count what ``leg_env.hybrid`` describes.
-    """
-    out = list(out[:OUT_BASE])
-    out[OUT_MODE] = float(mode)
-    row = np.asarray(out, dtype=np.float64)
-    info = row_info(out, [False] * len(FLAG_NAMES), row[OUT_LAM], _UNILATERAL_TEMPLATE, row[OUT_KICK])
-    return {key: info[key] for key in UNILATERAL_KEYS}
-
-
-def unilateral_columns(out: np.ndarray, modes: np.ndarray) -> dict:
-    """``unilateral_info`` of many robots at once: one fresh array per key over the rows of ``out``."""
-    acc = out[:, ACC0:OUT_MODE].T.copy()  # one copy serves every key
-    counts = acc[[ACC_EVENTS, ACC_PAINLEVE, ACC_SETTLES]].astype(np.int64)
-    return {
-        "contact_mode": np.take(_MODE_NAME_ARRAY, modes.astype(np.intp)),
-        "foot_height": acc[ACC_DIM + 1],
-        "impulse": acc[ACC_KICK_X:ACC_KICK_Y + 1].T,
-        "stick_time": acc[ACC_STICK_TIME],
-        "slip_time": acc[ACC_SLIP_TIME],
-        "flight_time": acc[ACC_FLIGHT_TIME],
-        "slip_distance": acc[ACC_SLIP_DISTANCE],
-        "work_actuators": acc[ACC_WORK],
-        "dissipation_slip": acc[ACC_SLIP_DISSIPATION],
-        "dissipation_impacts": acc[ACC_IMPACT_DISSIPATION],
-        "energy": acc[ACC_DIM],
-        "contact_events": counts[0],
-        "painleve_fallbacks": counts[1],
-        "zeno_settles": counts[2],
-    }
-
-
-_MODE_NAME_ARRAY = np.array(MODE_NAMES)
-
-
 def observation_space(params: LegParams, config: StanceConfig):
     """One robot's observation space: 12 entries (pinned) or 18 (unilateral); see ``PlanarLegStanceEnv``'s table."""
     from gymnasium import spaces
@@ -500,15 +361,15 @@ def observation_space(params: LegParams, config: StanceConfig):
     reach = 1.01 * (params.l1 + params.l2)
     unilateral = config.contact == "unilateral"
     high = np.full(OBS_DIM_UNILATERAL if unilateral else OBS_DIM, np.inf, dtype=np.float32)
-    high[0] = reach
+    high[Obs.base_x] = reach
     if not unilateral:  # on the unilateral ground the base may fly: its height has no bound
-        high[1] = reach
+        high[Obs.base_y] = reach
     else:
-        high[15] = 1.0  # contact flag
-        high[16] = 1.0  # slip direction
+        high[Obs.contact] = 1.0
+        high[Obs.slip] = 1.0  # the slip direction
     low = -high
     if unilateral:
-        low[15] = 0.0
+        low[Obs.contact] = 0.0
     return spaces.Box(low, high, dtype=np.float32)
 
 

@@ -65,6 +65,21 @@ static int batch_values(const env_batch *b, int modes)
     return 1;
 }
 
+/* obs's width is the one the task and the ground of the settings need (checked at every call of a Batch
+ * too: its settings can be written after it bound obs, and the task's kernel writes that many columns). */
+static int obs_fits(int task, const env_batch *b)
+{
+    if (b->obs == NULL)
+        return 1;
+    const Py_ssize_t need = task_obs_dim(task, b->settings->unilateral);
+    if (b->obs_cols != need) {
+        PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and ground (settings.unilateral), got (%zd, %zd)",
+                     b->n, need, b->n, b->obs_cols);
+        return 0;
+    }
+    return 1;
+}
+
 /* The arrays of a call, checked: (state, robots, settings, out) and obs (NULL for the physics alone). */
 static int batch_of(int task, PyObject *state, PyObject *robots, PyObject *settings, PyObject *out, PyObject *obs, held *h,
                     env_batch *b, int modes)
@@ -104,15 +119,13 @@ static int batch_of(int task, PyObject *state, PyObject *robots, PyObject *setti
         b->obs = (float *)matrix_of(obs, "obs", F32, 1, h, &rows, &cols);
         if (b->obs == NULL)
             return 0;
-        const Py_ssize_t need = task_obs_dim(task, b->settings->unilateral);
-        if (rows != b->n || cols != need) {
-            PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and ground, got (%zd, %zd)", b->n, need,
-                         rows, cols);
+        if (rows != b->n) {
+            PyErr_Format(PyExc_ValueError, "obs must have one row per robot (%zd), got %zd", b->n, rows);
             return 0;
         }
         b->obs_cols = cols;
     }
-    return batch_values(b, modes);
+    return obs_fits(task, b) && batch_values(b, modes);
 }
 
 /* An integer argument: a TypeError naming `name` if `obj` is not an integer, a ValueError if it is out of range. */
@@ -567,7 +580,7 @@ static PyObject *Batch_step_one(BatchObject *self, PyObject *const *args, Py_ssi
         return NULL;
     }
     const env_batch *b = &self->b;
-    if (!batch_values(b, 1)) /* the arrays may have been written since the last call */
+    if (!batch_values(b, 1) || !obs_fits(self->task, b)) /* the arrays may have been written since the last call */
         return NULL;
     env_state *s = state_row(b, 0);
     s->action[0] = a0;
@@ -589,7 +602,7 @@ static PyObject *Batch_start(BatchObject *self, PyObject *const *args, Py_ssize_
         PyErr_SetString(PyExc_TypeError, "start takes 2 arguments (noise or None, scale)");
         return NULL;
     }
-    if (!batch_values(&self->b, 0) || !noise_of(args[0], args[1], self->b.n, &h, &noise, &scale)) {
+    if (!batch_values(&self->b, 0) || !obs_fits(self->task, &self->b) || !noise_of(args[0], args[1], self->b.n, &h, &noise, &scale)) {
         release_all(&h);
         return NULL;
     }

@@ -117,6 +117,8 @@ def real_array(name: str, value, what: str) -> np.ndarray:
         raw = np.asarray(value)
     except (TypeError, ValueError) as e:  # ragged nesting
         raise ArgumentTypeError(f"{name} must be {what}, got {shown(value)}") from e
+    if raw.dtype.kind == "O" and all(is_real(v) for v in raw.flat):  # an object array of numbers
+        raw = raw.astype(np.float64)
     if raw.dtype.kind not in "fiu" or (isinstance(value, (list, tuple)) and _holds_a_bool(value)):
         raise ArgumentTypeError(f"{name} must be {what}, got {shown(value)} (dtype {raw.dtype})")
     return raw.astype(np.float64)

@@ -48,6 +48,7 @@ import math
 
 import numpy as np
 
+from . import checks
 from ._core import kernels
 from .dynamics import _CONTACT_NAMES, NQ, NU, _batched, _core_params, _vec
 from .params import LegParams
@@ -62,8 +63,9 @@ REST_SPEED = kernels.REST_SPEED
 
 
 def _scalar_field(x, lead, name: str) -> np.ndarray:
-    """A per-robot scalar (``mu``, ``sigma``) broadcast to the batch, as a flat float64 array."""
-    a = np.asarray(x, dtype=np.float64)
+    """A per-robot scalar (``mu``, ``sigma``) broadcast to the batch, as a flat float64 array (real numbers only,
+    ``leg_env.checks.real_array``)."""
+    a = checks.real_array(name, x, f"a real number or one per robot of the batch {lead}")
     try:
         return np.ascontiguousarray(np.broadcast_to(a, lead).reshape(-1))
     except ValueError as e:
@@ -93,7 +95,7 @@ def slip_dynamics(q, qd, tau, p: LegParams, mu, sigma):
     Returns:
         ``(qdd, lam)`` of shapes ``(..., 5)`` and ``(..., 2)``; ``lam`` is the ground's force on the foot [N].
     """
-    lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
+    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
     sg = _scalar_field(sigma, lead, "sigma")
     if not np.all(np.abs(sg) == 1.0):
         raise ValueError(f"sigma must be +1 or -1, got {sigma!r}")
@@ -126,7 +128,7 @@ def impact_map(q, qd, p: LegParams, mu=math.inf):
         ``(qd_plus, impulse)``: ``(..., 5)`` velocity after the impact and ``(..., 2)`` the ground's
         impulse on the foot [N s].
     """
-    lead, (qf, qdf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"))
+    lead, (qf, qdf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")))
     mu_f = _checked_mu(mu, lead, allow_inf=True)
     n = qf.shape[0]
     qd_plus, impulse, status = np.empty((n, NQ)), np.empty((n, 2)), np.empty(n, dtype=np.int64)
@@ -146,7 +148,7 @@ def contact_mode(q, qd, tau, p: LegParams, mu) -> np.ndarray:
     Returns:
         int64 array of shape ``(...)`` (0-d for one robot): the mode constants of this module.
     """
-    lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
+    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
     mu_f = _checked_mu(mu, lead)
     out = np.empty(qf.shape[0], dtype=np.int64)
     kernels.contact_mode(qf, qdf, tf, mu_f, _core_params(p), out)
@@ -155,7 +157,7 @@ def contact_mode(q, qd, tau, p: LegParams, mu) -> np.ndarray:
 
 def free_foot_acceleration(q, qd, tau, p: LegParams) -> tuple[np.ndarray, np.ndarray]:
     """``(Lambda, a0)``: the contact inertia ``J M^-1 J^T`` ``(..., 2, 2)`` and the free foot acceleration ``(..., 2)``."""
-    lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
+    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
     n = qf.shape[0]
     Lam, a0 = np.empty((n, 2, 2)), np.empty((n, 2))
     kernels.response(qf, qdf, tf, _core_params(p), Lam, a0)

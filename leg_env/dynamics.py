@@ -46,8 +46,11 @@ arrays are broadcast and validated here and looped over in C, one robot per row,
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from . import checks
 from ._core import kernels
 from .params import LegParams
 
@@ -71,6 +74,7 @@ __all__ = [
     "static_equilibrium",
 ]
 
+_LOAD_MAX = 1.0e12  # bound of a horizontal load [N]: far beyond any use, far below overflow
 NQ = 5  # generalized coordinates
 NU = 2  # actuated joints
 NP = 11  # LegParams fields in the kernels' parameter array
@@ -89,14 +93,25 @@ def params_array(p: LegParams | np.ndarray, load_x: float = 0.0) -> np.ndarray:
     ``load_x`` is the horizontal force on the torso's COM [N] held over a step (0: no load). An array of
     11 values gets the load appended; one of 12 passes through.
     """
+    load_x = checks.real("load_x", load_x, -_LOAD_MAX, _LOAD_MAX, unit="N")
     if isinstance(p, LegParams):
         return _loaded(p.array, load_x)
-    a = np.asarray(p, dtype=np.float64)
+    a = checks.real_array("p", p, f"LegParams or {NP} real numbers (or {NP + 1} with the load)")
+    if a.shape not in ((NP,), (NP + 1,)):
+        raise ValueError(f"p must be LegParams or an array of {NP} values (or {NP + 1} with the load), got shape {a.shape}")
+    try:
+        LegParams(*a[:NP].tolist())  # every value checked as a LegParams field
+    except ValueError as e:
+        raise ValueError(f"p: {e}") from None  # names p and the field
     if a.shape == (NP,):
         return _loaded(a, load_x)
-    if a.shape != (NP + 1,):
-        raise ValueError(f"params must be LegParams or an array of {NP} values (or {NP + 1} with the load), got shape {a.shape}")
+    checks.real("p's load (entry 11)", float(a[NP]), -_LOAD_MAX, _LOAD_MAX, unit="N")
     return a
+
+
+def _as_params(p) -> LegParams:
+    """``p`` as ``LegParams``: an instance as it is, an array of its 11 fields (or 12 with a load) checked."""
+    return p if isinstance(p, LegParams) else LegParams(*params_array(p)[:NP].tolist())  # params_array names p
 
 
 def _core_params(p: LegParams | np.ndarray) -> np.ndarray:
@@ -142,17 +157,24 @@ def _single_robot(q, qd, tau) -> bool:
 
 
 def _vec(x, n: int, name: str) -> np.ndarray:
-    a = np.asarray(x, dtype=np.float64)
+    """``x`` as a float64 array of shape ``(..., n)``. Only real numbers are taken (``leg_env.checks.real_array``:
+    no strings, bools, complex numbers or None, which numpy would convert); a wrong shape is a ``ValueError``.
+    Both name ``name``."""
+    a = x if type(x) is np.ndarray and x.dtype is _F64 else checks.real_array(name, x, f"real numbers of shape (..., {n})")
     if a.ndim == 0 or a.shape[-1] != n:
         raise ValueError(f"{name} must have shape (..., {n}), got {a.shape}")
     return a
 
 
-def _batched(*arrays):
-    """Broadcast leading axes; return the lead shape and contiguous (N, n) views."""
-    lead = np.broadcast_shapes(*(a.shape[:-1] for a in arrays))
+def _batched(*named):
+    """Broadcast the leading axes of ``(name, array)`` pairs; return the lead shape and contiguous (N, n) views."""
+    try:
+        lead = np.broadcast_shapes(*(a.shape[:-1] for _, a in named))
+    except ValueError:
+        shapes = ", ".join(f"{name} {a.shape}" for name, a in named)
+        raise ValueError(f"the leading axes of {shapes} do not broadcast together") from None
     flat = []
-    for a in arrays:
+    for _, a in named:
         if a.shape[:-1] != lead:
             a = np.broadcast_to(a, lead + a.shape[-1:])
         flat.append(np.ascontiguousarray(a.reshape(-1, a.shape[-1])))
@@ -161,7 +183,7 @@ def _batched(*arrays):
 
 def mass_matrix(q, p: LegParams) -> np.ndarray:
     """Joint-space mass matrix ``M(q)`` (section 2), shape ``(..., 5, 5)``, symmetric positive definite."""
-    lead, (qf,) = _batched(_vec(q, NQ, "q"))
+    lead, (qf,) = _batched(("q", _vec(q, NQ, "q")))
     M = np.empty((qf.shape[0], NQ, NQ))
     kernels.mass_matrix(qf, _core_params(p), M)
     return M.reshape(lead + (NQ, NQ))
@@ -169,7 +191,7 @@ def mass_matrix(q, p: LegParams) -> np.ndarray:
 
 def bias_forces(q, qd, p: LegParams) -> np.ndarray:
     """``h(q, qd)``: Coriolis, centrifugal and gravity generalized forces, shape ``(..., 5)``."""
-    lead, (qf, qdf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"))
+    lead, (qf, qdf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")))
     h = np.empty((qf.shape[0], NQ))
     kernels.bias(qf, qdf, _core_params(p), h, False)
     return h.reshape(lead + (NQ,))
@@ -177,7 +199,7 @@ def bias_forces(q, qd, p: LegParams) -> np.ndarray:
 
 def gravity_forces(q, p: LegParams) -> np.ndarray:
     """Gravity generalized forces ``dP/dq``, shape ``(..., 5)``."""
-    lead, (qf,) = _batched(_vec(q, NQ, "q"))
+    lead, (qf,) = _batched(("q", _vec(q, NQ, "q")))
     h = np.empty((qf.shape[0], NQ))
     kernels.bias(qf, qf, _core_params(p), h, True)
     return h.reshape(lead + (NQ,))
@@ -185,7 +207,7 @@ def gravity_forces(q, p: LegParams) -> np.ndarray:
 
 def foot_position(q, p: LegParams) -> np.ndarray:
     """Foot position ``p_f(q)`` in the world frame (section 3), shape ``(..., 2)``."""
-    lead, (qf,) = _batched(_vec(q, NQ, "q"))
+    lead, (qf,) = _batched(("q", _vec(q, NQ, "q")))
     out = np.empty((qf.shape[0], 2))
     kernels.foot(qf, _core_params(p), out)
     return out.reshape(lead + (2,))
@@ -193,7 +215,7 @@ def foot_position(q, p: LegParams) -> np.ndarray:
 
 def com_position(q, p: LegParams) -> np.ndarray:
     """Whole-body centre of mass in the world frame, shape ``(..., 2)``."""
-    lead, (qf,) = _batched(_vec(q, NQ, "q"))
+    lead, (qf,) = _batched(("q", _vec(q, NQ, "q")))
     out = np.empty((qf.shape[0], 2))
     kernels.com(qf, qf, _core_params(p), out, np.empty((qf.shape[0], 2)))
     return out.reshape(lead + (2,))
@@ -201,7 +223,7 @@ def com_position(q, p: LegParams) -> np.ndarray:
 
 def contact_jacobian(q, p: LegParams) -> np.ndarray:
     """Contact Jacobian ``Jc = d p_f / d q`` (section 3, Problem 3), rows ``x, y``, shape ``(..., 2, 5)``."""
-    lead, (qf,) = _batched(_vec(q, NQ, "q"))
+    lead, (qf,) = _batched(("q", _vec(q, NQ, "q")))
     Jc = np.empty((qf.shape[0], 2, NQ))
     kernels.jacobian(qf, _core_params(p), Jc)
     return Jc.reshape(lead + (2, NQ))
@@ -209,7 +231,7 @@ def contact_jacobian(q, p: LegParams) -> np.ndarray:
 
 def contact_jdot_qd(q, qd, p: LegParams) -> np.ndarray:
     """``Jcdot(q, qd) qd``, the foot's velocity-product acceleration, shape ``(..., 2)``."""
-    lead, (qf, qdf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"))
+    lead, (qf, qdf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")))
     out = np.empty((qf.shape[0], 2))
     kernels.jdot_qd(qf, qdf, _core_params(p), out)
     return out.reshape(lead + (2,))
@@ -244,7 +266,7 @@ def stance_dynamics(q, qd, tau, p: LegParams) -> tuple[np.ndarray, np.ndarray]:
         qdd, lam = np.empty(NQ), np.empty(2)
         kernels.stance(q, qd, tau, _core_params(p), _NO_LOAD, qdd, lam)
         return qdd, lam
-    lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
+    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
     n = qf.shape[0]
     qdd = np.empty((n, NQ))
     lam = np.empty((n, 2))
@@ -254,7 +276,7 @@ def stance_dynamics(q, qd, tau, p: LegParams) -> tuple[np.ndarray, np.ndarray]:
 
 def flight_dynamics(q, qd, tau, p: LegParams) -> np.ndarray:
     """Unconstrained forward dynamics ``M qdd + h = S^T tau`` (section 2), shape ``(..., 5)``."""
-    lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
+    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
     qdd = np.empty((qf.shape[0], NQ))
     kernels.flight(qf, qdf, tf, _core_params(p), np.zeros(qf.shape[0]), qdd)
     return qdd.reshape(lead + (NQ,))
@@ -262,14 +284,15 @@ def flight_dynamics(q, qd, tau, p: LegParams) -> np.ndarray:
 
 def kinetic_energy(q, qd, p: LegParams) -> np.ndarray:
     """Kinetic energy ``qd^T M qd / 2`` [J], shape ``(...)``."""
-    qd = _vec(qd, NQ, "qd")
-    M = mass_matrix(q, p)
-    return 0.5 * np.einsum("...i,...ij,...j->...", qd, M, qd)
+    lead, (qf, qdf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")))
+    M = mass_matrix(qf, p)
+    return (0.5 * np.einsum("ni,nij,nj->n", qdf, M, qdf)).reshape(lead)
 
 
 def potential_energy(q, p: LegParams) -> np.ndarray:
     """Potential energy ``g (m_b y_b + m1 y_c1 + m2 y_c2)`` [J], shape ``(...)``."""
     q = _vec(q, NQ, "q")
+    p = _as_params(p)
     com = com_position(q, p)
     return p.g * p.total_mass * com[..., 1]
 
@@ -287,7 +310,9 @@ def static_equilibrium(p: LegParams, knee: float = 0.8) -> tuple[np.ndarray, np.
         contact force ``[0, m g]``.
     """
     q, tau = np.empty(NQ), np.empty(NU)
-    kernels.equilibrium(p.array, float(knee), q, tau)
+    p = _as_params(p)
+    knee = checks.real("knee", knee, -math.pi, math.pi, unit="rad")
+    kernels.equilibrium(p.array, knee, q, tau)
     lam = np.array([0.0, p.total_mass * p.g])
     return q, tau, lam
 

@@ -60,7 +60,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .contact import FLIGHT, STICK
+from . import checks
+from .contact import FLIGHT, SLIP_BACKWARD, SLIP_FORWARD, STICK
 from ._core import kernels
 from .dynamics import NQ, NU, _batched, _core_params, _vec
 from .layout import RECORD
@@ -153,26 +154,32 @@ def hybrid_step(
     Returns:
         ``HybridStep``: the new state and mode, and what the step did.
     """
-    from .contact import _checked_mu
+    from .contact import _checked_mu, _scalar_field
     from .dynamics import foot_position
 
     dt, substeps, max_angle = _checked_steps(dt, substeps, max_angle)
-    lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
+    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
     qf, qdf = qf.copy(), qdf.copy()
     n = qf.shape[0]
     mu_f = _checked_mu(mu, lead)
     foot = foot_position(qf, p)
     if np.any(foot[:, 1] < -GROUND_TOL):
-        raise ValueError(f"the foot is below the ground (y_f = {foot[:, 1].min():.3e} m < -{GROUND_TOL} m)")
+        raise ValueError(f"q puts the foot below the ground (y_f = {foot[:, 1].min():.3e} m < -{GROUND_TOL} m)")
     if mode is None:
         modes = _initial_modes(qf, qdf, tf, mu_f, p)
     else:
-        modes = np.ascontiguousarray(np.broadcast_to(np.asarray(mode, dtype=np.int64), lead).reshape(-1)).copy()
-        if np.any((modes < STICK) | (modes > FLIGHT)):
-            raise ValueError(f"mode must be one of STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT (0-3), got {mode!r}")
+        m = _scalar_field(mode, lead, "mode")
+        if not np.all((m == STICK) | (m == SLIP_FORWARD) | (m == SLIP_BACKWARD) | (m == FLIGHT)):
+            raise ValueError(f"mode must be one of STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT (0-3), got {checks.shown(mode)}")
+        modes = m.astype(np.int64)
     anchor = np.zeros((n, 2))
-    anchor[:, 0] = foot[:, 0] if anchor_x is None else np.broadcast_to(np.asarray(anchor_x, dtype=np.float64), lead).reshape(-1)
-    load = np.ascontiguousarray(np.broadcast_to(np.asarray(load_x, dtype=np.float64), lead).reshape(-1))
+    if anchor_x is None:
+        anchor[:, 0] = foot[:, 0]
+    else:
+        anchor[:, 0] = _scalar_field(anchor_x, lead, "anchor_x")
+        if not np.all(np.isfinite(anchor[:, 0])):
+            raise ValueError("anchor_x must be finite")
+    load = _scalar_field(load_x, lead, "load_x")
     if not np.all(np.isfinite(load)):
         raise ValueError("load_x must be finite")
     record = np.empty(n, dtype=RECORD)

@@ -33,7 +33,7 @@ import math
 import numpy as np
 
 from ._core import kernels
-from .dynamics import _F64, LOAD_X, NP, NQ, NU, _batched, _core_params, _single_robot, _vec
+from .dynamics import _F64, LOAD_X, NP, NQ, NU, _batched, _core_params, _single_robot, _vec, params_array
 from . import checks
 from .params import LegParams
 
@@ -65,11 +65,12 @@ def step_inplace(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mea
         ValueError: ``p`` has another length, an array has the wrong shape, type or order, or a setting of
             the step rule is out of range (the message names it).
     """
-    p = np.asarray(p, dtype=np.float64)
-    if p.shape not in ((NP,), (NP + 1,)):
-        raise ValueError("step_inplace: p must have 11 entries (LegParams.array) or 12 (params_array: then the load)")
-    n = np.shape(q)[0] if np.ndim(q) == 2 else -1
-    load = np.full(max(n, 0), p[LOAD_X] if p.shape[0] > NP else 0.0)
+    p = params_array(p)  # real numbers, 11 valid LegParams fields (or 12 with the load): the error names p or the field
+    try:
+        n = np.asarray(q).size // NQ  # the robots q holds, if its size is a multiple of 5 (the core says so if not)
+    except (TypeError, ValueError):
+        n = 0
+    load = np.full(n, p[LOAD_X] if p.shape[0] > NP else 0.0)
     kernels.rk4_step(q, qd, tau, np.ascontiguousarray(p[:NP]), load, anchor, dt, substeps, max_angle, stance, lam_mean)
 
 
@@ -112,7 +113,7 @@ def stance_step(
             return q1[0], qd1[0], lam[0]
     q = _vec(q, NQ, "q")
     anchor = foot_position(q, p) if anchor is None else _vec(anchor, 2, "anchor")
-    lead, (qf, qdf, tf, af) = _batched(q, _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"), anchor)
+    lead, (qf, qdf, tf, af) = _batched(("q", q), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")), ("anchor", anchor))
     qf, qdf = qf.copy(), qdf.copy()
     lam = np.empty((qf.shape[0], 2))
     step_inplace(qf, qdf, tf, _core_params(p), af, dt, substeps, max_angle, True, lam)
@@ -122,7 +123,7 @@ def stance_step(
 def flight_step(q, qd, tau, p: LegParams, dt: float = DT, substeps: int = SUBSTEPS, max_angle: float = MAX_ANGLE):
     """One flight control step (no contact) of RK4, stepped as in ``stance_step``. Returns ``(q_next, qd_next)``."""
     dt, substeps, max_angle = _checked_steps(dt, substeps, max_angle)
-    lead, (qf, qdf, tf) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(tau, NU, "tau"))
+    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
     qf, qdf = qf.copy(), qdf.copy()
     lam = np.empty((qf.shape[0], 2))
     step_inplace(qf, qdf, tf, _core_params(p), np.zeros((qf.shape[0], 2)), dt, substeps, max_angle, False, lam)
@@ -131,7 +132,7 @@ def flight_step(q, qd, tau, p: LegParams, dt: float = DT, substeps: int = SUBSTE
 
 def project_stance(q, qd, p: LegParams, anchor):
     """Coordinate-partitioning projection: move only the base so the foot is at ``anchor`` and ``Jc qd = 0``."""
-    lead, (qf, qdf, af) = _batched(_vec(q, NQ, "q"), _vec(qd, NQ, "qd"), _vec(anchor, 2, "anchor"))
+    lead, (qf, qdf, af) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("anchor", _vec(anchor, 2, "anchor")))
     qf, qdf = qf.copy(), qdf.copy()
     kernels.project(qf, qdf, _core_params(p), af)
     return qf.reshape(lead + (NQ,)), qdf.reshape(lead + (NQ,))
@@ -141,8 +142,8 @@ def project_velocity(q, qd, p: LegParams) -> np.ndarray:
     """Euclidean projection of ``qd`` onto the nullspace of ``Jc(q)``: ``qd - Jc^T (Jc Jc^T)^-1 Jc qd`` (solved)."""
     from .dynamics import contact_jacobian
 
-    qd = _vec(qd, NQ, "qd")
-    Jc = contact_jacobian(q, p)
+    lead, (qf, qdf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")))
+    Jc = contact_jacobian(qf, p)
     JJt = Jc @ np.swapaxes(Jc, -1, -2)
-    y = np.linalg.solve(JJt, (Jc @ qd[..., None]))
-    return qd - (np.swapaxes(Jc, -1, -2) @ y)[..., 0]
+    y = np.linalg.solve(JJt, (Jc @ qdf[..., None]))
+    return (qdf - (np.swapaxes(Jc, -1, -2) @ y)[..., 0]).reshape(lead + (NQ,))

@@ -313,7 +313,7 @@ def test_step_inplace_reads_no_load_past_an_11_entry_parameter_array():
         it.step_inplace(q_io, qd_io, tau, params, anchor, it.DT, it.SUBSTEPS, it.MAX_ANGLE, True, lam)
         for a, b in zip((q_io, qd_io, lam), expected):
             np.testing.assert_array_equal(a, b)
-    with pytest.raises(ValueError, match="11 entries"):
+    with pytest.raises(ValueError, match="11 values"):
         it.step_inplace(q.copy(), qd.copy(), tau, p.array[:10], anchor, it.DT, it.SUBSTEPS, it.MAX_ANGLE, True, np.empty((4, 2)))
 
 

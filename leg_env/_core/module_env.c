@@ -320,20 +320,14 @@ static PyObject *py_robot_params(PyObject *self, PyObject *const *args, Py_ssize
     FAIL
 }
 
-/* The bit generator of one entry of `generators`: a numpy Generator, a BitGenerator, or a BitGenerator's
- * capsule. A new reference to what owns it is left in *owner, to be held for as long as it is drawn from:
- * given a Generator or a BitGenerator the call keeps it alive itself; a bare capsule does not keep its
- * BitGenerator alive (numpy's capsule holds a pointer into it), so the caller must. NULL with a ValueError. */
+/* The bit generator of one entry of `generators`: a numpy Generator or BitGenerator. A new reference to the
+ * BitGenerator is left in *owner, held for as long as it is drawn from. A bare capsule is refused: it does not
+ * keep its BitGenerator alive (numpy's capsule holds a pointer into it). NULL with a ValueError. */
 static bitgen_t *bitgen_of(PyObject *entry, long long index, PyObject **owner)
 {
     PyObject *capsule = NULL, *bit_generator = NULL;
     *owner = NULL;
-    if (PyCapsule_CheckExact(entry)) {
-        Py_INCREF(entry);
-        capsule = entry;
-        Py_INCREF(entry);
-        *owner = entry;
-    } else if (entry != Py_None) {
+    if (entry != Py_None && !PyCapsule_CheckExact(entry)) { /* a bare capsule does not keep its generator alive */
         bit_generator = PyObject_GetAttrString(entry, "bit_generator"); /* a Generator */
         if (bit_generator == NULL) {
             PyErr_Clear();
@@ -350,20 +344,20 @@ static bitgen_t *bitgen_of(PyObject *entry, long long index, PyObject **owner)
     if (bg == NULL || bg->next_double == NULL) {
         PyErr_Clear();
         Py_CLEAR(*owner);
-        PyErr_Format(PyExc_ValueError, "generators[%lld] is not a numpy Generator, BitGenerator or BitGenerator capsule", index);
+        PyErr_Format(PyExc_ValueError, "generators[%lld] is not a numpy Generator or BitGenerator", index);
         return NULL;
     }
     return bg;
 }
 
-/* The bit generators of `generators` (a list of numpy Generators, BitGenerators or their capsules) at
+/* The bit generators of `generators` (a list of numpy Generators or BitGenerators) at
  * `rows`, with a reference to each one's owner in owners[k] (release_owners() frees them). */
 static int bitgens_of(PyObject *generators, const int64_t *rows, Py_ssize_t n_rows, bitgen_t **out, PyObject **owners)
 {
     for (Py_ssize_t k = 0; k < n_rows; k++)
         owners[k] = NULL;
     if (!PyList_Check(generators)) {
-        PyErr_Format(PyExc_TypeError, "generators must be a list of numpy Generators, BitGenerators or BitGenerator capsules, got %.80R",
+        PyErr_Format(PyExc_TypeError, "generators must be a list of numpy Generators or BitGenerators, got %.80R",
                      (PyObject *)Py_TYPE(generators));
         return 0;
     }

@@ -289,7 +289,9 @@ def step_batch(state, robots, settings, out, obs):
             the extras, what the hybrid step did, the flags and the reward terms.
         obs: ``(N, 12 or 18)`` float32 out (left at the previous observation on numerical failure).
     """
-    physics_range(0, state.shape[0], state, robots, settings, out)
+    _check_obs(state, settings, obs)  # before the physics changes anything
+    n = state.shape[0] if isinstance(state, np.ndarray) and state.ndim >= 1 else 0  # the core refuses what is not a state
+    physics_range(0, n, state, robots, settings, out)
     TASK.assess(state, robots, settings, out, obs)
 
 
@@ -298,8 +300,26 @@ def step_range(lo, hi, state, robots, settings, out, obs):
 
     Robots are independent: the rows of a batch stepped in any split are bitwise those of ``step_batch``.
     """
+    _check_obs(state, settings, obs)  # before the physics changes anything
     physics_range(lo, hi, state, robots, settings, out)
     TASK.assess(state[lo:hi], robots if robots.shape[0] == 1 else robots[lo:hi], settings, out[lo:hi], obs[lo:hi])
+
+
+def _check_obs(state, settings, obs) -> None:
+    """``obs`` must be the C-contiguous, writable float32 ``(N, 12 or 18)`` observation of ``state``'s ``N`` robots on
+    ``settings``' ground: checked before the physics steps them, so that a refused ``obs`` changes nothing. (A
+    ``state`` or ``settings`` that is not one of their dtype's arrays is left for the core to refuse, which it does
+    before it steps.)"""
+    dtype = layout.settings_dtype("stance")
+    if not (isinstance(state, np.ndarray) and state.ndim == 1 and state.dtype.itemsize == TASK.state_dtype.itemsize
+            and isinstance(settings, np.ndarray) and settings.nbytes == dtype.itemsize):  # fmt: skip
+        return
+    unilateral = np.frombuffer(settings.tobytes(), dtype=dtype)["unilateral"][0]
+    width = OBS_DIM_UNILATERAL if unilateral else OBS_DIM
+    if not (isinstance(obs, np.ndarray) and obs.dtype == np.float32 and obs.shape == (state.shape[0], width)
+            and obs.flags.c_contiguous and obs.flags.writeable):  # fmt: skip
+        got = f"{obs.dtype} {obs.shape}" if isinstance(obs, np.ndarray) else checks.shown(obs)
+        raise ValueError(f"obs must be a C-contiguous, writable float32 array of shape ({state.shape[0]}, {width}), got {got}")
 
 
 def start_batch(state, robots, settings, out, obs):

@@ -124,6 +124,21 @@ def test_painleve_rule_fires_past_the_bound_and_is_counted():
     assert r_ok.painleve == 0
 
 
+def test_a_foot_leaving_the_ground_from_a_round_off_below_it_lands_again_at_a_located_touchdown():
+    """A sliding foot at y_f = -5.6e-16 (the round-off of its contact projection) that leaves the ground and comes
+    back down within the step: its touchdown is located (the foot ends on the ground, not 2e-5 m below it, which
+    the next step would refuse). The state was found by the reference recording (tests/reference/record.py)."""
+    p = LegParams()
+    q = np.array([-0.2071468465217468, -0.6926806097296976, -3.1489865732354807, 11.936113891382774, -20.442604387229775])
+    qd = np.array([1.3505218683398479, 1.4283855011302726, -5.418527068977169, 12.021300818954591, -2.608687132438418])
+    tau = np.array([-19.164609248729857, 2.4460877515398494])
+    assert -1e-15 < dyn.foot_position(q, p)[1] < 0.0
+    r = hybrid_step(q, qd, tau, p, 0.43948274465913995, mode=2, anchor_x=-0.3023751071739096)
+    assert abs(dyn.foot_position(r.q, p)[1]) < 1e-12
+    assert r.events >= 1 and 3 in r.event_kind.tolist()  # a touchdown
+    hybrid_step(r.q, r.qd, tau, p, 0.43948274465913995, mode=r.mode, anchor_x=r.anchor_x)  # the next step takes the state
+
+
 def test_batched_hybrid_step_equals_stacked_singles_bitwise():
     p = LegParams()
     rng = np.random.default_rng(3)

@@ -363,7 +363,9 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
         const leg_accel k1 = derivative(mode, M, u, &X1);
         double w1a, w1b;
         witnesses(mode, M, u, &X1, &k1, anchor, &w1a, &w1b);
-        const int watch_a = watched(kind_a, settled, events) && w0a >= 0.0;
+        /* a foot that leaves the ground within LEG_GROUND_TOL below it (round-off of a contact projection) is on
+         * it: its touchdown is watched from there, or a fall back within the step would go unlocated */
+        const int watch_a = watched(kind_a, settled, events) && (w0a >= 0.0 || (kind_a == LEG_TOUCHDOWN && w0a >= -LEG_GROUND_TOL));
         const int watch_b = watched(kind_b, settled, events) && w0b >= 0.0;
         if (!((watch_a && w1a < 0.0) || (watch_b && w1b < 0.0))) {
             book(mode, M, h, &g.X, &X1, &sums, rec);

@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -112,7 +114,44 @@ def main() -> None:
     if args.json:
         with open(args.json, "w") as f:
             json.dump(results, f, indent=1)
+    write_results(results, args)
     raise SystemExit(0 if ok else 1)
+
+
+RESULTS = Path(__file__).resolve().parent / "results" / "soak.md"
+
+
+def write_results(results: list[dict], args) -> None:
+    """The table of ``results`` in ``benchmarks/results/soak.md``, headed by the machine, the versions and the date."""
+    import platform
+    import time
+    from importlib.metadata import version
+
+    cpu = platform.machine()
+    try:
+        cpu = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines() if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    lines = [
+        "# Soak",
+        "",
+        f"Written by `python benchmarks/soak.py --steps {args.steps:g} --num-envs {args.num_envs}` on {time.strftime('%Y-%m-%d')}: "
+        f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; Python {platform.python_version()}, "
+        f"numpy {version('numpy')}, gymnasium {version('gymnasium')}, leg-env {version('leg-env')}.",
+        "",
+        "Each row: `num_envs` robots through `gymnasium.make_vec` with autoreset, at ten times the default torque limit. "
+        "`failures` are flagged numerical failures (each ends its episode; they are allowed); `non_finite`, `exceptions` and "
+        "`unflagged` must be 0.",
+        "",
+        "| case | actions | env-steps | non_finite | exceptions | unflagged | failures | terminated | env-steps/s |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in results:
+        lines.append(f"| {r['case']} | {r['actions']} | {r['steps']:,} | {r['non_finite']} | {r['exceptions']} | {r['unflagged']} | "
+                     f"{r['failures']} | {r['terminated']:,} | {r['steps_per_second']:,} |")
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text("\n".join(lines) + "\n")
+    print(f"written: {RESULTS}")
 
 
 if __name__ == "__main__":

@@ -21,8 +21,6 @@ env's ``info`` arrays, which the SB3 adapter splits into its per-env dicts). Key
 
 from __future__ import annotations
 
-from operator import itemgetter
-
 import numpy as np
 
 from .contact import MODE_NAMES
@@ -83,9 +81,10 @@ class InfoBuilder:
         """Every key of a reset's ``info``; a step's has ``reward_keys`` too."""
         self._task = task
 
-    def reader(self, out: np.ndarray, state: np.ndarray) -> "RowReader":
-        """A reader of the ``info`` of robot 0 of ``out`` and ``state`` (the single env's arrays, read at every step)."""
-        return RowReader(self, out, state)
+    def reader(self, batch, out: np.ndarray, state: np.ndarray) -> "RowReader":
+        """A reader of the ``info`` of robot 0 of the arrays ``out`` and ``state`` that ``batch`` (their
+        ``kernels.Batch``) holds: the single env's, read at every step."""
+        return RowReader(self, batch, out, state)
 
     def columns(self, out: np.ndarray, state: np.ndarray | None = None, rewards: bool = False) -> dict:
         """Every key as one fresh array over the rows of ``out`` (and ``state``); with ``rewards`` the reward terms."""
@@ -106,69 +105,27 @@ class InfoBuilder:
 
 
 class RowReader:
-    """The ``info`` dict of robot 0 of an ``out`` and a ``state`` array, read through views made once.
+    """The ``info`` dict of robot 0 of an env's arrays, read by its ``kernels.Batch`` in one call.
 
-    Every value is read in one ``tolist`` per type (the doubles, the int32 counts and mode, the flags) and one
-    copy of the array-valued keys' doubles, so that the single env's ``info`` costs about a microsecond.
+    The keys and where each comes from (``out`` or ``state``, its byte offset and kind) are worked out once,
+    from the dtypes; every call makes the values, the array-valued ones as slices of one fresh array.
     """
 
-    def __init__(self, builder: InfoBuilder, out: np.ndarray, state: np.ndarray):
-        dtype = out.dtype
-        self._doubles = out[:1].view(np.float64)  # robot 0's row as doubles, int32s and bytes
-        self._ints = out[:1].view(np.int32)
-        self._bytes = out[:1].view(np.bool_)
-        self._state_doubles = state[:1].view(np.float64)
-        scalar_doubles, ints, flags, vectors = [], [], [], []
+    def __init__(self, builder: InfoBuilder, batch, out: np.ndarray, state: np.ndarray):
+        self._batch = batch
+        spec = []
         for key, field in zip(builder.out_keys, builder.out_fields):
-            base, offset = dtype.fields[field][0], dtype.fields[field][1]
-            if base.shape:
-                vectors.append((key, offset // 8))
-            elif base.kind == "f":
-                scalar_doubles.append((key, offset // 8))
-            elif base.kind == "i":
-                ints.append((key, offset // 4))
-            else:
-                flags.append((key, offset))
-        # the int32 and the byte fields sit together: read only their span
-        first_int = min((i for _, i in ints), default=0)
-        first_flag = min((i for _, i in flags), default=0)
-        self._ints = self._ints[first_int:max((i for _, i in ints), default=-1) + 1]
-        self._bytes = self._bytes[first_flag:max((i for _, i in flags), default=-1) + 1]
-        self._double_keys, self._get_doubles = _getter(scalar_doubles)
-        self._int_keys, self._get_ints = _getter([(key, i - first_int) for key, i in ints])
-        self._flag_keys, self._get_flags = _getter([(key, i - first_flag) for key, i in flags])
-        self._vector_keys = tuple(key for key, _ in vectors)
-        self._vector_index = np.array([k + j for _, k in vectors for j in (0, 1)], dtype=np.intp)
-        terms = dtype.fields["terms"][1] // 8
-        self._terms = slice(terms, terms + len(builder.reward_keys))
-        self._reward_keys = builder.reward_keys
-        self._state_keys = builder.state_keys
-        self._state_index = [state.dtype.fields[key][1] // 8 for key in builder.state_keys]
-        self._mode = "contact_mode" in self._int_keys
+            base, offset = out.dtype.fields[field][0], out.dtype.fields[field][1]
+            kind = "m" if key == "contact_mode" else ("v" if base.shape else {"f": "d", "i": "i", "b": "?"}[base.kind])
+            spec.append((key, 0, offset, kind))
+        for key in builder.state_keys:
+            spec.append((key, 1, state.dtype.fields[key][1], "d"))
+        terms = out.dtype.fields["terms"][1]
+        rewards = [(key, 0, terms + 8 * k, "d") for k, key in enumerate(builder.reward_keys)]
+        self._spec, self._spec_rewards = tuple(spec), tuple(spec + rewards)
+        self._vectors = 2 * sum(kind == "v" for _, _, _, kind in spec)
 
     def __call__(self, rewards: bool = True) -> dict:
-        d = self._doubles.tolist()
-        info = dict(zip(self._double_keys, self._get_doubles(d)))
-        info.update(zip(self._flag_keys, self._get_flags(self._bytes.tolist())))
-        if self._int_keys:
-            info.update(zip(self._int_keys, self._get_ints(self._ints.tolist())))
-            if self._mode:
-                info["contact_mode"] = MODE_NAMES[info["contact_mode"]]
-        vectors = self._doubles[self._vector_index]  # one copy serves every array-valued key
-        for k, key in enumerate(self._vector_keys):
-            info[key] = vectors[2 * k:2 * k + 2]
-        if self._state_keys:
-            s = self._state_doubles.tolist()
-            info.update((key, s[i]) for key, i in zip(self._state_keys, self._state_index))
-        if rewards:
-            info.update(zip(self._reward_keys, d[self._terms]))
-        return info
+        return self._batch.info(self._spec_rewards if rewards else self._spec, MODE_NAMES, np.empty(self._vectors))
 
 
-def _getter(pairs: list) -> tuple[tuple, object]:
-    """The keys of ``(key, index)`` pairs and a function taking their values from a list (always a tuple)."""
-    keys = tuple(key for key, _ in pairs)
-    if not pairs:
-        return keys, lambda values: ()
-    get = itemgetter(*(index for _, index in pairs))
-    return keys, (get if len(pairs) > 1 else (lambda values: (get(values),)))

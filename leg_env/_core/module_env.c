@@ -606,7 +606,102 @@ static PyObject *Batch_start(BatchObject *self, PyObject *const *args, Py_ssize_
     Py_RETURN_NONE;
 }
 
+/* info(spec, names, vectors) -> dict: robot 0's info, read from its out and state rows by `spec`, a tuple of
+ * (key, source, offset, kind): source 0 the out row, 1 the state row; offset in bytes; kind 'd' a double,
+ * 'i' an int32, '?' a byte flag, 'm' an int32 contact mode given as names[mode], 'v' two doubles written into
+ * `vectors` (a fresh float64 array) at the next free pair, and the key's value is that pair (a slice of it).
+ * The single env's info in one call: the keys are built once in Python (leg_env.info), the values here. */
+static PyObject *Batch_info(BatchObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    held h;
+    h.n = 0;
+    if (nargs != 3 || !PyTuple_Check(args[0]) || !PyTuple_Check(args[1])) {
+        PyErr_SetString(PyExc_TypeError, "info takes (spec tuple, mode names tuple, vectors array)");
+        return NULL;
+    }
+    PyObject *spec = args[0], *names = args[1], *vec_obj = args[2];
+    Py_ssize_t n_vec = 0;
+    double *vec = (double *)buffer_of(vec_obj, "vectors", F64, -1, 1, &h, &n_vec);
+    if (vec == NULL)
+        return NULL;
+    const char *out = (const char *)self->b.out, *state = (const char *)self->b.state;
+    PyObject *info = PyDict_New();
+    if (info == NULL)
+        goto fail;
+    Py_ssize_t used = 0;
+    for (Py_ssize_t k = 0; k < PyTuple_GET_SIZE(spec); k++) {
+        PyObject *item = PyTuple_GET_ITEM(spec, k), *value = NULL;
+        long source, offset;
+        const char *kind;
+        if (!PyTuple_Check(item) || PyTuple_GET_SIZE(item) != 4 || !PyUnicode_Check(PyTuple_GET_ITEM(item, 0))) {
+            PyErr_SetString(PyExc_TypeError, "info: every spec entry must be (key, source, offset, kind)");
+            goto fail;
+        }
+        source = PyLong_AsLong(PyTuple_GET_ITEM(item, 1));
+        offset = PyLong_AsLong(PyTuple_GET_ITEM(item, 2));
+        kind = PyUnicode_AsUTF8(PyTuple_GET_ITEM(item, 3));
+        if (PyErr_Occurred() || kind == NULL)
+            goto fail;
+        const size_t size = source == 0 ? sizeof(env_out) : sizeof(env_state);
+        const size_t width = kind[0] == 'd' ? 8 : (kind[0] == 'v' ? 16 : (kind[0] == '?' ? 1 : 4));
+        if ((source != 0 && source != 1) || offset < 0 || (size_t)offset + width > size) {
+            PyErr_Format(PyExc_ValueError, "info: spec entry %zd reads outside its row", k);
+            goto fail;
+        }
+        const char *at = (source == 0 ? out : state) + offset;
+        double x[2];
+        int32_t i32;
+        switch (kind[0]) {
+        case 'd':
+            memcpy(x, at, 8);
+            value = PyFloat_FromDouble(x[0]);
+            break;
+        case 'i':
+            memcpy(&i32, at, 4);
+            value = PyLong_FromLong(i32);
+            break;
+        case '?':
+            value = PyBool_FromLong(*at != 0);
+            break;
+        case 'm':
+            memcpy(&i32, at, 4);
+            if (i32 < 0 || i32 >= PyTuple_GET_SIZE(names)) {
+                PyErr_Format(PyExc_ValueError, "info: contact mode %d has no name", (int)i32);
+                goto fail;
+            }
+            value = PyTuple_GET_ITEM(names, i32);
+            Py_INCREF(value);
+            break;
+        case 'v':
+            if (used + 2 > n_vec) {
+                PyErr_SetString(PyExc_ValueError, "info: vectors is too short for the spec's array-valued keys");
+                goto fail;
+            }
+            memcpy(vec + used, at, 16);
+            value = PySequence_GetSlice(vec_obj, used, used + 2);
+            used += 2;
+            break;
+        default:
+            PyErr_Format(PyExc_ValueError, "info: unknown kind %s", kind);
+            goto fail;
+        }
+        if (value == NULL || PyDict_SetItem(info, PyTuple_GET_ITEM(item, 0), value) < 0) {
+            Py_XDECREF(value);
+            goto fail;
+        }
+        Py_DECREF(value);
+    }
+    release_all(&h);
+    return info;
+fail:
+    Py_XDECREF(info);
+    release_all(&h);
+    return NULL;
+}
+
 static PyMethodDef Batch_methods[] = {
+    {"info", (PyCFunction)(void (*)(void))Batch_info, METH_FASTCALL,
+     "info(spec, mode names, vectors) -> dict: robot 0's info keys read from its out and state rows (leg_env.info)."},
     {"step_one", (PyCFunction)(void (*)(void))Batch_step_one, METH_FASTCALL,
      "step_one(a0, a1) -> reward: robot 0's action, control step and evaluation."},
     {"start", (PyCFunction)(void (*)(void))Batch_start, METH_FASTCALL,

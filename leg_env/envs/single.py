@@ -205,7 +205,7 @@ class LegEnv(gym.Env):
         self._out_row, self._state_row, self._obs_row = self._out[0], state[0], self._obs[0]
         self._core = kernels.Batch(self.task.kernel, state, self._robots, self._settings, self._out, self._obs)  # held by C
         self._step_kernel = self._core.step_one
-        self._info = InfoBuilder(self.task, self.unilateral).reader(self._out, state)
+        self._info = InfoBuilder(self.task, self.unilateral).reader(self._core, self._out, state)
         self._task_draws = self.task.draws(self.config)
         self._human = self.render_mode == "human"
 

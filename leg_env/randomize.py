@@ -264,7 +264,7 @@ class Robots:
         """Draw the robots of sub-envs ``rows`` into their rows of ``robots`` (``(num_envs,)`` ``ROBOT``) from ``rngs``
         (``leg_env.step.BitGeneratorRows``); the refused tries of each."""
         rejected = np.zeros(rows.size, dtype=np.int64)
-        kernels.draw_robots(rngs.generators, np.ascontiguousarray(rows, dtype=np.int64), self.spec, self.base, self.limits, MAX_DRAWS,
+        kernels.draw_robots(rngs.bit_generators, np.ascontiguousarray(rows, dtype=np.int64), self.spec, self.base, self.limits, MAX_DRAWS,
                             robots, rejected)
         return rejected
 

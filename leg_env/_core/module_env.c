@@ -328,15 +328,18 @@ static bitgen_t *bitgen_of(PyObject *entry, long long index, PyObject **owner)
     PyObject *capsule = NULL, *bit_generator = NULL;
     *owner = NULL;
     if (entry != Py_None && !PyCapsule_CheckExact(entry)) { /* a bare capsule does not keep its generator alive */
-        bit_generator = PyObject_GetAttrString(entry, "bit_generator"); /* a Generator */
-        if (bit_generator == NULL) {
-            PyErr_Clear();
+        capsule = PyObject_GetAttrString(entry, "capsule"); /* a BitGenerator */
+        if (capsule != NULL) {
             Py_INCREF(entry);
             bit_generator = entry;
-        }
-        capsule = PyObject_GetAttrString(bit_generator, "capsule");
-        if (capsule == NULL)
+        } else {
             PyErr_Clear();
+            bit_generator = PyObject_GetAttrString(entry, "bit_generator"); /* a Generator */
+            if (bit_generator == NULL)
+                PyErr_Clear();
+            else if ((capsule = PyObject_GetAttrString(bit_generator, "capsule")) == NULL)
+                PyErr_Clear();
+        }
         *owner = bit_generator;
     }
     bitgen_t *bg = capsule != NULL && PyCapsule_IsValid(capsule, "BitGenerator") ? (bitgen_t *)PyCapsule_GetPointer(capsule, "BitGenerator") : NULL;

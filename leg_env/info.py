@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._core import kernels
 from .contact import MODE_NAMES
 
 __all__ = ["KEYS", "UNILATERAL", "InfoBuilder"]
@@ -86,22 +87,45 @@ class InfoBuilder:
         ``kernels.Batch``) holds: the single env's, read at every step."""
         return RowReader(self, batch, out, state)
 
-    def columns(self, out: np.ndarray, state: np.ndarray | None = None, rewards: bool = False) -> dict:
-        """Every key as one fresh array over the rows of ``out`` (and ``state``); with ``rewards`` the reward terms."""
-        cols = {}
-        for key, field in zip(self.out_keys, self.out_fields):
-            if key == "contact_mode":
-                cols[key] = np.take(_MODE_NAMES, out[field])
-            elif out.dtype.fields[field][0].kind == "i":  # counts: int64, as numpy stacks Python ints
-                cols[key] = out[field].astype(np.int64)
-            else:
-                cols[key] = out[field].copy()
-        for key in self.state_keys:
-            cols[key] = state[key].copy()
-        if rewards:
-            terms = out["terms"].T.copy()  # one copy serves every term
-            cols.update(zip(self.reward_keys, terms[: len(self.reward_keys)]))
+    def columns(self, out: np.ndarray, state: np.ndarray, rewards: bool = False) -> dict:
+        """Every key as one fresh array over the rows of ``out`` and ``state``; with ``rewards`` the reward terms.
+
+        One compiled pass (``kernels.info_columns``) fills a block per type (doubles, int64 counts and modes,
+        bools, ``(N, 2)`` vectors); each key's array is its row of a block (fresh, and no two share memory)."""
+        spec, layout_ = self._column_spec(out.dtype, state.dtype, rewards)
+        n = out.shape[0]
+        (d, i, b, v), keys = layout_
+        doubles, ints = np.empty((d, n)), np.empty((i, n), dtype=np.int64)
+        flags, vectors = np.empty((b, n), dtype=np.bool_), np.empty((v, n, 2))
+        kernels.info_columns(spec, out, state, doubles, ints, flags, vectors)
+        blocks = {"d": doubles, "i": ints, "m": ints, "?": flags, "v": vectors}
+        cols = {key: blocks[kind][row] for key, kind, row in keys}
+        if self.unilateral:
+            cols["contact_mode"] = np.take(_MODE_NAMES, cols["contact_mode"])
         return cols
+
+    def _column_spec(self, out_dtype: np.dtype, state_dtype: np.dtype, rewards: bool):
+        """``info_columns``' spec and the blocks' sizes and keys, for arrays of these dtypes (made once)."""
+        cache = self.__dict__.setdefault("_specs", {})
+        if rewards in cache:
+            return cache[rewards]
+        entries = []  # (key, source, offset, kind)
+        for key, field in zip(self.out_keys, self.out_fields):
+            base, offset = out_dtype.fields[field][0], out_dtype.fields[field][1]
+            kind = "m" if key == "contact_mode" else ("v" if base.shape else {"f": "d", "i": "i", "b": "?"}[base.kind])
+            entries.append((key, 0, offset, kind))
+        entries += [(key, 1, state_dtype.fields[key][1], "d") for key in self.state_keys]
+        if rewards:
+            terms = out_dtype.fields["terms"][1]
+            entries += [(key, 0, terms + 8 * k, "d") for k, key in enumerate(self.reward_keys)]
+        counts, spec, keys = {"d": 0, "i": 0, "?": 0, "v": 0}, [], []
+        for key, source, offset, kind in entries:
+            block = "i" if kind == "m" else kind
+            spec.append((source, offset, kind, counts[block]))
+            keys.append((key, kind, counts[block]))
+            counts[block] += 1
+        cache[rewards] = (tuple(spec), ((counts["d"], counts["i"], counts["?"], counts["v"]), keys))
+        return cache[rewards]
 
 
 class RowReader:

@@ -54,7 +54,7 @@ static inline void witnesses(int mode, const leg_model *M, const leg_drive *u, c
                              const double *anchor, double *wa, double *wb)
 {
     if (mode == LEG_FLIGHT) {
-        *wa = touchdown_witness(foot_of(M, X).y, anchor[1]);
+        *wa = touchdown_witness(X->y + M->p.l1 * X->s1 + M->p.l2 * X->s2, anchor[1]); /* foot_of's y */
         *wb = INFINITY;
     } else if (mode == LEG_STICK) {
         *wa = liftoff_witness(k->lam_y);
@@ -321,11 +321,7 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
                                double s2, double co2, leg_record *rec)
 {
     const leg_model model = model_of(P), *M = &model;
-    memset(rec, 0, sizeof(*rec));
-    for (int j = 0; j < LEG_LOG_SIZE; j++) {
-        rec->event_kind[j] = -1;
-        rec->event_time[j] = NAN;
-    }
+    memset(rec, 0, offsetof(leg_record, event_kind)); /* the sums and counts; the log is written as events come */
     leg_progress g;
     g.X = x_from(q, qd, s1, co1, s2, co2);
     int settled = 0, events = 0;

@@ -744,6 +744,10 @@ static PyObject *py_hybrid_step(PyObject *self, PyObject *const *args, Py_ssize_
         double *qi = q + i * LEG_NQ, s1, co1, s2, co2;
         const leg_drive u = {tau[2 * i], tau[2 * i + 1], load[i], mu[i]};
         leg_trig(qi, &s1, &co1, &s2, &co2);
+        for (int j = 0; j < LEG_LOG_SIZE; j++) { /* the log after the last event: none */
+            rec[i].event_kind[j] = -1;
+            rec[i].event_time[j] = NAN;
+        }
         mode[i] = hybrid_control_step(P + i * ps, &u, qi, qd + i * LEG_NQ, (int)mode[i], anchor + 2 * i, dt, substeps,
                                       max_angle, s1, co1, s2, co2, rec + i);
     }
@@ -923,6 +927,8 @@ static PyMethodDef methods[] = {
          "plus noise, or as the state has them if noise is None) and evaluated."),
     FAST("perturbed_starts", py_perturbed_starts, "perturbed_starts(noise, scale, q_nom, p, q, qd, anchor)."),
     FAST("robot_params", py_robot_params, "robot_params(u, spec, base, limits, row) -> accepted."),
+    FAST("info_columns", py_info_columns,
+         "info_columns(spec, out, state, doubles, ints, flags, vectors): every row's info keys, a block row per key."),
     FAST("draw_uniform", py_draw_uniform, "draw_uniform(generators, rows, out): uniforms from each row's generator."),
     FAST("draw_robots", py_draw_robots, "draw_robots(generators, rows, spec, base, limits, max_draws, robots, rejected)."),
     {"layouts", (PyCFunction)py_layouts, METH_NOARGS, "layouts(): {struct: (itemsize, [(field, offset, size)])}."},

@@ -514,6 +514,112 @@ fail:
     return NULL;
 }
 
+/* info_columns(spec, out, state, doubles, ints, flags, vectors): every row's info keys in one pass, each key's
+ * values into a row of a fresh block: spec is a tuple of (source, offset, kind, row): source 0 out, 1 state;
+ * kind 'd' a double into doubles[row], 'i' an int32 (or 'm', the contact mode) into ints[row] (int64), '?' a
+ * byte into flags[row] (bool), 'v' two doubles into vectors[row] (an (N, 2) block). leg_env.info makes the
+ * blocks and the keys' views of them. */
+static PyObject *py_info_columns(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    held h;
+    h.n = 0;
+    Py_ssize_t n = 0, n_state = 0, r_d = 0, r_i = 0, r_b = 0, r_v = 0;
+    if (!n_args(nargs, 7, "info_columns"))
+        return NULL;
+    if (!PyTuple_Check(args[0])) {
+        PyErr_SetString(PyExc_TypeError, "info_columns: spec must be a tuple");
+        return NULL;
+    }
+    const char *out = (const char *)rows_of(args[1], "out", sizeof(env_out), 0, &h, &n);
+    const char *state = out ? (const char *)rows_of(args[2], "state", sizeof(env_state), 0, &h, &n_state) : NULL;
+    double *doubles = state ? (double *)buffer_of(args[3], "doubles", F64, -(n > 0 ? n : 1), 1, &h, &r_d) : NULL;
+    int64_t *ints = doubles ? (int64_t *)buffer_of(args[4], "ints", I64, -(n > 0 ? n : 1), 1, &h, &r_i) : NULL;
+    unsigned char *flags = ints ? (unsigned char *)matrix_of(args[5], "flags", BOOL, 1, &h, &r_b, &n_state) : NULL;
+    double *vectors = flags ? (double *)buffer_of(args[6], "vectors", F64, -(2 * (n > 0 ? n : 1)), 1, &h, &r_v) : NULL;
+    if (vectors == NULL)
+        goto fail;
+    Py_ssize_t n_rows_state = 0;
+    rows_of(args[2], "state", sizeof(env_state), 0, &h, &n_rows_state);
+    if (n_rows_state != n || (r_b > 0 && n_state != n)) {
+        PyErr_SetString(PyExc_ValueError, "info_columns: out, state and the blocks must have the same rows");
+        goto fail;
+    }
+    const Py_ssize_t m = PyTuple_GET_SIZE(args[0]);
+    long *spec = PyMem_Malloc((m ? m : 1) * 4 * sizeof(long));
+    if (spec == NULL) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    for (Py_ssize_t k = 0; k < m; k++) {
+        PyObject *item = PyTuple_GET_ITEM(args[0], k);
+        if (!PyTuple_Check(item) || PyTuple_GET_SIZE(item) != 4 || !PyUnicode_Check(PyTuple_GET_ITEM(item, 2))) {
+            PyMem_Free(spec);
+            PyErr_SetString(PyExc_TypeError, "info_columns: every spec entry must be (source, offset, kind, row)");
+            goto fail;
+        }
+        const long source = PyLong_AsLong(PyTuple_GET_ITEM(item, 0)), offset = PyLong_AsLong(PyTuple_GET_ITEM(item, 1));
+        const long row = PyLong_AsLong(PyTuple_GET_ITEM(item, 3));
+        const char *kind = PyUnicode_AsUTF8(PyTuple_GET_ITEM(item, 2));
+        if (PyErr_Occurred() || kind == NULL) {
+            PyMem_Free(spec);
+            goto fail;
+        }
+        const size_t size = source == 0 ? sizeof(env_out) : sizeof(env_state);
+        const size_t width = kind[0] == 'd' ? 8 : (kind[0] == 'v' ? 16 : (kind[0] == '?' ? 1 : 4));
+        const Py_ssize_t rows = kind[0] == 'd' ? r_d : (kind[0] == 'v' ? r_v : (kind[0] == '?' ? r_b : r_i));
+        if ((source != 0 && source != 1) || offset < 0 || (size_t)offset + width > size || row < 0 || row >= rows
+            || !(kind[0] == 'd' || kind[0] == 'i' || kind[0] == 'm' || kind[0] == '?' || kind[0] == 'v')) {
+            PyMem_Free(spec);
+            PyErr_Format(PyExc_ValueError, "info_columns: spec entry %zd is outside its row or block", k);
+            goto fail;
+        }
+        spec[4 * k] = source;
+        spec[4 * k + 1] = offset;
+        spec[4 * k + 2] = kind[0];
+        spec[4 * k + 3] = row;
+    }
+    for (Py_ssize_t k = 0; k < m; k++) { /* a key at a time: one strided read, one contiguous write */
+        const size_t stride = spec[4 * k] == 0 ? sizeof(env_out) : sizeof(env_state);
+        const char *at = (spec[4 * k] == 0 ? out : state) + spec[4 * k + 1];
+        const long row = spec[4 * k + 3];
+        switch ((char)spec[4 * k + 2]) {
+        case 'd': {
+            double *dst = doubles + row * n;
+            for (Py_ssize_t i = 0; i < n; i++)
+                memcpy(dst + i, at + i * stride, 8);
+            break;
+        }
+        case 'i':
+        case 'm': {
+            int64_t *dst = ints + row * n;
+            for (Py_ssize_t i = 0; i < n; i++) {
+                int32_t i32;
+                memcpy(&i32, at + i * stride, 4);
+                dst[i] = i32;
+            }
+            break;
+        }
+        case '?': {
+            unsigned char *dst = flags + row * n;
+            for (Py_ssize_t i = 0; i < n; i++)
+                dst[i] = at[i * stride] != 0;
+            break;
+        }
+        default: {
+            double *dst = vectors + row * n * 2;
+            for (Py_ssize_t i = 0; i < n; i++)
+                memcpy(dst + 2 * i, at + i * stride, 16);
+        }
+        }
+    }
+    PyMem_Free(spec);
+    release_all(&h);
+    Py_RETURN_NONE;
+fail:
+    release_all(&h);
+    return NULL;
+}
+
 /* ------------------------------------------------------------------------------------------------
  * Batch: one env's arrays handed to C once (the single environment's step is one call)
  * ------------------------------------------------------------------------------------------------ */

@@ -30,6 +30,7 @@ from .. import checks
 from ..params import LegParams
 from .. import tasks
 from ..info import KEYS, InfoBuilder
+from ..layout import put_rows, take_rows
 from ..randomize import FIELD_COLUMNS, FIELDS
 from ..step import BitGeneratorRows, physics_range
 from ..tasks.stance import REWARD_TERMS, StanceConfig
@@ -333,9 +334,8 @@ class LegVectorEnv(VectorEnv):
         if mode == AutoresetMode.NEXT_STEP and self._ended.any():
             restarted = np.flatnonzero(self._ended)
             rejected = self._set_robots(restarted)
-            starts = self._draw_starts(restarted)
             # step the restarting rows from their start (cheap, near nominal), then put them back there
-            self._start(restarted, *starts)
+            starts = self._start(restarted, *self._draw_starts(restarted))
         elif mode == AutoresetMode.DISABLED and self._ended.any():
             raise ValueError(
                 f"sub-env(s) {_some(np.flatnonzero(self._ended))} ended; with autoreset_mode DISABLED reset them "
@@ -348,7 +348,7 @@ class LegVectorEnv(VectorEnv):
         self.task.assess(self._state, self._robots, self._settings, self._out, self._obs)
         self._elapsed += 1
         if restarted is not None:
-            self._start(restarted, *starts)  # zeroes their reward terms too
+            self._put_rows(restarted, starts)  # zeroes their reward terms too
             self._elapsed[restarted] = 0
         terms = self._out["terms"][:, :len(self.reward_keys)].copy()  # the step's, before a SAME_STEP reset zeroes the reset rows'
         reward = terms[:, 0].copy()
@@ -365,7 +365,7 @@ class LegVectorEnv(VectorEnv):
         final = None
         if mode == AutoresetMode.SAME_STEP and ended.any():
             restarted = np.flatnonzero(ended)
-            final = _Final(self._obs[restarted], self._out[restarted], self._state[restarted])
+            final = _Final(self._obs[restarted], take_rows(self._out, restarted), take_rows(self._state, restarted))
             rejected = self._set_robots(restarted)
             self._start(restarted, *self._draw_starts(restarted))
             self._elapsed[restarted] = 0
@@ -458,12 +458,13 @@ class LegVectorEnv(VectorEnv):
         noise = None if explicit is not None else np.ascontiguousarray(draws[:, :posture])
         return explicit, noise, columns
 
-    def _start(self, rows: np.ndarray | None, explicit, noise, columns: dict) -> None:
+    def _start(self, rows: np.ndarray | None, explicit, noise, columns: dict):
         """Start ``rows`` (all if None) with the task's state ``columns`` and evaluate them without stepping.
 
         ``explicit``: ``(q, qd, anchor)`` (each broadcast to ``(len(rows), .)``), put on their contact as they
         are; else the nominal posture plus the posture ``noise`` (``(len(rows), 6 or 0)`` uniforms), each robot
-        from its own row of ``robots``. Their reward terms become zero.
+        from its own row of ``robots``. Their reward terms become zero. Returns the rows' ``(state, out, obs)``
+        (None when ``rows`` is None), for ``_put_rows``.
         """
         if rows is None:
             state, robots, out, obs = self._state, self._robots, self._out, self._obs
@@ -471,7 +472,7 @@ class LegVectorEnv(VectorEnv):
             k = rows.size
             state, out = np.zeros(k, dtype=self._state.dtype), np.zeros(k, dtype=self._out.dtype)
             obs = np.empty((k, self._obs.shape[1]), dtype=np.float32)
-            robots = self._robots if self._robots.shape[0] == 1 else self._robots[rows]
+            robots = self._robots if self._robots.shape[0] == 1 else take_rows(self._robots, rows)
         for field, values in columns.items():
             state[field] = values
         if explicit is not None:
@@ -481,9 +482,16 @@ class LegVectorEnv(VectorEnv):
             noise = np.zeros((state.shape[0], 6))  # no posture noise: not read
         self.task.start(state, robots, self._settings, out, obs, noise, self.config.reset_noise_scale)
         if rows is None:
-            return
-        self._state[rows] = state
-        self._out[rows] = out
+            return None
+        started = (state, out, obs)
+        self._put_rows(rows, started)
+        return started
+
+    def _put_rows(self, rows: np.ndarray, started) -> None:
+        """Write ``_start``'s ``(state, out, obs)`` of ``rows`` back into the buffers."""
+        state, out, obs = started
+        put_rows(self._state, rows, state)
+        put_rows(self._out, rows, out)
         self._obs[rows] = obs
 
     def _bind(self) -> None:

@@ -291,7 +291,7 @@ typedef struct {
 /* Substeps in `mode` while no witness of it is negative at a substep's end. A substep that ends with
  * one negative is not taken: the general loop of hybrid_control_step redoes it from the same state and
  * locates the event. Called with `mode` a constant, so that the compiler specialises the RK4 stages. */
-static inline void steady(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
+LEG_INLINE void steady(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
                           leg_record *rec)
 {
     while (g->n_left > 0) {

@@ -431,7 +431,7 @@ class LegVectorEnv(VectorEnv):
             return
         n = self.num_envs
         columns = np.zeros((len(FIELDS), n))  # one block for every field's column, one for every mask
-        columns[:, custom] = self._robots[custom].view(np.float64).reshape(custom.size, -1)[:, FIELD_COLUMNS].T
+        columns.T[custom] = take_rows(self._robots, custom).view(np.float64).reshape(custom.size, -1)[:, FIELD_COLUMNS]
         masks = np.zeros((len(FIELDS) + 1, n), dtype=np.bool_)
         masks[:, custom] = True
         params = {}

@@ -81,7 +81,7 @@ class LegStanceVecEnv(VecEnv):
         obs, info = self.env.reset(seed=seeds, options=self._merged_options())
         self._reset_seeds()
         self._reset_options()
-        self.reset_infos = _per_env_infos(info, range(self.num_envs), self.env.state_keys)
+        self.reset_infos = _per_env_infos(info, None, self.env.state_keys)
         _add_params(self.reset_infos, info, range(self.num_envs))
         return obs
 
@@ -104,9 +104,8 @@ class LegStanceVecEnv(VecEnv):
                 column = columns[key].copy()
                 column[ended] = final[key][ended]
                 columns[key] = column
-        infos = _per_env_infos(columns, range(self.num_envs), keys)
-        for info_i, limit in zip(infos, (truncated & ~terminated).tolist()):
-            info_i["TimeLimit.truncated"] = limit
+        columns["TimeLimit.truncated"] = truncated & ~terminated
+        infos = _per_env_infos(columns, None, (*keys, "TimeLimit.truncated"))
         if ended is not None:
             rows = ended.tolist()
             for i in rows:
@@ -169,13 +168,17 @@ def _add_params(infos: list[dict], info: dict, rows) -> None:
 
 
 def _per_env_infos(columns: dict, rows, keys) -> list[dict]:
-    """Per-row dicts of ``keys`` from their columns (a vector ``info``): numbers as Python's, arrays as the row's."""
-    rows = list(rows)
+    """Per-row dicts of ``keys`` from their columns (a vector ``info``) for ``rows`` (None: every row): numbers
+    as Python's, arrays as the row's."""
+    if rows is not None:
+        rows = np.fromiter(rows, dtype=np.intp)
     values = []
     for key in keys:
-        column = columns[key]
-        values.append(column[rows] if column.ndim > 1 else column[rows].tolist())
-    return [dict(zip(keys, row)) for row in zip(*values)] if keys else [{} for _ in rows]
+        column = columns[key] if rows is None else columns[key][rows]
+        values.append(list(column) if column.ndim > 1 else column.tolist())
+    if not keys:
+        return [{} for _ in range(len(rows))]
+    return [dict(zip(keys, row)) for row in zip(*values)]
 
 
 def make_sb3_vec_env(num_envs: int, seed: int | None = None, env_id: str | None = None, **env_kwargs: Any) -> LegStanceVecEnv:

@@ -87,8 +87,9 @@ def copy_sources(dest: Path) -> Path:
 def build_sdist(source: Path, out: Path) -> Path:
     """The sdist of ``source`` in ``out``, built without isolation (no download of the build backend)."""
     out.mkdir(parents=True, exist_ok=True)
-    if importlib.util.find_spec("build") is not None:
-        _run([sys.executable, "-m", "build", "--sdist", "--no-isolation", "--outdir", str(out), str(source)])
+    spec = importlib.util.find_spec("build")
+    if spec is not None and spec.origin is not None:  # the `build` package, not a checkout's build/ directory
+        _run([sys.executable, "-m", "build", "--sdist", "--no-isolation", "--outdir", str(out), str(source)], cwd=out)
     else:  # what `build --no-isolation` calls: the backend's PEP 517 hook
         hook = f"import setuptools.build_meta as backend; print(backend.build_sdist({str(out)!r}))"
         _run([sys.executable, "-c", hook], cwd=source)

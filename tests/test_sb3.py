@@ -1,5 +1,7 @@
 """The Stable-Baselines3 VecEnv adapter: SB3's VecEnv contract, its wrappers, and PPO on it."""
 
+from types import SimpleNamespace
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -122,6 +124,62 @@ def test_infos_carry_the_single_env_keys():
         assert set(REWARD_KEYS + STATE_KEYS) | {"TimeLimit.truncated"} == set(info)
         assert np.float32(sum(info[key] for key in REWARD_KEYS)) == reward
         assert info["contact_force"].shape == (2,)
+
+
+def test_step_info_columns_and_lean_infos_match_the_per_env_dicts():
+    """``step_info`` holds every sub-env's info values (the ended ones' last step); with per_env_info=False the
+    dicts carry only TimeLimit.truncated and terminal_observation, and everything else is the same."""
+    full = make_sb3_vec_env(NUM_ENVS, seed=SEED, max_episode_steps=MAX_STEPS, **ENV_KWARGS)
+    lean = make_sb3_vec_env(NUM_ENVS, seed=SEED, max_episode_steps=MAX_STEPS, per_env_info=False, **ENV_KWARGS)
+    np.testing.assert_array_equal(full.reset(), lean.reset())
+    ended = 0
+    for actions in random_actions(STEPS):
+        obs, rewards, dones, infos = full.step(actions)
+        lean_obs, lean_rewards, lean_dones, lean_infos = lean.step(actions)
+        np.testing.assert_array_equal(obs, lean_obs)
+        np.testing.assert_array_equal(rewards, lean_rewards)
+        np.testing.assert_array_equal(dones, lean_dones)
+        for i in range(NUM_ENVS):
+            expected = {k: infos[i][k] for k in ("TimeLimit.truncated", "terminal_observation") if k in infos[i]}
+            assert_info_equal(lean_infos[i], expected)
+            for key in set(infos[i]) - {"terminal_observation"}:
+                for columns in (full.step_info, lean.step_info):
+                    value = columns[key][i]
+                    assert (np.array_equal(value, infos[i][key]) if isinstance(value, np.ndarray) else value == infos[i][key]), key
+        ended += int(dones.sum())
+    assert ended >= 6
+
+
+def test_per_env_info_must_be_a_bool():
+    with pytest.raises(TypeError, match="per_env_info"):
+        make_sb3_vec_env(2, per_env_info="no")
+    with pytest.raises(TypeError, match="per_env_info"):
+        LegStanceVecEnv(make_sb3_vec_env(2).env, per_env_info=1)
+
+
+def test_reward_terms_logger_reads_the_columns_as_it_reads_the_dicts():
+    """The logger's rollout means from the adapter's columns (found under VecNormalize) equal those it
+    computes from the per-env dicts of another kind of VecEnv."""
+    from train.callbacks import RewardTermsLogger, leg_adapter
+
+    lean = VecNormalize(make_sb3_vec_env(NUM_ENVS, seed=SEED, max_episode_steps=MAX_STEPS, per_env_info=False, **ENV_KWARGS))
+    assert isinstance(leg_adapter(lean), LegStanceVecEnv) and leg_adapter(dummy_vec_env(1)) is None
+    ref = dummy_vec_env()
+    ref.seed(SEED)
+    logged = []
+    for venv in (lean, ref):
+        logger = RewardTermsLogger(REWARD_KEYS)
+        logger.model = SimpleNamespace(get_env=lambda venv=venv: venv)  # what training_env reads
+        logger.locals = {}
+        logger._on_rollout_start()
+        venv.reset()
+        for actions in random_actions(40):
+            logger.locals["infos"] = venv.step(actions)[3]
+            logger._on_step()
+        logged.append({key: total / logger._count for key, total in logger._sums.items()})
+    assert logged[0].keys() == logged[1].keys() and len(logged[0]) == len(REWARD_KEYS) + 2
+    for key in logged[0]:
+        assert logged[0][key] == pytest.approx(logged[1][key], rel=1e-12, abs=1e-12), key
 
 
 # ------------------------------------------------------------------ SB3 wrappers and PPO

@@ -9,7 +9,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-__all__ = ["RewardTermsLogger", "PeriodicEvaluation", "PeriodicCheckpoint", "FrozenActor", "run_vec_episodes", "evaluate_now"]
+__all__ = ["RewardTermsLogger", "leg_adapter", "PeriodicEvaluation", "PeriodicCheckpoint", "FrozenActor", "run_vec_episodes", "evaluate_now"]
 
 VIOLATION_KEYS = ("unilateral_violation", "friction_violation")
 
@@ -34,10 +34,15 @@ class RewardTermsLogger(BaseCallback):
 
     def _on_step(self) -> bool:
         sums = self._sums
+        adapter = leg_adapter(self.training_env)
+        if adapter is not None:  # the step's columns: no per-env dicts needed
+            columns = adapter.step_info
+            for key in sums:
+                sums[key] += float(columns[key].sum())
+            self._count += adapter.num_envs
+            return True
         for info in self.locals["infos"]:
-            for key in self.reward_keys:
-                sums[key] += info[key]
-            for key in VIOLATION_KEYS:
+            for key in sums:
                 sums[key] += info[key]
         self._count += len(self.locals["infos"])
         return True
@@ -49,6 +54,15 @@ class RewardTermsLogger(BaseCallback):
             self.logger.record(f"rollout/{key}", self._sums[key] / self._count)
         for key in VIOLATION_KEYS:
             self.logger.record(f"rollout/{key}_rate", self._sums[key] / self._count)
+
+
+def leg_adapter(venv):
+    """The ``leg_env.sb3.LegStanceVecEnv`` under ``venv``'s wrappers, or None (another kind of VecEnv)."""
+    from leg_env.sb3 import LegStanceVecEnv
+
+    while venv is not None and not isinstance(venv, LegStanceVecEnv):
+        venv = getattr(venv, "venv", None)
+    return venv
 
 
 def run_vec_episodes(predict: Callable, venv: VecEnv, seed: int) -> dict:

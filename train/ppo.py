@@ -357,7 +357,9 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
     n_envs, seed = config["n_envs"], config["seed"]
     set_random_seed(seed)
     # each (re)start draws fresh episodes from its own block of small seeds
-    venv = _with_residual(make_sb3_vec_env(n_envs, seed=seed + progress["resumes"] * n_envs, env_id=config["env_id"], **config["env_kwargs"]), config)
+    # the training env's per-env info dicts hold only what SB3 reads; RewardTermsLogger logs from its step_info columns
+    venv = make_sb3_vec_env(n_envs, seed=seed + progress["resumes"] * n_envs, env_id=config["env_id"], per_env_info=False, **config["env_kwargs"])
+    venv = _with_residual(venv, config)
     if checkpoint is None:
         if config["normalize"] is not False:
             venv = VecNormalize(venv, **config["normalize"])

@@ -281,3 +281,16 @@ def test_evaluate_missing_policy_folder_creates_nothing(tmp_path, monkeypatch):
 def test_evaluate_takes_a_model_file(run_copy):
     out = evaluate(EvalArgs(policy=str(run_copy / "model.zip"), episodes=1))
     assert out == run_copy / "eval" and (out / "policy.json").is_file() and (out / "learning_curve.png").is_file()
+
+
+def test_rllib_env_threads_and_its_deprecated_numba_name():
+    """``--env-threads`` sets the threads of each runner's batch; ``--numba-threads``, its old name, still does,
+    with a DeprecationWarning; a count below 1 is refused by name."""
+    from train.rllib import RLlibArgs
+
+    assert RLlibArgs(env_threads=2).env_threads == 2
+    with pytest.warns(DeprecationWarning, match="--env-threads"):
+        args = RLlibArgs(numba_threads=3)
+    assert args.env_threads == 3 and args.numba_threads is None
+    with pytest.raises(ValueError, match="env_threads"):
+        RLlibArgs(env_threads=0)

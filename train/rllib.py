@@ -110,9 +110,11 @@ class RLlibArgs:
     num_learners: int = 0
     """Learner actors (0: one learner in this process); the batch is split over them."""
     num_cpus_per_env_runner: float | None = None
-    """CPUs Ray reserves for each env runner (None: numba_threads)."""
-    numba_threads: int = 1
-    """NUMBA_NUM_THREADS of the env runners and the threads each runner's batch is stepped with."""
+    """CPUs Ray reserves for each env runner (None: env_threads)."""
+    env_threads: int = 1
+    """Threads each env runner's native batch is stepped with (the batch's ``num_threads``)."""
+    numba_threads: int | None = None
+    """Deprecated name of env_threads, from when the physics was numba code; removed in the next release."""
     checkpoint_freq: int = 200_000
     """Environment steps between checkpoints (0: only at the end and on Ctrl-C)."""
     address: str | None = None
@@ -127,12 +129,16 @@ class RLlibArgs:
     """0: quiet; 1: a line per iteration."""
 
     def __post_init__(self):
+        if self.numba_threads is not None:
+            warnings.warn("--numba-threads is deprecated and will be removed in the next release: use --env-threads",
+                          DeprecationWarning, stacklevel=2)  # fmt: skip
+            self.env_threads, self.numba_threads = self.numba_threads, None
         if self.total_timesteps is not None and self.total_timesteps < 1:
             raise ValueError(f"total_timesteps must be >= 1, got {self.total_timesteps}")
         for name in ("num_env_runners", "num_learners", "checkpoint_freq", "seed"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("num_envs_per_env_runner", "numba_threads", "num_cpus"):
+        for name in ("num_envs_per_env_runner", "env_threads", "num_cpus"):
             value = getattr(self, name)
             if value is not None and value < 1:
                 raise ValueError(f"{name} must be >= 1, got {value}")
@@ -220,8 +226,8 @@ def resolve_config(args: RLlibArgs) -> dict:
             "num_env_runners": runners,
             "num_envs_per_env_runner": args.num_envs_per_env_runner or -(-n_envs // max(1, runners)),
             "num_learners": args.num_learners,
-            "num_cpus_per_env_runner": args.num_cpus_per_env_runner or args.numba_threads,
-            "numba_threads": args.numba_threads,
+            "num_cpus_per_env_runner": args.num_cpus_per_env_runner or args.env_threads,
+            "env_threads": args.env_threads,
         },
         "checkpoint_freq": int(args.checkpoint_freq),
         "hyperparams_file": _display_path(args.hyperparams),
@@ -248,8 +254,8 @@ def rllib_config(config: dict, restart: int = 0):
 
     scaling, ppo = config["scaling"], dict(config["ppo"])
     env_kwargs = dict(config["env_kwargs"])
-    if scaling["numba_threads"] > 1:
-        env_kwargs["num_threads"] = scaling["numba_threads"]
+    if scaling["env_threads"] > 1:
+        env_kwargs["num_threads"] = scaling["env_threads"]
     learners = max(1, scaling["num_learners"])
     train_batch = ppo.pop("train_batch_size")
     return (
@@ -341,14 +347,11 @@ def _prepare(out: Path, config: dict, overwrite: bool) -> None:
 def _ray_init(args: RLlibArgs, config: dict) -> None:
     import ray
 
-    threads = str(config["scaling"]["numba_threads"])
-    os.environ.setdefault("NUMBA_NUM_THREADS", threads)  # the local env runner, when sampling here
-    runtime_env = {"env_vars": {"NUMBA_NUM_THREADS": threads}}
     address = args.address or os.environ.get("RAY_ADDRESS")
     if address:
-        ray.init(address=address, runtime_env=runtime_env)
+        ray.init(address=address)
     else:
-        ray.init(num_cpus=args.num_cpus, include_dashboard=False, runtime_env=runtime_env)
+        ray.init(num_cpus=args.num_cpus, include_dashboard=False)
 
 
 def _notice(message: str) -> None:

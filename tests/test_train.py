@@ -271,3 +271,14 @@ def test_extras_declare_every_package_that_training_and_evaluation_import(extra)
     providers = packages_distributions()
     missing = sorted(m for m in third_party if not {norm(d) for d in providers.get(m, [m])} & declared)
     assert not missing, f"imported but not declared in the core or {extra} dependencies: {missing}"
+
+
+def test_torch_threads_apply_to_the_run_and_are_restored(tmp_path):
+    import torch
+
+    before = torch.get_num_threads()
+    out = train(tiny_args(tmp_path / "run", torch_threads=2, eval_freq=0, checkpoint_freq=0, total_timesteps=128))
+    assert json.loads((out / "evaluations.json").read_text())["machine"]["torch_threads"] == 2
+    assert torch.get_num_threads() == before
+    with pytest.raises(ValueError, match="torch_threads"):
+        tiny_args(tmp_path / "bad", torch_threads=0)

@@ -145,6 +145,10 @@ class TrainArgs:
     """Show SB3's progress bar."""
     verbose: int = 1
     """0: quiet; 1: a line per evaluation; 2: also SB3's training tables."""
+    torch_threads: int = 1
+    """Threads of torch (the policy's forward passes and the PPO update). The environments step on one thread
+    and are idle during the update, so on an otherwise idle machine up to one thread per core speeds training;
+    the results then depend on the thread count in their last digits."""
 
     def __post_init__(self):
         if self.total_timesteps is not None and self.total_timesteps < 1:
@@ -158,6 +162,8 @@ class TrainArgs:
         for name in ("eval_freq", "checkpoint_freq", "seed", "critic_warmup"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not isinstance(self.torch_threads, int) or self.torch_threads < 1:
+            raise ValueError(f"torch_threads must be an integer >= 1, got {self.torch_threads!r}")
 
 
 def _controllers() -> tuple:
@@ -319,14 +325,18 @@ def train(args: TrainArgs) -> Path:
     """
     import torch
 
-    torch.set_num_threads(1)
-    out = Path(args.out)
-    config = resolve_config(args)
-    out.mkdir(parents=True, exist_ok=True)
-    with RunLock(out) as lock:
-        if lock.stale_pid is not None:
-            _notice(f"took over the lock {lock.path} left by process {lock.stale_pid}, which no longer runs")
-        return _train_locked(args, config, out)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(args.torch_threads)
+    try:
+        out = Path(args.out)
+        config = resolve_config(args)
+        out.mkdir(parents=True, exist_ok=True)
+        with RunLock(out) as lock:
+            if lock.stale_pid is not None:
+                _notice(f"took over the lock {lock.path} left by process {lock.stale_pid}, which no longer runs")
+            return _train_locked(args, config, out)
+    finally:
+        torch.set_num_threads(threads)  # the caller's, as it was
 
 
 def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:

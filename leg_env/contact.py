@@ -10,15 +10,15 @@ Modes of a foot on the ground (acceleration-level complementarity ``0 <= y_f'' _
 Coulomb friction with maximal dissipation); one planar contact needs no LCP solver, the four closed
 forms are enumerated:
 
-=================  ==================================================  ==========================================
-mode               force                                               consistent iff
-=================  ==================================================  ==========================================
-``STICK``          ``lam = -Lambda^-1 a0`` (the pinned stance solution)   ``lam_y >= 0`` and ``|lam_x| <= mu lam_y``
+=================  ======================================================  ==========================================
+mode               force                                                   consistent iff
+=================  ======================================================  ==========================================
+``STICK``          ``lam = -Lambda^-1 a0`` (the pinned stance solution)    ``lam_y >= 0`` and ``|lam_x| <= mu lam_y``
 ``SLIP_FORWARD``   ``lam = lam_y (-sigma mu, 1)``, ``sigma = +1``,         ``k_sigma > 0``, ``lam_y >= 0`` and, from
-``SLIP_BACKWARD``  ``sigma = -1``; ``lam_y = -a0_y / k_sigma``,          rest, ``sigma x_f'' >= 0``
+``SLIP_BACKWARD``  ``sigma = -1``; ``lam_y = -a0_y / k_sigma``,            rest, ``sigma x_f'' >= 0``
                    ``k_sigma = Lambda_yy - sigma mu Lambda_yx``
-``FLIGHT``         ``lam = 0``                                          ``a0_y >= 0``
-=================  ==================================================  ==========================================
+``FLIGHT``         ``lam = 0``                                             ``a0_y >= 0``
+=================  ======================================================  ==========================================
 
 Below the Painleve bound, ``mu < mu_critical(q) = Lambda_yy / |Lambda_xy|``, both ``k_sigma > 0`` and
 exactly one mode is consistent. Above it a mode may be missing (a sliding foot with ``k_sigma <= 0``

@@ -56,7 +56,7 @@ terminate; 1000 steps). Every ``PushConfig`` field is a keyword argument, checke
 
 ## Solved
 Survival (no termination in 1000 steps) on at least 90% of 100 evaluation episodes with the push
-magnitude fixed at ``push_force[1]`` (150 N, 15 N s), on seeds not used in training. Issue 10's bar is
+magnitude fixed at ``push_force[1]`` (150 N, 15 N s), on seeds not used in training. A second bar is
 relative to the LQR: the push impulse survived 90% of the time at least 1.5 times the LQR's. The references
 (``train.evaluate --push-curve``, every push of an episode at one magnitude, seeds 10000..10099): the stance
 LQR (``policies/lqr.py``) survives 90% of the episodes up to 2.25 N s; the stepping controller

@@ -10,18 +10,18 @@ one's.
 
 Observation (float32, ``OBS_DIM = 12``; ``Obs`` names the columns):
 
-===== ======================================== ======
-index meaning                                  unit
-===== ======================================== ======
-0     base x relative to the foot contact point m
-1     base y relative to the foot contact point m
-2     torso angle th_b                          rad
-3     hip angle q1                              rad
-4     knee angle q2                             rad
-5-9   qd = [x_b', y_b', th_b', q1', q2']        m/s, rad/s
-10    lam_x / (m_total g)                       1 (N if g = 0)
-11    lam_y / (m_total g)                       1 (N if g = 0)
-===== ======================================== ======
+===== ========================================== ======
+index meaning                                    unit
+===== ========================================== ======
+0     base x relative to the foot contact point  m
+1     base y relative to the foot contact point  m
+2     torso angle th_b                           rad
+3     hip angle q1                               rad
+4     knee angle q2                              rad
+5-9   qd = [x_b', y_b', th_b', q1', q2']         m/s, rad/s
+10    lam_x / (m_total g)                        1 (N if g = 0)
+11    lam_y / (m_total g)                        1 (N if g = 0)
+===== ========================================== ======
 
 The contact force is the mean over the last control step (the contact impulse / dt). With ``g = 0``
 there is no weight to divide by: the kernels divide by 1, so entries 10-11 are in newtons.

@@ -216,13 +216,12 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    load = ", ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "n/a"
     packages = ", ".join(
         f"{name} {version(name)}" for name in ("numpy", "gymnasium", "mujoco", "stable-baselines3", "torch")
     )
     return (
         f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; Python {platform.python_version()}; "
-        f"{packages}; one thread unless a row says otherwise; load average at start {load}"
+        f"{packages}; one thread unless a row says otherwise"
     )
 
 

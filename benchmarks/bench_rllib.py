@@ -83,7 +83,7 @@ def main() -> None:
     cpus = int(ray.cluster_resources()["CPU"])
     print(
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Ray CPUs {cpus}, Python {platform.python_version()}, "
-        f"ray {ray.__version__}, torch {torch.__version__}, load average {os.getloadavg()[0]:.1f}"
+        f"ray {ray.__version__}, torch {torch.__version__}"
     )
     print("| measurement | env runners | value |\n|---|---:|---:|")
     for runners in (1, 2):

@@ -3,8 +3,7 @@ r"""Unilateral contact of the point foot with the ground ``y = 0``: modes, slip,
 Notation (``leg_env.dynamics`` states the conventions): ``J = Jc`` with rows ``J_x, J_y``,
 ``gamma = Jcdot qd``, the contact inertia ``Lambda = J M^-1 J^T`` (2x2 SPD) and the free foot
 acceleration ``a0 = J M^-1 (S^T tau - h) + gamma``. A contact force ``lam`` (the ground's force on the
-foot) gives the foot acceleration ``a_f = a0 + Lambda lam`` (lesson section 5, and
-``shared/notes/contact.md`` section 1).
+foot) gives the foot acceleration ``a_f = a0 + Lambda lam`` (lesson section 5).
 
 Modes of a foot on the ground (acceleration-level complementarity ``0 <= y_f'' _|_ lam_y >= 0`` and
 Coulomb friction with maximal dissipation); one planar contact needs no LCP solver, the four closed

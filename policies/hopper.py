@@ -48,7 +48,7 @@ model (``LegParams``, ``HopConfig``); its per-robot state (phase, apex bias, las
 displacement from the start, dead-reckoned from its velocity since the foot's own ``x`` is not observed)
 is reset by ``reset()`` or where ``episode_start`` is true. Torques are clipped to the joints' limits.
 
-**Tuning** (issue 10, re-measured on 100 episodes, seeds 10000..10099, and on seeds 30000..30099 as a check).
+**Tuning** (measured on 100 episodes, seeds 10000..10099, and on seeds 30000..30099 as a check).
 The first gains (``position_gain`` 0.3, ``liftoff_knee`` 0.6) survived 95% / 85%, drifted 12.6 cm (mean after
 10 s) and missed the apex by 1.62 cm. The drift is the slow position loop, not the dead reckoning: its
 estimate of the COM's displacement is within 0.16 cm of the truth at 10 s (mean over the surviving

@@ -62,7 +62,7 @@ from train.checkpoints import (
     write_text_atomic,
 )
 from train.cli import parse_args
-from train.runfolder import RunFolderError, RunLock, prepare_run_folder
+from train.runfolder import RunFolderError, prepare_run_folder, run_locked
 
 __all__ = ["TrainArgs", "train", "resolve_config", "load_hyperparams", "ENV_ID", "DEFAULT_HYPERPARAMS"]
 
@@ -330,11 +330,7 @@ def train(args: TrainArgs) -> Path:
     try:
         out = Path(args.out)
         config = resolve_config(args)
-        out.mkdir(parents=True, exist_ok=True)
-        with RunLock(out) as lock:
-            if lock.stale_pid is not None:
-                _notice(f"took over the lock {lock.path} left by process {lock.stale_pid}, which no longer runs")
-            return _train_locked(args, config, out)
+        return run_locked(out, lambda: _train_locked(args, config, out))
     finally:
         torch.set_num_threads(threads)  # the caller's, as it was
 

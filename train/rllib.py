@@ -74,7 +74,7 @@ from leg_env import ENV_ID
 from train.checkpoints import write_json_atomic, write_text_atomic
 from train.cli import parse_args
 from train.ppo import DEFAULT_HYPERPARAMS, _display_path, _parse_override, load_hyperparams
-from train.runfolder import RunFolderError, RunLock
+from train.runfolder import RunFolderError, run_locked
 
 __all__ = ["RLlibArgs", "train", "resolve_config", "rllib_config", "latest_checkpoint", "RLlibPolicy", "is_rllib_checkpoint", "is_rllib_run"]
 
@@ -368,12 +368,12 @@ def train(args: RLlibArgs) -> Path:
     torch.set_num_threads(1)
     out = Path(args.out)
     config = resolve_config(args)
-    out.mkdir(parents=True, exist_ok=True)
-    with RunLock(out) as lock:
-        if lock.stale_pid is not None:
-            _notice(f"took over the lock {lock.path} left by process {lock.stale_pid}, which no longer runs")
+
+    def prepared_run() -> Path:
         _prepare(out, config, args.overwrite)
         return _train_locked(args, config, out)
+
+    return run_locked(out, prepared_run)
 
 
 def _restore(algo, out: Path) -> dict | None:

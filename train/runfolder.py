@@ -23,7 +23,10 @@ from __future__ import annotations
 
 import os
 import shutil
+import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 import yaml
 
@@ -118,6 +121,19 @@ class RunLock:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+T = TypeVar("T")
+
+
+def run_locked(out: Path, run: Callable[[], T]) -> T:
+    """Make the folder ``out`` and return ``run()``, called while holding the folder's lock (``RunLock``); taking
+    over a lock left by a process that no longer runs is said on stderr."""
+    out.mkdir(parents=True, exist_ok=True)
+    with RunLock(out) as lock:
+        if lock.stale_pid is not None:
+            print(f"took over the lock {lock.path} left by process {lock.stale_pid}, which no longer runs", file=sys.stderr, flush=True)
+        return run()
 
 
 def _read_all(fd: int) -> str:

@@ -282,3 +282,12 @@ def test_torch_threads_apply_to_the_run_and_are_restored(tmp_path):
     assert torch.get_num_threads() == before
     with pytest.raises(ValueError, match="torch_threads"):
         tiny_args(tmp_path / "bad", torch_threads=0)
+
+
+def test_each_evaluation_line_prints_the_training_rate(tmp_path, capsys):
+    train(tiny_args(tmp_path / "run", verbose=1, checkpoint_freq=0))
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("[")]
+    assert len(lines) == 2  # an evaluation at 128 steps and one at the end, 256
+    for line in lines:
+        rate = line.split(" min, ", 1)[1].split(" steps/s]", 1)[0]
+        assert float(rate.replace(",", "")) > 0.0, line

@@ -411,8 +411,10 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
         if best is None or score(info) >= score(best):
             save_snapshot(out / "best", model, vec_normalize, info)
         if args.verbose:
+            seconds = time.perf_counter() - t0
+            rate = (result["timesteps"] - start_steps) / seconds if seconds > 0 else 0.0  # this invocation's, evaluations included
             print(
-                f"[{result['timesteps']:>9,} steps, {result['time'] / 60:5.1f} min] return "
+                f"[{result['timesteps']:>9,} steps, {result['time'] / 60:5.1f} min, {rate:,.0f} steps/s] return "
                 f"{result['mean_return']:7.1f} +- {result['std_return']:5.1f}, length {result['mean_length']:6.1f}, "
                 f"survival {100 * result['survival_rate']:5.1f}%, RMS drift {100 * result['rms_base_drift']:.2f} cm",
                 flush=True,

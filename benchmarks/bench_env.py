@@ -264,6 +264,35 @@ def arithmetic_limit() -> dict:
     return out
 
 
+def work_per_step(steps: int = 200) -> dict:
+    """What one control step computes under the random actions of the timed rows, pinned and unilateral
+    (``make_vec`` of ``VECTOR_SIZES[-1]`` robots, ``steps`` steps): the RK4 steps the step rule takes
+    (``leg_env.integrate``: at least 2, more when a link turns fast), the located events, and the share of
+    robots in flight. The physics of a step costs about its RK4 steps (4 dynamics evaluations each, the
+    same for every contact mode) plus a few per event: their ratio bounds the unilateral share of the
+    pinned rate at equal cost per RK4 step."""
+    from leg_env.integrate import MAX_ANGLE, SUBSTEPS
+
+    n = max(VECTOR_SIZES)
+    out = {}
+    for name, kwargs in (("pinned", {}), ("unilateral", UNILATERAL)):
+        envs = gym.make_vec(LEG, num_envs=n, **kwargs)
+        envs.reset(seed=SEED)
+        actions = sampled_actions(envs.single_action_space, steps, n)
+        rk4, events, flight = [], [], []
+        for a in actions:
+            qd = envs._state["qd"]
+            va, vb, vc = qd[:, 2], qd[:, 3], qd[:, 4]
+            w = np.max(np.abs(np.stack([va, vb, vc, va + vb, va + vb + vc])), axis=0)
+            rk4.append(np.maximum(SUBSTEPS, np.ceil(w * envs.config.dt / MAX_ANGLE)).mean())
+            flight.append((envs._state["mode"] == 3).mean())
+            envs.step(a)
+            events.append(envs._out["events"].mean())
+        envs.close()
+        out[name] = {"rk4": float(np.mean(rk4)), "events": float(np.mean(events)), "flight": float(np.mean(flight))}
+    return out
+
+
 def env_table() -> dict:
     """Time everything, print the table, return the numbers the targets need."""
     from stable_baselines3.common.env_util import make_vec_env
@@ -339,6 +368,15 @@ def env_table() -> dict:
     ]
     for interface, env_id, n, r, ratio in rows:
         lines.append(f"| {interface} | {env_id} | {n} | {1e6 * n / r:,.1f} | {fmt_rate(r)} | {ratio:.1f}x |")
+    work = work_per_step()
+    p, u = work["pinned"], work["unilateral"]
+    lines += [
+        "",
+        "Work per control step under the same random actions (the step rule's RK4 steps, located events, robots in flight):",
+        f"pinned {p['rk4']:.2f} RK4 steps; unilateral {u['rk4']:.2f} RK4 steps, {u['events']:.3f} events, {100 * u['flight']:.0f}% in flight. "
+        f"At equal cost per RK4 step the unilateral physics runs at most {p['rk4'] / u['rk4']:.0%} of the pinned rate before its events "
+        "(each event re-integrates its RK4 step a few times to locate it).",
+    ]
     print("\n" + "\n".join(lines))
     rate["lines"] = lines
     return rate

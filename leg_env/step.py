@@ -10,8 +10,10 @@ control step, one after the other on the same arrays:
 2. the task's kernel (``Task.assess``, ``tasks.c``): observation, reward terms, termination, extras, and
    whatever the task keeps per robot (a push schedule, a command).
 
-Starting robots is one call (``Task.start``: on their contact, then evaluated). The single env makes both
-calls of a step in one (``kernels.Batch.step_one``).
+Starting robots is one call (``Task.start``: on their contact, then evaluated). The envs make both calls
+of a step in one: ``Task.step`` (the vector env: block by block over rows, so that each block stays in
+cache between the two) and ``kernels.Batch.step_one`` (the single env); the results are bitwise those of
+the two calls.
 
 The arrays (``leg_env.layout``; row ``i`` is robot ``i``): ``state`` (``state_dtype(task)``: ``q``, ``qd``,
 the contact ``anchor``, the last ``action``, the ``trig`` of ``q``, the ``load`` held over the next step, the

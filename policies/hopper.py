@@ -1,4 +1,4 @@
-"""A model-based hopping controller for ``leg_env/PlanarLegHop-v0``: Raibert's three-part decomposition.
+"""A model-based hopping controller for ``leg_env/PlanarLegHop-v1`` (and v0): Raibert's three-part decomposition.
 
 Raibert (1986) splits running into three decoupled servos. On this articulated leg (hip and knee, point
 foot, no spring, 50 N m per joint) each becomes a law on the observation, with the stance torques solved
@@ -43,7 +43,7 @@ exactly from the stance model and the flight torques from the flight model:
 The stance model's ground force is affine in the torques, ``lam = lam_0 + Lambda tau``: the torques for
 ``lam_des`` come from three exact solves and one 2x2 solve per robot, and where they would pass the torque
 limit ``lam_des`` is scaled down along its direction to the largest feasible force (the knee limit
-mostly). The controller reads only the observation (19 entries: ``PlanarLegHop-v0``'s table) and the
+mostly). The controller reads only the observation (the first 19 entries of ``PlanarLegHop``'s table) and the
 model (``LegParams``, ``HopConfig``); its per-robot state (phase, apex bias, last apex, and the COM's
 displacement from the start, dead-reckoned from its velocity since the foot's own ``x`` is not observed)
 is reset by ``reset()`` or where ``episode_start`` is true. Torques are clipped to the joints' limits.
@@ -148,7 +148,7 @@ class HopperController:
         self._was_flight[rows] = False
 
     def torque(self, obs: np.ndarray) -> np.ndarray:
-        """Joint torques [N m] for observations ``(N, 19)``; advances the per-robot phase and apex bias."""
+        """Joint torques [N m] for observations ``(N, 19)`` or ``(N, 20)``; advances the per-robot phase and apex bias."""
         p, m, a, b = self.params, self.m, self.a, self.b
         l1, l2, g, dt = p.l1, p.l2, p.g, self.config.dt
         thb, q1, q2 = obs[:, Obs.th_b], obs[:, Obs.q1], obs[:, Obs.q2]
@@ -283,11 +283,13 @@ class HopperController:
         action[rows] = hop_action[rows]
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        """SB3-style ``predict``: actions in [-1, 1] for one observation (19,) or a batch (N, 19)."""
+        """SB3-style ``predict``: actions in [-1, 1] for one observation or a batch of ``PlanarLegHop``'s: 19 entries
+        (v0) or 20 (v1, whose last, the COM's drift, the controller does not read: it keeps its own dead reckoning)."""
         obs = np.asarray(observation, dtype=np.float64)
-        if obs.shape[-1:] != (19,) or obs.ndim not in (1, 2):
-            raise ValueError(f"observation must have shape (19,) or (N, 19) (PlanarLegHop-v0), got {obs.shape}")
-        batch = obs.reshape(-1, 19)
+        width = obs.shape[-1] if obs.ndim in (1, 2) else None
+        if width not in (19, 20):
+            raise ValueError(f"observation must have shape (19,) or (N, 19) (PlanarLegHop-v0), or 20 entries (v1), got {obs.shape}")
+        batch = obs.reshape(-1, width)
         n = batch.shape[0]
         if self._n != n:
             self._n = n

@@ -16,7 +16,8 @@ import leg_env
 from leg_env import dynamics as dyn
 from leg_env.tasks import REGISTRY
 
-NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0")
+NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1")
+OUT_OF_DATE = ("leg_env/PlanarLegHop-v0",)  # a higher version of its name is registered
 ALL_IDS = tuple(REGISTRY)
 NUM_ENVS = 4
 SEED = 5
@@ -29,6 +30,7 @@ KWARGS = {
     "leg_env/PlanarLegBalance-v0": dict(ctrl_cost_weight=0.02, params={"m_b": 9.0}),
     "leg_env/PlanarLegPush-v0": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
     "leg_env/PlanarLegHop-v0": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
+    "leg_env/PlanarLegHop-v1": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
 }
 
 
@@ -43,14 +45,24 @@ def test_every_task_id_is_registered():
 
 def test_no_current_id_is_out_of_date_and_the_old_stance_v1_is_a_deprecated_alias_of_balance():
     """Making any current id draws no warning (Gymnasium calls an id out of date when a higher version of its
-    name is registered); the old ``PlanarLegStance-v1`` makes ``PlanarLegBalance-v0`` with a DeprecationWarning."""
+    name is registered); an older version of a task warns as Gymnasium does; the old ``PlanarLegStance-v1``
+    makes ``PlanarLegBalance-v0`` with a DeprecationWarning."""
     import warnings
 
+    latest = {}
+    for env_id in leg_env.ENV_IDS:
+        name, version = env_id.rsplit("-v", 1)
+        latest[name] = max(latest.get(name, 0), int(version))
+    current = [i for i in leg_env.ENV_IDS if int(i.rsplit("-v", 1)[1]) == latest[i.rsplit("-v", 1)[0]]]
+    assert set(leg_env.ENV_IDS) - set(current) == set(OUT_OF_DATE)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        for env_id in leg_env.ENV_IDS:
+        for env_id in current:
             gym.make(env_id).reset(seed=0)
             gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point").reset(seed=0)
+    for env_id in OUT_OF_DATE:
+        with pytest.warns(DeprecationWarning, match="out of date"):
+            gym.make(env_id)
     assert "leg_env/PlanarLegStance-v1" not in leg_env.ENV_IDS
     for make in (gym.make, lambda i: gym.make_vec(i, num_envs=2, vectorization_mode="vector_entry_point")):
         with pytest.warns(DeprecationWarning, match="PlanarLegBalance-v0"):
@@ -225,7 +237,7 @@ def test_sb3_adapter_contract(env_id):
                 assert info["terminal_observation"].shape == venv.observation_space.shape
     assert done_seen >= 4
     bad = {"ctrl_cost_weight": -1.0, "com_weight": "1", "command_range": (0.2, 0.1)}
-    field = {NEW_IDS[0]: "ctrl_cost_weight", PUSH: "com_weight", HOP: "command_range"}[env_id]
+    field = {NEW_IDS[0]: "ctrl_cost_weight", PUSH: "com_weight", HOP: "command_range", HOP1: "command_range"}[env_id]
     with pytest.raises(ValueError, match=field):  # ArgumentTypeError is a ValueError too
         make_sb3_vec_env(2, env_id=env_id, **{field: bad[field]})
 
@@ -337,6 +349,50 @@ def test_hop_reward_peaks_at_the_commanded_apex_on_scripted_flights():
     assert abs(rises[np.argmax(rewards[:-1])] - command) <= 0.0025
 
 
+def test_hop_v1_pays_the_height_term_in_flight_only_and_observes_the_drift():
+    """The same seeds and actions on v0 and v1 give the same motion (only the reward and one observation entry
+    differ): v1's height term is v0's times the step's flight share when the step ends in flight, else 0, and
+    its entry 19 is the COM's x from its start."""
+    from leg_env.tasks.stance import Obs
+
+    v0, v1 = (gym.make(f"leg_env/PlanarLegHop-v{k}").unwrapped for k in (0, 1))
+    assert v0.observation_space.shape == (19,) and v1.observation_space.shape == (20,)
+    flights = grounded = 0
+    for seed in range(3):
+        o0, i0 = v0.reset(seed=seed)
+        o1, i1 = v1.reset(seed=seed)
+        x0 = i1["com_position"][0]
+        assert np.array_equal(o0, o1[:19]) and o1[Obs.com_drift] == 0.0
+        for a in actions(150, 1, seed=seed)[:, 0]:
+            o0, r0, t0, _, i0 = v0.step(a)
+            o1, r1, t1, _, i1 = v1.step(a)
+            assert np.array_equal(o0, o1[:19]) and t0 == t1
+            assert o1[Obs.com_drift] == np.float32(i1["com_position"][0] - x0)
+            if i1["contact_mode"] == "flight":
+                flights += 1
+                assert i1["reward_height"] == pytest.approx(i0["reward_height"] * i1["flight_time"] / v1.dt, rel=1e-12, abs=0.0)
+            else:
+                grounded += 1
+                assert i1["reward_height"] == 0.0
+            others = [k for k in i0 if k.startswith("reward_") and k != "reward_height"]
+            assert all(i0[k] == i1[k] for k in others)
+            if t0:
+                break
+    assert flights > 10 and grounded > 10
+
+
+def test_hop_v1_pays_nothing_for_standing_where_v0_paid_its_height_term():
+    """The v0 loophole: holding the nominal posture earns v0's height term at every step (the COM's vertical
+    energy is near the target without any hop); v1 pays it for flight only."""
+    paid = {}
+    for k in (0, 1):
+        env = gym.make(f"leg_env/PlanarLegHop-v{k}", reset_noise_scale=0.0, command_range=(0.0, 0.0)).unwrapped
+        env.reset(seed=0)
+        hold = (env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32)
+        paid[k] = sum(env.step(hold)[4]["reward_height"] for _ in range(100))
+    assert paid[0] > 0.9 * 100 * 2.0 and paid[1] == 0.0
+
+
 def test_hop_landing_impulse_is_charged():
     env = gym.make("leg_env/PlanarLegHop-v0", reset_noise_scale=0.0).unwrapped
     q = env.nominal.q.copy()
@@ -364,7 +420,7 @@ def test_push_reward_charges_the_com_leaving_the_start():
     assert r == pytest.approx(sum(info[k] for k in env.task.reward_keys), abs=0.0)
 
 
-PUSH, HOP = "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0"
+PUSH, HOP, HOP1 = "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1"
 BAD_CONFIGS = [
     (PUSH, {"push_force": (50.0, 20.0)}, ValueError, "push_force"),
     (PUSH, {"push_force": (-1.0, 20.0)}, ValueError, "push_force"),
@@ -388,6 +444,8 @@ BAD_CONFIGS = [
     (HOP, {"slip_weight": -2.0}, ValueError, "slip_weight"),
     (HOP, {"drift_com_weight": 1j}, TypeError, "drift_com_weight"),
     (HOP, {"tilt_weight": np.nan}, ValueError, "tilt_weight"),
+    (HOP1, {"flight_height": 1}, TypeError, "flight_height"),
+    (HOP1, {"observe_drift": "yes"}, TypeError, "observe_drift"),
 ]
 
 

@@ -256,7 +256,7 @@ def run_episodes(
     drift_sq, drift_max, torque_sq, steps, unilateral, friction = 0.0, 0.0, np.zeros(2), 0, 0, 0
     tilt_sq = 0.0
     series = None
-    hop = HopTracker() if env_id == "leg_env/PlanarLegHop-v0" else None
+    hop = HopTracker() if env_id.startswith("leg_env/PlanarLegHop-v") else None
     reward_terms = None
     for i, seed in enumerate(seeds):
         recording = record == i

@@ -7,7 +7,8 @@ metrics; these add what a task's own question needs:
   instant of the flight, ``y_apex = y_com + y_com'^2 / (2 g)``, and needs no apex event; the apex error is
   ``y_apex - (y_stand + dh*)``. The hop period is the time between successive lift-offs, the landing
   impulse the norm of the step's impact impulse (``info["impulse"]``) at each touchdown, the drift the
-  COM's horizontal displacement from the episode's start at its end.
+  COM's horizontal displacement from the episode's start at its end. ``hops_per_episode`` counts the
+  flights of at least ``LONG_FLIGHT`` (50 ms) per episode.
 * **Push** (``push_survival``): episodes of ``PlanarLegPush-v0`` with every push of one magnitude (the
   range ``push_force`` set to ``(F, F)``; signs and times as the task draws them), run as one native batch
   per magnitude with the controller's batched ``predict``; survival is reaching the time limit.
@@ -19,11 +20,14 @@ import numpy as np
 
 from leg_env.tasks.stance import Obs
 
-__all__ = ["HopTracker", "push_survival", "largest_survived_impulse"]
+__all__ = ["HopTracker", "push_survival", "largest_survived_impulse", "LONG_FLIGHT"]
+
+LONG_FLIGHT = 0.05
+"""A flight of at least this long [s] is a hop in ``hops_per_episode`` (shorter ones are stumbles)."""
 
 
 class HopTracker:
-    """Hop metrics of ``PlanarLegHop-v0`` episodes, fed one step at a time (module docstring).
+    """Hop metrics of ``PlanarLegHop`` episodes (v0 and v1), fed one step at a time (module docstring).
 
     ``start(env, obs)`` after each reset, ``step(env, obs, info)`` after each step, ``summary()`` at the end
     over every episode. Also keeps, per step of the current episode, the COM height, its target and the
@@ -36,6 +40,7 @@ class HopTracker:
         self.landings: list[float] = []  # |impact impulse| at each touchdown [N s]
         self.drifts: list[float] = []  # |x_com(end) - x_com(start)| of each episode that ran to its end [m]
         self.hops_per_episode: list[int] = []
+        self.long_hops_per_episode: list[int] = []  # flights of at least LONG_FLIGHT seconds
 
     def start(self, env, obs, info: dict) -> None:
         """A new episode from its reset's ``obs`` and ``info`` (the COM comes from ``info``)."""
@@ -47,12 +52,18 @@ class HopTracker:
         self._target = float(com_position(nominal_state(u.params, u.config).q, u.params)[1]) + float(info["command"])
         self._x0 = float(info["com_position"][0])
         self._t, self._flying, self._last_liftoff, self._hops = 0.0, obs[Obs.contact] < 0.5, None, 0
+        self._flight_time, self._long = 0.0, 0
         self.series = {"com_height": [], "target": self._target, "apex": []}
 
     def step(self, env, obs, info) -> None:
         (x, y), vy = info["com_position"].tolist(), float(info["com_velocity"][1])
         self._t += self._dt
         flying = info["contact_mode"] == "flight"
+        self._flight_time += float(info["flight_time"])  # this flight's time so far (the step's share of it)
+        if not flying and self._flying:  # a touchdown in this step: the flight is over
+            self._long += self._flight_time >= LONG_FLIGHT
+        if not flying:
+            self._flight_time = 0.0
         apex = y + vy * vy / (2.0 * self._g) if flying else np.nan
         if flying and not self._flying:  # a lift-off in this step: one hop, its apex known now
             self.errors.append(apex - self._target)
@@ -71,6 +82,7 @@ class HopTracker:
     def end(self, survived: bool) -> None:
         """Close the episode (its drift counts when it ran to the time limit)."""
         self.hops_per_episode.append(self._hops)
+        self.long_hops_per_episode.append(self._long + (self._flying and self._flight_time >= LONG_FLIGHT))
         if survived:
             self.drifts.append(abs(self._x_end - self._x0))
 
@@ -82,6 +94,7 @@ class HopTracker:
             "rms_apex_error": float(np.sqrt(np.mean(e * e))) if e.size else float("nan"),
             "mean_apex_error": float(np.mean(e)) if e.size else float("nan"),
             "mean_hop_period": float(np.mean(self.periods)) if self.periods else float("nan"),
+            "hops_per_episode": float(np.mean(self.long_hops_per_episode)) if self.long_hops_per_episode else 0.0,
             "mean_drift_10s": float(np.mean(self.drifts)) if self.drifts else float("nan"),
             "max_drift_10s": float(np.max(self.drifts)) if self.drifts else float("nan"),
             "mean_landing_impulse": float(np.mean(self.landings)) if self.landings else 0.0,

@@ -212,8 +212,8 @@ static int mode_at_rest_m(const leg_model *M, double s1, double co1, double s2, 
                           double tau_hip, double tau_knee, double F, double mu, int exclude, int *painleve)
 {
     const double m = M->m;
-    const double f_scale = m * fmax(M->p.g, 1.0); /* forces: the weight (or mass x 1 m/s^2 without gravity) */
-    const double a_scale = fmax(M->p.g, 1.0);
+    const double f_scale = m * leg_fmax(M->p.g, 1.0); /* forces: the weight (or mass x 1 m/s^2 without gravity) */
+    const double a_scale = leg_fmax(M->p.g, 1.0);
     const double tie = -LEG_TIE;
     *painleve = 0;
     const leg_accel st = stance_m(M, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);

@@ -44,17 +44,16 @@ static int robot_params(const double *u, const double *spec, Py_ssize_t n_spec, 
         else
             row[col] = x;
     }
-    equilibrium_one(&r->p, limits[5], r->q_nom, r->tau_nom);
-    com_one(&r->p, r->q_nom, NULL, r->com_nom, NULL);
+    double trig[4]; /* sin th1, cos th1, sin th2, cos th2 of the nominal posture */
+    equilibrium_one(&r->p, limits[5], r->q_nom, r->tau_nom, trig);
+    com_trig(&r->p, r->q_nom, NULL, trig[0], trig[1], trig[2], trig[3], r->com_nom, NULL);
     const double *q = r->q_nom;
     if (fabs(r->tau_nom[0]) > r->torque_limit[0] || fabs(r->tau_nom[1]) > r->torque_limit[1])
         return 0;
     if (q[3] < limits[0] || q[3] > limits[1] || q[4] < limits[2] || q[4] > limits[3] || q[1] < limits[4])
         return 0; /* the nominal posture would end the episode at once (the foot is at the origin) */
     if (limits[6] > 0.5) {
-        double s1, co1, s2, co2;
-        leg_trig(q, &s1, &co1, &s2, &co2);
-        const leg_response R = foot_response(&r->p, s1, co1, s2, co2);
+        const leg_response R = foot_response(&r->p, trig[0], trig[1], trig[2], trig[3]);
         if (R.Lxy != 0.0 && r->mu >= R.Lyy / fabs(R.Lxy))
             return 0;
     }

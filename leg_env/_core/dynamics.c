@@ -217,20 +217,13 @@ static void mass_matrix_one(const leg_params *P, const double *q, double *M)
 #undef AT
 }
 
-/* h(q, qd): Coriolis, centrifugal and gravity generalised forces; gravity alone if gravity_only. */
-static void bias_one(const leg_params *P, const double *q, const double *qd, int gravity_only, double *h)
+/* h from the link angles' sines/cosines, s12 = sin(th1 - th2) and the rates w1 = th1', w2 = th2'. */
+static void bias_trig(const leg_params *P, double s1, double co1, double s2, double co2, double s12, double w1, double w2,
+                      double *h)
 {
     const double m2 = P->m2, l1 = P->l1, c2 = P->c2, g = P->g;
-    const double th1 = q[2] + q[3], th2 = th1 + q[4];
-    double w1 = qd[2] + qd[3], w2 = w1 + qd[4];
     const double m = P->m_b + P->m1 + m2, a = P->m1 * P->c1 + m2 * l1, b = m2 * c2;
-    const double s1 = sin(th1), co1 = cos(th1), s2 = sin(th2), co2 = cos(th2);
-    if (gravity_only) {
-        w1 = 0.0;
-        w2 = 0.0;
-    }
     const double k = m2 * l1 * c2;
-    const double s12 = sin(th1 - th2);
     const double hx = -a * co1 * w1 * w1 - b * co2 * w2 * w2;
     const double hy = -a * s1 * w1 * w1 - b * s2 * w2 * w2 + m * g;
     const double h1 = k * s12 * w2 * w2 + a * g * co1;
@@ -242,20 +235,38 @@ static void bias_one(const leg_params *P, const double *q, const double *qd, int
     h[4] = h2;
 }
 
+/* h(q, qd): Coriolis, centrifugal and gravity generalised forces; gravity alone if gravity_only. */
+static void bias_one(const leg_params *P, const double *q, const double *qd, int gravity_only, double *h)
+{
+    const double th1 = q[2] + q[3], th2 = th1 + q[4];
+    double w1 = qd[2] + qd[3], w2 = w1 + qd[4];
+    const double s1 = sin(th1), co1 = cos(th1), s2 = sin(th2), co2 = cos(th2);
+    if (gravity_only) {
+        w1 = 0.0;
+        w2 = 0.0;
+    }
+    bias_trig(P, s1, co1, s2, co2, sin(th1 - th2), w1, w2, h);
+}
+
+/* The foot position from the base position (x, y) and the link angles' sines/cosines. */
+static inline void foot_trig(const leg_params *P, double x, double y, double s1, double co1, double s2, double co2, double *out)
+{
+    out[0] = x + P->l1 * co1 + P->l2 * co2;
+    out[1] = y + P->l1 * s1 + P->l2 * s2;
+}
+
 /* The foot position p_f(q) (section 3). */
 static void foot_one(const leg_params *P, const double *q, double *out)
 {
     const double th1 = q[2] + q[3], th2 = th1 + q[4];
-    out[0] = q[0] + P->l1 * cos(th1) + P->l2 * cos(th2);
-    out[1] = q[1] + P->l1 * sin(th1) + P->l2 * sin(th2);
+    foot_trig(P, q[0], q[1], sin(th1), cos(th1), sin(th2), cos(th2), out);
 }
 
-/* The contact Jacobian Jc = d p_f / d q (section 3, Problem 3), 2x5 row-major. */
-static void jacobian_one(const leg_params *P, const double *q, double *Jc)
+/* The contact Jacobian from the link angles' sines/cosines. */
+static inline void jacobian_trig(const leg_params *P, double s1, double co1, double s2, double co2, double *Jc)
 {
-    const double th1 = q[2] + q[3], th2 = th1 + q[4];
-    const double J1x = -P->l1 * sin(th1), J1y = P->l1 * cos(th1);
-    const double J2x = -P->l2 * sin(th2), J2y = P->l2 * cos(th2);
+    const double J1x = -P->l1 * s1, J1y = P->l1 * co1;
+    const double J2x = -P->l2 * s2, J2y = P->l2 * co2;
     Jc[0] = 1.0;
     Jc[1] = 0.0;
     Jc[2] = J1x + J2x;
@@ -268,6 +279,13 @@ static void jacobian_one(const leg_params *P, const double *q, double *Jc)
     Jc[9] = J2y;
 }
 
+/* The contact Jacobian Jc = d p_f / d q (section 3, Problem 3), 2x5 row-major. */
+static void jacobian_one(const leg_params *P, const double *q, double *Jc)
+{
+    const double th1 = q[2] + q[3], th2 = th1 + q[4];
+    jacobian_trig(P, sin(th1), cos(th1), sin(th2), cos(th2), Jc);
+}
+
 /* Jcdot(q, qd) qd, the foot's velocity-product acceleration. */
 static void jdot_qd_one(const leg_params *P, const double *q, const double *qd, double *out)
 {
@@ -277,12 +295,12 @@ static void jdot_qd_one(const leg_params *P, const double *q, const double *qd, 
     out[1] = -P->l1 * sin(th1) * w1 * w1 - P->l2 * sin(th2) * w2 * w2;
 }
 
-/* The whole-body centre of mass and its velocity (world frame). */
-static void com_one(const leg_params *P, const double *q, const double *qd, double *pos, double *vel)
+/* The whole-body centre of mass and its velocity (world frame; vel may be NULL) from the link angles'
+ * sines/cosines. */
+static inline void com_trig(const leg_params *P, const double *q, const double *qd, double s1, double co1, double s2,
+                            double co2, double *pos, double *vel)
 {
     const double m = P->m_b + P->m1 + P->m2, a = P->m1 * P->c1 + P->m2 * P->l1, b = P->m2 * P->c2;
-    const double th1 = q[2] + q[3], th2 = th1 + q[4];
-    const double s1 = sin(th1), co1 = cos(th1), s2 = sin(th2), co2 = cos(th2);
     pos[0] = q[0] + (a * co1 + b * co2) / m;
     pos[1] = q[1] + (a * s1 + b * s2) / m;
     if (vel) {
@@ -292,10 +310,18 @@ static void com_one(const leg_params *P, const double *q, const double *qd, doub
     }
 }
 
+/* The whole-body centre of mass and its velocity (world frame). */
+static void com_one(const leg_params *P, const double *q, const double *qd, double *pos, double *vel)
+{
+    const double th1 = q[2] + q[3], th2 = th1 + q[4];
+    com_trig(P, q, qd, sin(th1), cos(th1), sin(th2), cos(th2), pos, vel);
+}
+
 /* The stance equilibrium with the torso level, the knee at `knee` and the COM above the foot at the
  * origin: its posture q and holding torques tau (M qdd + G = S^T tau + Jc^T lam with qdd = 0 and
- * lam = (0, m g), read on the actuated rows). */
-static void equilibrium_one(const leg_params *P, double knee, double *q, double *tau)
+ * lam = (0, m g), read on the actuated rows); trig (NULL or 4 doubles) gets sin th1, cos th1, sin th2,
+ * cos th2 of q, computed once for all of it. */
+static void equilibrium_one(const leg_params *P, double knee, double *q, double *tau, double *trig)
 {
     const double m = P->m_b + P->m1 + P->m2;
     const double A = (P->m1 * P->c1 + P->m2 * P->l1) / m - P->l1;
@@ -310,13 +336,21 @@ static void equilibrium_one(const leg_params *P, double knee, double *q, double 
     q[2] = 0.0;
     q[3] = th1;
     q[4] = knee;
+    const double a1 = q[2] + q[3], a2 = a1 + q[4]; /* the link angles, as foot_one() forms them */
+    const double s1 = sin(a1), co1 = cos(a1), s2 = sin(a2), co2 = cos(a2);
     double foot[2], G[LEG_NQ], Jc[2 * LEG_NQ];
-    foot_one(P, q, foot);
+    foot_trig(P, q[0], q[1], s1, co1, s2, co2, foot);
     q[0] -= foot[0];
     q[1] -= foot[1];
-    bias_one(P, q, q, 1, G);
-    jacobian_one(P, q, Jc);
+    bias_trig(P, s1, co1, s2, co2, sin(a1 - a2), 0.0, 0.0, G); /* gravity alone */
+    jacobian_trig(P, s1, co1, s2, co2, Jc);
     const double mg = m * P->g;
     tau[0] = G[3] - (Jc[3] * 0.0 + Jc[LEG_NQ + 3] * mg);
     tau[1] = G[4] - (Jc[4] * 0.0 + Jc[LEG_NQ + 4] * mg);
+    if (trig) {
+        trig[0] = s1;
+        trig[1] = co1;
+        trig[2] = s2;
+        trig[3] = co2;
+    }
 }

@@ -79,8 +79,8 @@ static void physics_range(const env_batch *b, Py_ssize_t lo, Py_ssize_t hi)
         for (int j = 0; j < 4; j++)
             s->prev_trig[j] = s->trig[j];
         leg_drive u;
-        u.tau_hip = fmin(1.0, fmax(-1.0, s->action[0])) * r->torque_limit[0];
-        u.tau_knee = fmin(1.0, fmax(-1.0, s->action[1])) * r->torque_limit[1];
+        u.tau_hip = leg_fmin(1.0, leg_fmax(-1.0, s->action[0])) * r->torque_limit[0];
+        u.tau_knee = leg_fmin(1.0, leg_fmax(-1.0, s->action[1])) * r->torque_limit[1];
         u.load_x = s->load;
         u.mu = r->mu;
         if (unilateral) {

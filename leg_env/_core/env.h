@@ -80,6 +80,8 @@ typedef struct {
         } push;
         struct {
             double w_height, height_scale, w_drift, w_tilt, w_impact, w_slip;
+            uint8_t flight_height; /* the height term is paid in flight only (else at every step) */
+            uint8_t observe_drift; /* the COM's x from its start is an observation entry */
         } hop;
     } task;
 } env_settings;
@@ -114,7 +116,9 @@ typedef enum {
     OBS_FOOT_HEIGHT = OBS_PINNED_DIM, OBS_FOOT_VX, OBS_FOOT_VY, OBS_CONTACT, OBS_SLIP, OBS_IMPULSE_Y,
     OBS_UNILATERAL_DIM, /* the unilateral ground's */
     OBS_COMMAND = OBS_UNILATERAL_DIM,
-    OBS_HOP_DIM
+    OBS_HOP_DIM,
+    OBS_COM_DRIFT = OBS_HOP_DIM, /* with the hop's observe_drift */
+    OBS_MAX_DIM
 } obs_index;
 
 /* A batch: the arrays of one call, checked (module_env.c). */

@@ -183,7 +183,7 @@ typedef struct {
 
 static inline double watched_min(int watch_a, int watch_b, double wa, double wb)
 {
-    return fmin(watch_a ? wa : INFINITY, watch_b ? wb : INFINITY);
+    return leg_fmin(watch_a ? wa : INFINITY, watch_b ? wb : INFINITY);
 }
 
 static int locate(int mode, const leg_model *M, const leg_drive *u, const double *anchor, const leg_x *X,

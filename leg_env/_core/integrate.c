@@ -22,7 +22,7 @@ static const double RK4_W1 = 2.0 / 6.0;
  * joint moves, by more than max_angle per RK4 step at the rates (th_b', q1', q2') = (va, vb, vc). */
 static inline int substeps_for_rates(double va, double vb, double vc, double dt, int substeps, double max_angle)
 {
-    const double w = fmax(fmax(fmax(fabs(va), fabs(vb)), fmax(fabs(vc), fabs(va + vb))), fabs(va + vb + vc));
+    const double w = leg_fmax(leg_fmax(leg_fmax(fabs(va), fabs(vb)), leg_fmax(fabs(vc), fabs(va + vb))), fabs(va + vb + vc));
     const double need = w * dt / max_angle;
     if (need > substeps) {
         if (need > LEG_MAX_SUBSTEPS) /* infinite or absurd rates: cap the work, the caller flags the state */
@@ -35,7 +35,7 @@ static inline int substeps_for_rates(double va, double vb, double vc, double dt,
 /* (sin(th + d), cos(th + d)) from s = sin th, c = cos th by angle addition. Within a control step the
  * links turn by little, so sin d and cos d - 1 come from short Taylor series (the first omitted terms,
  * d^11/11! and d^12/12!, are below 3e-19 for |d| <= 0.1); a larger or non-finite d calls sin and cos. */
-static inline void turn(double s, double c, double d, double *s_out, double *c_out)
+LEG_INLINE void turn(double s, double c, double d, double *s_out, double *c_out)
 {
     static const double S3 = -1.0 / 6.0, S5 = 1.0 / 120.0, S7 = -1.0 / 5040.0, S9 = 1.0 / 362880.0;
     static const double C2 = -0.5, C4 = 1.0 / 24.0, C6 = -1.0 / 720.0, C8 = 1.0 / 40320.0, C10 = -1.0 / 3628800.0;

@@ -458,7 +458,7 @@ static PyObject *py_equilibrium(PyObject *self, PyObject *const *args, Py_ssize_
     CHECK(q)
     double *tau = F64_OUT(args[3], "tau", LEG_NU);
     CHECK(tau)
-    equilibrium_one(P, knee, q, tau);
+    equilibrium_one(P, knee, q, tau, NULL);
     DONE
     FAIL
 }
@@ -816,6 +816,8 @@ static const field SETTINGS_HOP_FIELDS[] = {
     TASK(env_settings, task.hop.w_height, "w_height", "f8", 1), TASK(env_settings, task.hop.height_scale, "height_scale", "f8", 1),
     TASK(env_settings, task.hop.w_drift, "w_drift", "f8", 1), TASK(env_settings, task.hop.w_tilt, "w_tilt", "f8", 1),
     TASK(env_settings, task.hop.w_impact, "w_impact", "f8", 1), TASK(env_settings, task.hop.w_slip, "w_slip", "f8", 1),
+    TASK(env_settings, task.hop.flight_height, "flight_height", "?", 1),
+    TASK(env_settings, task.hop.observe_drift, "observe_drift", "?", 1),
     {NULL, 0, NULL, 0}};
 
 static const field OUT_FIELDS[] = {
@@ -888,11 +890,11 @@ static PyObject *py_layouts(PyObject *self, PyObject *unused)
 static PyObject *py_observation(PyObject *self, PyObject *unused)
 {
     return Py_BuildValue(
-        "{sisisisisisisisisisisisisisisisisisisisisisi}", "base_x", OBS_BASE_X, "base_y", OBS_BASE_Y, "th_b", OBS_TH_B, "q1",
+        "{sisisisisisisisisisisisisisisisisisisisisisisisi}", "base_x", OBS_BASE_X, "base_y", OBS_BASE_Y, "th_b", OBS_TH_B, "q1",
         OBS_Q1, "q2", OBS_Q2, "vx_b", OBS_VX_B, "vy_b", OBS_VY_B, "w_b", OBS_W_B, "w_q1", OBS_W_Q1, "w_q2", OBS_W_Q2, "lam_x",
         OBS_LAM_X, "lam_y", OBS_LAM_Y, "foot_height", OBS_FOOT_HEIGHT, "foot_vx", OBS_FOOT_VX, "foot_vy", OBS_FOOT_VY, "contact",
         OBS_CONTACT, "slip", OBS_SLIP, "impulse_y", OBS_IMPULSE_Y, "command", OBS_COMMAND, "pinned_dim", OBS_PINNED_DIM,
-        "unilateral_dim", OBS_UNILATERAL_DIM, "hop_dim", OBS_HOP_DIM);
+        "unilateral_dim", OBS_UNILATERAL_DIM, "hop_dim", OBS_HOP_DIM, "com_drift", OBS_COM_DRIFT, "hop_drift_dim", OBS_MAX_DIM);
 }
 
 /* ------------------------------------------------------------------------------------------------ */
@@ -922,6 +924,7 @@ static PyMethodDef methods[] = {
          "hybrid_step(q, qd, tau, p, load, mu, mode, anchor, dt, substeps, max_angle, record): one hybrid control step."),
     FAST("physics_range", py_physics_range, "physics_range(lo, hi, state, robots, settings, out): one control step of rows lo .. hi - 1."),
     FAST("assess", py_assess, "assess(task, state, robots, settings, out, obs): the task after a control step."),
+    FAST("step", py_step, "step(task, lo, hi, state, robots, settings, out, obs): physics_range then assess of rows lo .. hi - 1, block by block."),
     FAST("start", py_start,
          "start(task, state, robots, settings, out, obs, noise, scale): robots put on their contact (at the nominal posture "
          "plus noise, or as the state has them if noise is None) and evaluated."),

@@ -71,9 +71,9 @@ static int obs_fits(int task, const env_batch *b)
 {
     if (b->obs == NULL)
         return 1;
-    const Py_ssize_t need = task_obs_dim(task, b->settings->unilateral);
+    const Py_ssize_t need = task_obs_dim(task, b->settings);
     if (b->obs_cols != need) {
-        PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and ground (settings.unilateral), got (%zd, %zd)",
+        PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and its settings (unilateral, observe_drift), got (%zd, %zd)",
                      b->n, need, b->n, b->obs_cols);
         return 0;
     }
@@ -231,6 +231,41 @@ static PyObject *py_assess(PyObject *self, PyObject *const *args, Py_ssize_t nar
     if (!batch_of((int)(task < 0 || task >= N_TASKS ? -1 : task), args[1], args[2], args[3], args[4], args[5], &h, &b, 1))
         goto fail;
     task_assess((int)task, &b, 0, b.n);
+    release_all(&h);
+    Py_RETURN_NONE;
+fail:
+    release_all(&h);
+    return NULL;
+}
+
+/* Rows stepped and assessed together by `step`: a block's state, out and robot rows stay in cache between
+ * the physics and the task's kernels. */
+#define STEP_BLOCK 32
+
+/* step(task, lo, hi, state, robots, settings, out, obs): one control step of rows lo .. hi - 1 and the task
+ * after it, block by block (GIL released): bitwise physics_range then assess of the same rows, with the
+ * arrays checked once */
+static PyObject *py_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    held h;
+    h.n = 0;
+    env_batch b;
+    Py_ssize_t task, lo, hi;
+    if (!n_args(nargs, 8, "step") || !int_arg(args[0], "task", &task) || !int_arg(args[1], "lo", &lo) || !int_arg(args[2], "hi", &hi))
+        return NULL;
+    if (!batch_of((int)(task < 0 || task >= N_TASKS ? -1 : task), args[3], args[4], args[5], args[6], args[7], &h, &b, 1))
+        goto fail;
+    if (!(0 <= lo && lo <= hi && hi <= b.n)) {
+        PyErr_Format(PyExc_ValueError, "rows lo .. hi must satisfy 0 <= lo <= hi <= %zd, got %zd .. %zd", b.n, lo, hi);
+        goto fail;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = lo; i < hi; i += STEP_BLOCK) {
+        const Py_ssize_t end = hi - i > STEP_BLOCK ? i + STEP_BLOCK : hi;
+        physics_range(&b, i, end);
+        task_assess((int)task, &b, i, end);
+    }
+    Py_END_ALLOW_THREADS
     release_all(&h);
     Py_RETURN_NONE;
 fail:

@@ -22,6 +22,26 @@
 #define LEG_INLINE static inline __attribute__((always_inline))
 #endif
 
+/* C99's fmax and fmin, inlined: without -ffinite-math-only the compiler calls libm's. A NaN argument gives the
+ * other one; otherwise the larger (smaller), and the second argument on a tie (+0 and -0), as libm on x86-64. */
+static inline double leg_fmax(double a, double b)
+{
+    if (a != a)
+        return b;
+    if (b != b)
+        return a;
+    return a > b ? a : b;
+}
+
+static inline double leg_fmin(double a, double b)
+{
+    if (a != a)
+        return b;
+    if (b != b)
+        return a;
+    return a < b ? a : b;
+}
+
 #define LEG_NQ 5 /* generalised coordinates */
 #define LEG_NU 2 /* actuated joints */
 

@@ -42,8 +42,8 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, double a0, double a1
     const double height = s->q[1] - s->anchor[1];
     const int unilateral_model = c->unilateral;
 
-    const double unilateral = fmax(0.0, -lam_y);
-    const double friction = fmax(0.0, fabs(lam_x) - mu * lam_y);
+    const double unilateral = leg_fmax(0.0, -lam_y);
+    const double friction = leg_fmax(0.0, fabs(lam_x) - mu * lam_y);
     const int fell = height < c->min_base_height || s->q[1] < knee_y || fabs(th_b) > c->max_torso_angle
                      || s->q[3] < c->hip_range[0] || s->q[3] > c->hip_range[1] || s->q[4] < c->knee_range[0]
                      || s->q[4] > c->knee_range[1];
@@ -139,10 +139,10 @@ static int evaluate(const env_batch *b, Py_ssize_t i, double *terms, int n_terms
     }
     env_state *s = state_row(b, i);
     float *obs = b->obs + i * b->obs_cols;
-    float kept[OBS_HOP_DIM];
+    float kept[OBS_MAX_DIM];
     for (Py_ssize_t j = 0; j < b->obs_cols; j++)
         kept[j] = obs[j];
-    const double a0 = fmin(1.0, fmax(-1.0, s->action[0])), a1 = fmin(1.0, fmax(-1.0, s->action[1]));
+    const double a0 = leg_fmin(1.0, leg_fmax(-1.0, s->action[0])), a1 = leg_fmin(1.0, leg_fmax(-1.0, s->action[1]));
     stance_assess(b, i, a0, a1, terms);
     double total = 0.0; /* finite for any finite float32 entries, inf or NaN if one of them is */
     for (Py_ssize_t j = 0; j < b->obs_cols; j++)
@@ -230,8 +230,13 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     const double err = (e_v - e_star) / (weight * height_scale);
     const double dx = x_com - t->x_com0;
     const double px = o->kick[0], py = o->kick[1];
+    const env_settings *c = b->settings;
     terms[0] = stance_terms[0]; /* alive: the balance task's health predicate */
     terms[1] = w_height * exp(-err * err);
+    if (c->task.hop.flight_height) /* in flight E_v is m g times the arc's apex height: paid for the step's flight */
+        terms[1] = s->mode == LEG_FLIGHT ? terms[1] * (o->flight_time / c->dt) : 0.0;
+    if (c->task.hop.observe_drift)
+        b->obs[i * b->obs_cols + OBS_COM_DRIFT] = (float)dx;
     terms[2] = -b->settings->task.hop.w_drift * dx * dx;
     terms[3] = -b->settings->task.hop.w_tilt * s->q[2] * s->q[2];
     terms[4] = -b->settings->task.hop.w_impact * (px * px + py * py) / (m * m);
@@ -250,6 +255,8 @@ static void hop_start(const env_batch *b, Py_ssize_t i)
     for (int j = 0; j < HOP_TERMS; j++)
         o->terms[j] = 0.0;
     b->obs[i * b->obs_cols + OBS_COMMAND] = (float)s->task.hop.command;
+    if (b->settings->task.hop.observe_drift)
+        b->obs[i * b->obs_cols + OBS_COM_DRIFT] = 0.0f;
     s->task.hop.x_com0 = o->com[0];
 }
 
@@ -258,10 +265,12 @@ static void hop_start(const env_batch *b, Py_ssize_t i)
 /* The number of reward terms of each task. */
 static int task_terms(int task) { return task == TASK_STANCE ? STANCE_TERMS : (task == TASK_PUSH ? PUSH_TERMS : HOP_TERMS); }
 
-/* The observation's width of a task on its ground. */
-static Py_ssize_t task_obs_dim(int task, int unilateral)
+/* The observation's width of a task with its settings. */
+static Py_ssize_t task_obs_dim(int task, const env_settings *c)
 {
-    return task == TASK_HOP ? OBS_HOP_DIM : (unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM);
+    if (task == TASK_HOP)
+        return c->task.hop.observe_drift ? OBS_MAX_DIM : OBS_HOP_DIM;
+    return c->unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM;
 }
 
 /* The task after a control step of robots lo .. hi - 1. */

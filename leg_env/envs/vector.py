@@ -1,8 +1,9 @@
 """``leg_env/PlanarLegStance-v0`` as a natively batched ``gymnasium.vector.VectorEnv``.
 
 ``gymnasium.make_vec("leg_env/PlanarLegStance-v0", num_envs=N)`` builds this class (it is the id's
-``vector_entry_point``). Two calls of the compiled core advance all N robots (``leg_env.step.physics_range``
-and the task's ``assess``), the same kernels the single environment calls with N = 1, and resets build their
+``vector_entry_point``). One call of the compiled core advances all N robots (``Task.step``: the physics of
+``leg_env.step.physics_range`` and the task's ``assess``, block by block), the same kernels the single
+environment calls with N = 1, and resets build their
 start states with the same task ``start`` kernel (the noise, and with ``randomize`` the robot, drawn in
 compiled code from each sub-env's own generator, ``BitGeneratorRows``, the same numbers as ``rng.random``):
 sub-env ``i`` of a batch reset with
@@ -32,7 +33,7 @@ from .. import tasks
 from ..info import KEYS, InfoBuilder
 from ..layout import put_rows, take_rows
 from ..randomize import FIELD_COLUMNS, FIELDS
-from ..step import BitGeneratorRows, physics_range
+from ..step import BitGeneratorRows
 from ..tasks.stance import REWARD_TERMS, StanceConfig
 from .single import LegEnv, explicit_start, render_marks, robot_of_row, start_anchor
 
@@ -342,10 +343,9 @@ class LegVectorEnv(VectorEnv):
                 'with reset(options={"reset_mask": mask}) before stepping them again'
             )
         if self.num_threads == 1:
-            physics_range(0, self.num_envs, self._state, self._robots, self._settings, self._out)
+            self.task.step(self._state, self._robots, self._settings, self._out, self._obs)
         else:
-            self._physics_threaded()
-        self.task.assess(self._state, self._robots, self._settings, self._out, self._obs)
+            self._step_threaded()
         self._elapsed += 1
         if restarted is not None:
             self._put_rows(restarted, starts)  # zeroes their reward terms too
@@ -374,8 +374,8 @@ class LegVectorEnv(VectorEnv):
             self._ended = ended
         return _Transition(self._obs.copy(), reward, terminated, truncated, restarted, final, terms, rejected)
 
-    def _physics_threaded(self) -> None:
-        """``physics_range`` split into ``num_threads`` contiguous chunks, each stepped in a thread.
+    def _step_threaded(self) -> None:
+        """``Task.step`` split into ``num_threads`` contiguous chunks, each stepped in a thread.
 
         The kernel releases the GIL, so the chunks run in parallel; robots are independent, so the result is
         bitwise that of one thread. The pool is made in the process that uses it (a forked child, whose copy
@@ -384,8 +384,8 @@ class LegVectorEnv(VectorEnv):
         pid = os.getpid()
         if self._pool is None or self._pool[0] != pid:
             self._pool = (pid, ThreadPoolExecutor(self.num_threads, thread_name_prefix="leg_env"))
-        n, k, args = self.num_envs, self.num_threads, (self._state, self._robots, self._settings, self._out)
-        chunks = [self._pool[1].submit(physics_range, j * n // k, (j + 1) * n // k, *args) for j in range(k)]
+        n, k, args = self.num_envs, self.num_threads, (self._state, self._robots, self._settings, self._out, self._obs)
+        chunks = [self._pool[1].submit(self.task.step, *args, j * n // k, (j + 1) * n // k) for j in range(k)]
         for chunk in chunks:
             chunk.result()
 
@@ -431,7 +431,8 @@ class LegVectorEnv(VectorEnv):
             return
         n = self.num_envs
         columns = np.zeros((len(FIELDS), n))  # one block for every field's column, one for every mask
-        columns.T[custom] = take_rows(self._robots, custom).view(np.float64).reshape(custom.size, -1)[:, FIELD_COLUMNS]
+        values = self._robots.view(np.float64).reshape(n, -1)  # a ROBOT row is doubles only
+        columns[:, custom] = values[custom][:, FIELD_COLUMNS].T
         masks = np.zeros((len(FIELDS) + 1, n), dtype=np.bool_)
         masks[:, custom] = True
         params = {}

@@ -62,6 +62,12 @@ class Task:
         observation, the reward terms (they sum to the reward), the extras and the flags."""
         kernels.assess(self.kernel, state, robots, settings, out, obs)
 
+    def step(self, state, robots, settings, out, obs, lo: int = 0, hi: int | None = None) -> None:
+        """One control step of robots ``lo .. hi - 1`` and the task after it, in place: bitwise
+        ``leg_env.step.physics_range`` then ``assess`` of those rows, in one compiled call that releases the
+        GIL (so that chunks of rows can run in threads) and keeps each block of rows in cache between the two."""
+        kernels.step(self.kernel, lo, state.shape[0] if hi is None else hi, state, robots, settings, out, obs)
+
     def start(self, state, robots, settings, out, obs, noise=None, scale: float = 0.0) -> None:
         """Freshly reset robots put on their contact and evaluated without stepping (reward terms zero): at
         ``state["q"], ["qd"], ["anchor"]`` if ``noise`` is None, else at each robot's nominal posture plus

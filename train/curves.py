@@ -1,0 +1,310 @@
+"""Learning curves over training seeds: a task's PPO configuration trained from scratch with several seeds,
+summarised as RL results should be (Agarwal et al. 2021, the ``rliable`` package).
+
+    python -m train.curves --env-id leg_env/PlanarLegHop-v1 --seeds 5
+    python -m train.curves --env-id leg_env/PlanarLegBalance-v0 --seeds 5 --baseline lqr
+
+Seed ``s`` trains ``python -m train.ppo --seed s`` (the task's entry in ``train/hyperparams/ppo.yml``, the
+same for every seed) into ``<runs>/seed_<s>``, evaluated during training on the same fixed episodes
+(seeds 20000+) for every seed. A finished seed is not trained again and an interrupted one resumes from its
+checkpoint, so rerunning the command after a stop finishes the sweep. Each seed's selected policy is then
+evaluated on ``--episodes`` held-out episodes (seeds 10000+, never used in training or selection), and so is
+``--baseline``, a model-based controller, on the same episodes.
+
+The results page, ``<out>/README.md`` (headed by the machine, the versions and the date), gives:
+
+- the interquartile mean (IQM) across seeds of the in-training survival rate and return, with 95%
+  stratified-bootstrap confidence intervals, against environment steps (``curves_steps.png``) and
+  against wall-clock time (``curves_time.png``; the seeds' median time at each evaluation), every seed's
+  curve drawn faintly beside it;
+- every seed's final held-out scores, their IQM with its interval, and the baseline's;
+- the shipped seed, named by ``--shipped-seed`` before training (it is written on the page before any
+  seed trains) and its rank among the seeds, so that a shipped policy is never picked after the fact.
+
+``scores.json`` holds every number of the page.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from train.cli import parse_args
+
+__all__ = ["CurvesArgs", "iqm_interval", "sweep", "main"]
+
+ROOT = Path(__file__).resolve().parents[1]
+METRICS = ("survival_rate", "mean_return")
+"""The in-training evaluation metrics whose curves are drawn (``train.callbacks.PeriodicEvaluation``)."""
+BOOTSTRAP_REPS = 5000
+TEST_SEED = 10_000  # the held-out episodes: train.evaluate's default
+KEYS = ("survival_rate", "mean_return", "mean_length", "hops_per_episode", "mean_abs_apex_error", "mean_drift_10s")
+"""The held-out scores on the page (the hop metrics for the hop task: ``train.task_metrics.HopTracker``)."""
+
+
+@dataclass
+class CurvesArgs:
+    """Train a task's PPO configuration with several seeds and write its learning curves and scores."""
+
+    env_id: str = "leg_env/PlanarLegHop-v1"
+    """The task: its entry in the hyperparameter file is trained, the same for every seed."""
+    seeds: int = 5
+    """Number of training seeds (first_seed, first_seed + 1, ...)."""
+    first_seed: int = 0
+    """The first training seed."""
+    shipped_seed: int | None = None
+    """The seed whose policy is (or will be) shipped, chosen before training: the page says where it ranks
+    (None: first_seed)."""
+    total_timesteps: int | None = None
+    """Environment steps per seed (None: the file's n_timesteps)."""
+    params: list[str] = field(default_factory=list)
+    """Hyperparameter overrides for every seed, as train.ppo's --params."""
+    eval_freq: int = 2_000_000
+    """Environment steps between in-training evaluations (the points of the curves)."""
+    eval_episodes: int = 32
+    """Episodes per in-training evaluation (seeds 20000 + i, the same for every seed)."""
+    episodes: int = 100
+    """Held-out episodes per seed for the final scores (seeds 10000 + i)."""
+    baseline: str | None = None
+    """A model-based controller evaluated on the same held-out episodes ('lqr', 'hopper', 'gated', 'stepping')."""
+    runs: Path | None = None
+    """Folder of the seeds' run folders (None: runs/curves/<task name>)."""
+    out: Path | None = None
+    """Folder of the results page (None: benchmarks/results/learning/<task name>)."""
+    torch_threads: int = 1
+    """Threads of torch in each seed's training (train.ppo's --torch-threads)."""
+    progress_bar: bool = False
+    """Show SB3's progress bar while a seed trains."""
+
+    def __post_init__(self):
+        if self.seeds < 1:
+            raise ValueError(f"seeds must be >= 1, got {self.seeds}")
+        if self.first_seed < 0:
+            raise ValueError(f"first_seed must be >= 0, got {self.first_seed}")
+        if self.shipped_seed is None:
+            self.shipped_seed = self.first_seed
+        if not self.first_seed <= self.shipped_seed < self.first_seed + self.seeds:
+            raise ValueError(f"shipped_seed must be one of the trained seeds {self.first_seed}..{self.first_seed + self.seeds - 1}, got {self.shipped_seed}")
+        if self.episodes < 1 or self.eval_episodes < 1:
+            raise ValueError(f"episodes and eval_episodes must be >= 1, got {self.episodes} and {self.eval_episodes}")
+        if self.eval_freq < 1:
+            raise ValueError(f"eval_freq must be >= 1 (the curves are made of the evaluations), got {self.eval_freq}")
+        name = self.env_id.split("/")[-1]
+        if self.runs is None:
+            self.runs = Path("runs/curves") / name
+        if self.out is None:
+            self.out = ROOT / "benchmarks" / "results" / "learning" / name
+
+
+def iqm_interval(scores: np.ndarray, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> tuple[float, float, float]:
+    """The IQM of ``scores`` (one per seed) and its 95% stratified-bootstrap confidence interval (rliable's
+    ``get_interval_estimates`` on one task): ``(iqm, low, high)``."""
+    from rliable import library as rly
+    from rliable import metrics
+
+    scores = np.asarray(scores, dtype=np.float64).reshape(-1, 1)
+    np.random.seed(seed)  # rliable's bootstrap draws from numpy's global generator: seeded, the page is reproducible
+    point, interval = rly.get_interval_estimates({"ppo": scores}, lambda x: np.array([metrics.aggregate_iqm(x)]), reps=reps)
+    return float(point["ppo"][0]), float(interval["ppo"][0, 0]), float(interval["ppo"][1, 0])
+
+
+def _machine() -> str:
+    import gymnasium
+    import stable_baselines3
+    import torch
+
+    import leg_env
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import os
+
+    return (
+        f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; Python {platform.python_version()}; "
+        f"leg-env {leg_env.__version__}, numpy {np.__version__}, gymnasium {gymnasium.__version__}, "
+        f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}"
+    )
+
+
+def _train_seed(args: CurvesArgs, seed: int) -> Path:
+    """Train (or finish) one seed's run folder; returns it."""
+    from train.ppo import TrainArgs, train
+
+    folder = args.runs / f"seed_{seed}"
+    log = folder / "evaluations.json"
+    if log.is_file() and (args.total_timesteps is None or json.loads(log.read_text())["total_timesteps"] >= args.total_timesteps):
+        return folder  # finished
+    train(
+        TrainArgs(
+            out=folder,
+            env_id=args.env_id,
+            params=list(args.params),
+            total_timesteps=args.total_timesteps,
+            seed=seed,
+            eval_freq=args.eval_freq,
+            eval_episodes=args.eval_episodes,
+            progress_bar=args.progress_bar,
+            verbose=1,
+            torch_threads=args.torch_threads,
+        )
+    )
+    return folder
+
+
+def _held_out(policy, args: CurvesArgs, env_kwargs: dict) -> dict:
+    """A policy's scores on the held-out episodes (``train.evaluate.run_episodes``)."""
+    from train.evaluate import run_episodes
+
+    seeds = [TEST_SEED + i for i in range(args.episodes)]
+    summary, _ = run_episodes(policy, seeds, env_kwargs, env_id=args.env_id)
+    keep = KEYS
+    return {k: summary[k] for k in keep if k in summary}
+
+
+def _curves(histories: dict[int, list[dict]]) -> dict:
+    """Per metric, at each evaluation every seed reached: the steps, the seeds' median wall-clock, the IQM and
+    its interval, and every seed's value."""
+    n = min(len(h) for h in histories.values())
+    seeds = sorted(histories)
+    steps = [histories[seeds[0]][j]["timesteps"] for j in range(n)]
+    out = {"timesteps": steps, "time_s": [float(np.median([histories[s][j]["time"] for s in seeds])) for j in range(n)], "seeds": seeds}
+    for metric in METRICS:
+        values = np.array([[histories[s][j][metric] for j in range(n)] for s in seeds])  # (seeds, evaluations)
+        estimates = [iqm_interval(values[:, j]) for j in range(n)]
+        out[metric] = {"per_seed": values.tolist(), "iqm": [e[0] for e in estimates], "low": [e[1] for e in estimates], "high": [e[2] for e in estimates]}
+    return out
+
+
+def _plot(curves: dict, path: Path, x_key: str, x_label: str, title: str) -> None:
+    from train.plots import _pyplot
+
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(METRICS), figsize=(10.0, 3.6), dpi=100)
+    labels = {"survival_rate": "survival rate [%]", "mean_return": "episode return"}
+    x = np.asarray(curves[x_key], dtype=float) / (60.0 if x_key == "time_s" else 1.0)
+    for ax, metric in zip(axes, METRICS):
+        scale = 100.0 if metric == "survival_rate" else 1.0
+        c = curves[metric]
+        for row in c["per_seed"]:
+            ax.plot(x, scale * np.asarray(row), color="C0", alpha=0.25, lw=0.8)
+        ax.plot(x, scale * np.asarray(c["iqm"]), "o-", color="C0", ms=3, label=f"IQM of {len(c['per_seed'])} seeds")
+        ax.fill_between(x, scale * np.asarray(c["low"]), scale * np.asarray(c["high"]), color="C0", alpha=0.2, label="95% CI")
+        ax.set_xlabel(x_label)
+        ax.set_ylabel(labels[metric])
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="lower right", fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _fmt(v: float, metric: str) -> str:
+    return f"{100 * v:.0f}%" if metric == "survival_rate" else f"{v:.1f}"
+
+
+def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: dict | None, command: str) -> str:
+    name = args.env_id.split("/")[-1]
+    seeds = curves["seeds"]
+    lines = [
+        f"# Learning curves: {args.env_id}",
+        "",
+        f"Written by `{command}` on {time.strftime('%Y-%m-%d')}.",
+        "",
+        f"Machine: {header}",
+        "",
+        f"Plain PPO from scratch (SB3 `MlpPolicy`, random initialisation, no controller, no demonstrations), the "
+        f"`{args.env_id}` entry of `train/hyperparams/ppo.yml`{' with ' + ' '.join(args.params) if args.params else ''}, "
+        f"{len(seeds)} training seeds ({seeds[0]}..{seeds[-1]}). The shipped seed, named before training: {args.shipped_seed}.",
+        "",
+        f"Curves: every {args.eval_freq:,} steps each seed's policy runs the same {args.eval_episodes} deterministic "
+        "episodes (seeds 20000+); the line is the interquartile mean (IQM) across seeds, the band its 95% "
+        "stratified-bootstrap confidence interval (rliable), the faint lines the seeds.",
+        "",
+        f"![against steps](curves_steps.png)",
+        "",
+        f"![against wall-clock](curves_time.png)",
+        "",
+        "| env steps | wall-clock (median) | survival IQM [95% CI] | return IQM [95% CI] |",
+        "|---:|---:|---|---|",
+    ]
+    for j, steps in enumerate(curves["timesteps"]):
+        s, r = curves["survival_rate"], curves["mean_return"]
+        lines.append(
+            f"| {steps:,} | {curves['time_s'][j] / 60:.1f} min | {_fmt(s['iqm'][j], 'survival_rate')} "
+            f"[{_fmt(s['low'][j], 'survival_rate')}, {_fmt(s['high'][j], 'survival_rate')}] | {r['iqm'][j]:.1f} [{r['low'][j]:.1f}, {r['high'][j]:.1f}] |"
+        )
+    keys = [k for k in KEYS if k in final["per_seed"][str(seeds[0])]]
+    lines += [
+        "",
+        f"Final scores: each seed's selected policy on {args.episodes} held-out episodes (seeds {TEST_SEED}..{TEST_SEED + args.episodes - 1}, "
+        "never used in training or selection)" + (f"; `{args.baseline}` (model-based controller) on the same episodes." if baseline else "."),
+        "",
+        "| policy | rank | " + " | ".join(keys) + " |",
+        "|---|---:|" + "---:|" * len(keys),
+    ]
+    for s in seeds:
+        row = final["per_seed"][str(s)]
+        label = f"PPO seed {s}" + (" (shipped)" if s == args.shipped_seed else "")
+        lines.append(f"| {label} | {final['rank'][str(s)]} | " + " | ".join(_fmt(row[k], k) if k in METRICS else f"{row[k]:.3g}" for k in keys) + " |")
+    for metric in METRICS:
+        iqm, low, high = final["iqm"][metric]
+        lines.append(f"| PPO, IQM of {len(seeds)} seeds [95% CI]: {metric} | | {_fmt(iqm, metric)} [{_fmt(low, metric)}, {_fmt(high, metric)}] |" + " |" * (len(keys) - 1))
+    if baseline:
+        lines.append(f"| {args.baseline} (controller) | | " + " | ".join(_fmt(baseline[k], k) if k in METRICS else f"{baseline.get(k, float('nan')):.3g}" for k in keys) + " |")
+    lines += ["", f"Rank: by held-out survival, then return, among the {len(seeds)} seeds (1 = best). Every number is in `scores.json`.", ""]
+    return "\n".join(lines)
+
+
+def sweep(args: CurvesArgs, command: str | None = None) -> Path:
+    """Train every seed, evaluate them and write the results page; returns its folder."""
+    from train.evaluate import load_policy
+
+    command = command or "python -m train.curves " + " ".join(sys.argv[1:])
+    header = _machine()
+    args.out.mkdir(parents=True, exist_ok=True)
+    seeds = list(range(args.first_seed, args.first_seed + args.seeds))
+    plan = {"env_id": args.env_id, "seeds": seeds, "shipped_seed": args.shipped_seed, "params": list(args.params), "command": command}
+    (args.out / "plan.json").write_text(json.dumps(plan, indent=2) + "\n")  # the shipped seed, on record before training
+    histories, final = {}, {"per_seed": {}}
+    for seed in seeds:
+        folder = _train_seed(args, seed)
+        log = json.loads((folder / "evaluations.json").read_text())
+        histories[seed] = log["evaluations"]
+        policy = load_policy(folder)
+        final["per_seed"][str(seed)] = _held_out(policy, args, policy.env_kwargs)
+    order = sorted(seeds, key=lambda s: (-final["per_seed"][str(s)]["survival_rate"], -final["per_seed"][str(s)]["mean_return"]))
+    final["rank"] = {str(s): order.index(s) + 1 for s in seeds}
+    final["iqm"] = {m: iqm_interval([final["per_seed"][str(s)][m] for s in seeds]) for m in METRICS}
+    baseline = _held_out(load_policy(args.baseline, env_id=args.env_id), args, {}) if args.baseline else None
+    curves = _curves(histories)
+    title = f"{args.env_id}: plain PPO, {len(seeds)} seeds"
+    _plot(curves, args.out / "curves_steps.png", "timesteps", "environment steps", title)
+    _plot(curves, args.out / "curves_time.png", "time_s", "wall-clock [min] (median over seeds)", title)
+    scores = {**plan, "machine": header, "date": time.strftime("%Y-%m-%d"), "curves": curves, "final": final, "baseline": baseline}
+    (args.out / "scores.json").write_text(json.dumps(scores, indent=2) + "\n")
+    (args.out / "README.md").write_text(_page(args, header, curves, final, baseline, command))
+    print(f"results written to {args.out}/ (the shipped seed {args.shipped_seed} ranks {final['rank'][str(args.shipped_seed)]} of {len(seeds)})")
+    return args.out
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(CurvesArgs, argv, prog="python -m train.curves")
+    sweep(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -16,7 +16,7 @@ from .params import LegParams
 from .tasks import ALIASES, REGISTRY
 
 __all__ = ["LegParams", "StanceConfig", "PlanarLegStanceEnv", "PlanarLegStanceVectorEnv", "ENV_ID", "ENV_IDS"]
-__version__ = "0.1.0"
+__version__ = "0.1.0"  # the package version's one source (pyproject.toml reads it)
 
 ENV_ID = "leg_env/PlanarLegStance-v0"
 ENV_IDS = tuple(REGISTRY)

@@ -25,7 +25,9 @@ os.environ["MPLBACKEND"] = "module://matplotlib_inline.backend_inline"
 project = "leg-env"
 author = "leg-env authors"
 copyright = "leg-env authors"
-release = version = "0.1.0"
+import leg_env  # noqa: E402  (after the path is set: the checkout's package)
+
+release = version = leg_env.__version__
 
 extensions = [
     "myst_nb",  # MyST Markdown (it loads myst_parser) and executable notebooks

@@ -146,10 +146,10 @@ class RowReader:
             spec.append((key, 1, state.dtype.fields[key][1], "d"))
         terms = out.dtype.fields["terms"][1]
         rewards = [(key, 0, terms + 8 * k, "d") for k, key in enumerate(builder.reward_keys)]
-        self._spec, self._spec_rewards = tuple(spec), tuple(spec + rewards)
+        batch.bind_info(tuple(spec + rewards), len(spec), MODE_NAMES)  # parsed once, read at every call
         self._vectors = 2 * sum(kind == "v" for _, _, _, kind in spec)
 
     def __call__(self, rewards: bool = True) -> dict:
-        return self._batch.info(self._spec_rewards if rewards else self._spec, MODE_NAMES, np.empty(self._vectors))
+        return self._batch.info(rewards, np.empty(self._vectors))
 
 

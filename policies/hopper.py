@@ -148,7 +148,7 @@ class HopperController:
         self._was_flight[rows] = False
 
     def torque(self, obs: np.ndarray) -> np.ndarray:
-        """Joint torques [N m] for observations ``(N, 19)`` or ``(N, 20)``; advances the per-robot phase and apex bias."""
+        """Joint torques [N m] for observations ``(N, 19)`` or ``(N, 21)``; advances the per-robot phase and apex bias."""
         p, m, a, b = self.params, self.m, self.a, self.b
         l1, l2, g, dt = p.l1, p.l2, p.g, self.config.dt
         thb, q1, q2 = obs[:, Obs.th_b], obs[:, Obs.q1], obs[:, Obs.q2]
@@ -284,11 +284,12 @@ class HopperController:
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         """SB3-style ``predict``: actions in [-1, 1] for one observation or a batch of ``PlanarLegHop``'s: 19 entries
-        (v0) or 20 (v1, whose last, the COM's drift, the controller does not read: it keeps its own dead reckoning)."""
+        (v0) or 21 (v1, whose last two, the COM's drift and the ground time, the controller does not read: it keeps
+        its own dead reckoning and hops all the time)."""
         obs = np.asarray(observation, dtype=np.float64)
         width = obs.shape[-1] if obs.ndim in (1, 2) else None
-        if width not in (19, 20):
-            raise ValueError(f"observation must have shape (19,) or (N, 19) (PlanarLegHop-v0), or 20 entries (v1), got {obs.shape}")
+        if width not in (19, 21):
+            raise ValueError(f"observation must have shape (19,) or (N, 19) (PlanarLegHop-v0), or 21 entries (v1), got {obs.shape}")
         batch = obs.reshape(-1, width)
         n = batch.shape[0]
         if self._n != n:

@@ -629,9 +629,9 @@ def _values_of(base):
     return (0, 1, 2, 255)  # bool: raw bytes
 
 
-def _obs_dim(task, unilateral, observe_drift):
-    """The observation's width the C core requires: the hop's 19, or 20 observing the drift (v1); else the ground's."""
-    return (20 if observe_drift else 19) if task == 2 else (18 if unilateral else 12)
+def _obs_dim(task, unilateral, observe_progress):
+    """The observation's width the C core requires: the hop's 19, or 21 observing its progress (v1); else the ground's."""
+    return (21 if observe_progress else 19) if task == 2 else (18 if unilateral else 12)
 
 
 def field_rule(array, field, value, task, obs_cols, modes, takes_obs):
@@ -648,8 +648,8 @@ def field_rule(array, field, value, task, obs_cols, modes, takes_obs):
         if ok is not None:
             return (A if ok(value) else R), ("settings",)
         if field == "unilateral" and takes_obs:
-            return (A if _obs_dim(task, bool(value), obs_cols == 20) == obs_cols else R), ("obs", "settings")
-        if field == "observe_drift" and takes_obs:  # the hop's (its own settings only)
+            return (A if _obs_dim(task, bool(value), obs_cols == 21) == obs_cols else R), ("obs", "settings")
+        if field == "observe_progress" and takes_obs:  # the hop's (its own settings only)
             return (A if _obs_dim(task, False, bool(value)) == obs_cols else R), ("obs", "settings")
     if array == "state" and field in ("mode", "prev_mode") and modes:
         return (A if value in (0, 1, 2, 3) else R), ("state",)

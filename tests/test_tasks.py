@@ -349,48 +349,73 @@ def test_hop_reward_peaks_at_the_commanded_apex_on_scripted_flights():
     assert abs(rises[np.argmax(rewards[:-1])] - command) <= 0.0025
 
 
-def test_hop_v1_pays_the_height_term_in_flight_only_and_observes_the_drift():
-    """The same seeds and actions on v0 and v1 give the same motion (only the reward and one observation entry
-    differ): v1's height term is v0's times the step's flight share when the step ends in flight, else 0, and
-    its entry 19 is the COM's x from its start."""
+def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping():
+    """The same seeds and actions on v0 and v1 give the same motion (only the reward and two observation entries
+    differ). v1's height term, when the step ends in flight, is its weight times the sum of two Gaussian kernels
+    of the COM's ballistic apex error (scales 5 cm and 1 cm), times the step's flight share, else 0; its alive
+    bonus is v0's while the ground time (since the end of the last flight of at least ``min_flight``, or the start,
+    recomputed here from the contact modes and flight times) is at most ``max_ground_time``; entries 19 and 20 are
+    the COM's x from its start and the ground time."""
     from leg_env.tasks.stance import Obs
 
-    v0, v1 = (gym.make(f"leg_env/PlanarLegHop-v{k}").unwrapped for k in (0, 1))
-    assert v0.observation_space.shape == (19,) and v1.observation_space.shape == (20,)
-    flights = grounded = 0
-    for seed in range(3):
+    v0, v1 = (gym.make(f"leg_env/PlanarLegHop-v{k}", reset_noise_scale=0.002).unwrapped for k in (0, 1))
+    hold = (v1.nominal.tau / np.asarray(v1.config.torque_limit)).astype(np.float32)
+    assert v0.observation_space.shape == (19,) and v1.observation_space.shape == (21,)
+    cfg = v1.config
+    assert cfg.flight_height and cfg.observe_progress and cfg.max_ground_time == 1.0 and cfg.min_flight == 0.05
+    assert cfg.height_scale == 0.05 and cfg.height_scale_fine == 0.01
+    y_stand = dyn.com_position(v1.nominal.q, v1.params)[1]
+    flights = grounded = unpaid = 0
+    for seed in range(6):
         o0, i0 = v0.reset(seed=seed)
         o1, i1 = v1.reset(seed=seed)
-        x0 = i1["com_position"][0]
-        assert np.array_equal(o0, o1[:19]) and o1[Obs.com_drift] == 0.0
-        for a in actions(150, 1, seed=seed)[:, 0]:
+        x0, run, ground = i1["com_position"][0], 0.0, 0.0
+        assert np.array_equal(o0, o1[:19]) and o1[Obs.com_drift] == 0.0 and o1[Obs.ground_time] == 0.0
+        for k, a in enumerate(actions(300, 1, seed=seed)[:, 0]):
+            if seed % 2 and k < 150:  # standing for 1.5 s first
+                a = hold
+            else:  # random torques and, now and then, a kick of the knee
+                a = a if k % 60 < 30 else np.float32([0.0, -1.0]) if k % 60 < 36 else np.float32([0.0, 1.0])
             o0, r0, t0, _, i0 = v0.step(a)
             o1, r1, t1, _, i1 = v1.step(a)
             assert np.array_equal(o0, o1[:19]) and t0 == t1
             assert o1[Obs.com_drift] == np.float32(i1["com_position"][0] - x0)
+            run = run + i1["flight_time"] if i1["contact_mode"] == "flight" else 0.0
+            ground = 0.0 if run >= cfg.min_flight else ground + v1.dt
+            assert i1["ground_time"] == ground and o1[Obs.ground_time] == np.float32(ground)
             if i1["contact_mode"] == "flight":
                 flights += 1
-                assert i1["reward_height"] == pytest.approx(i0["reward_height"] * i1["flight_time"] / v1.dt, rel=1e-12, abs=0.0)
+                (y, vy), command = (i1["com_position"][1], i1["com_velocity"][1]), i1["command"]
+                err = y + vy * vy / (2.0 * v1.params.g) - (y_stand + command)  # the arc's apex above the ground's
+                kernel = np.exp(-((err / cfg.height_scale) ** 2)) + np.exp(-((err / cfg.height_scale_fine) ** 2))
+                expected = 0.0 if t1 else cfg.height_weight * kernel * i1["flight_time"] / v1.dt  # a fall pays none
+                assert i1["reward_height"] == pytest.approx(expected, rel=1e-9, abs=1e-12)
             else:
                 grounded += 1
                 assert i1["reward_height"] == 0.0
-            others = [k for k in i0 if k.startswith("reward_") and k != "reward_height"]
+            assert i1["reward_alive"] == (i0["reward_alive"] if ground <= cfg.max_ground_time else 0.0)
+            unpaid += i0["reward_alive"] > 0.0 and i1["reward_alive"] == 0.0
+            others = [k for k in i0 if k.startswith("reward_") and k not in ("reward_height", "reward_alive")]
             assert all(i0[k] == i1[k] for k in others)
             if t0:
                 break
-    assert flights > 10 and grounded > 10
+    assert flights > 10 and grounded > 10 and unpaid > 0
 
 
-def test_hop_v1_pays_nothing_for_standing_where_v0_paid_its_height_term():
+def test_hop_v1_pays_nothing_for_standing_after_a_second_where_v0_paid_its_height_term():
     """The v0 loophole: holding the nominal posture earns v0's height term at every step (the COM's vertical
-    energy is near the target without any hop); v1 pays it for flight only."""
+    energy is near the target without any hop). v1 pays the height term for flight only, and the alive bonus
+    for the first second on the ground only."""
     paid = {}
     for k in (0, 1):
         env = gym.make(f"leg_env/PlanarLegHop-v{k}", reset_noise_scale=0.0, command_range=(0.0, 0.0)).unwrapped
         env.reset(seed=0)
         hold = (env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32)
-        paid[k] = sum(env.step(hold)[4]["reward_height"] for _ in range(100))
-    assert paid[0] > 0.9 * 100 * 2.0 and paid[1] == 0.0
+        steps = [env.step(hold) for _ in range(150)]
+        assert not any(s[2] for s in steps)  # it stands
+        paid[k] = (sum(s[4]["reward_height"] for s in steps), sum(s[4]["reward_alive"] for s in steps))
+    assert paid[0][0] > 0.9 * 150 * 2.0 and paid[0][1] == 150.0
+    assert paid[1][0] == 0.0 and 99.0 <= paid[1][1] <= 100.0
 
 
 def test_hop_landing_impulse_is_charged():
@@ -445,7 +470,9 @@ BAD_CONFIGS = [
     (HOP, {"drift_com_weight": 1j}, TypeError, "drift_com_weight"),
     (HOP, {"tilt_weight": np.nan}, ValueError, "tilt_weight"),
     (HOP1, {"flight_height": 1}, TypeError, "flight_height"),
-    (HOP1, {"observe_drift": "yes"}, TypeError, "observe_drift"),
+    (HOP1, {"observe_progress": "yes"}, TypeError, "observe_progress"),
+    (HOP1, {"max_ground_time": 0.0}, ValueError, "max_ground_time"),
+    (HOP1, {"min_flight": -0.01}, ValueError, "min_flight"),
 ]
 
 

@@ -367,7 +367,8 @@ _ROWS = (
     ("steps outside friction cone", "friction_violation_frac", lambda v: f"{100 * v:.2f}%"),
     ("RMS torque hip / knee [N m]", "rms_torque", lambda v: f"{v[0]:.2f} / {v[1]:.2f}"),
     # the hop task's (train.task_metrics.HopTracker); rows whose key a result lacks are left out
-    ("hops", "hops", lambda v: f"{v}"),
+    ("hops (all lift-offs)", "hops", lambda v: f"{v}"),
+    ("hops of 50 ms or more per episode", "hops_per_episode", lambda v: f"{v:.1f}"),
     ("mean abs apex error [cm]", "mean_abs_apex_error", lambda v: f"{100 * v:.2f}"),
     ("RMS apex error [cm]", "rms_apex_error", lambda v: f"{100 * v:.2f}"),
     ("mean hop period [s]", "mean_hop_period", lambda v: f"{v:.3f}"),

@@ -28,8 +28,10 @@ typedef struct {
 
 /* The hopping task's state. */
 typedef struct {
-    double command; /* the commanded rise of the COM at the apex above standing [m] */
-    double x_com0;  /* the whole-body COM's x at the start [m] */
+    double command;     /* the commanded rise of the COM at the apex above standing [m] */
+    double x_com0;      /* the whole-body COM's x at the start [m] */
+    double flight_run;  /* the current flight's time so far (0 on the ground) [s] */
+    double ground_time; /* time since the last flight of at least min_flight ended, or since the start [s] */
 } hop_state;
 
 /* One robot's state. */
@@ -80,8 +82,11 @@ typedef struct {
         } push;
         struct {
             double w_height, height_scale, w_drift, w_tilt, w_impact, w_slip;
-            uint8_t flight_height; /* the height term is paid in flight only (else at every step) */
-            uint8_t observe_drift; /* the COM's x from its start is an observation entry */
+            double height_scale_fine; /* > 0: the height kernel is the sum of the height_scale one and this one [m] */
+            double min_flight;        /* a flight at least this long is a hop [s] */
+            double max_ground_time;   /* the alive bonus stops after this long without a hop [s] (inf: never) */
+            uint8_t flight_height;    /* the height term is paid in flight only (else at every step) */
+            uint8_t observe_progress; /* the COM's x from its start and the ground time are observation entries */
         } hop;
     } task;
 } env_settings;
@@ -117,7 +122,8 @@ typedef enum {
     OBS_UNILATERAL_DIM, /* the unilateral ground's */
     OBS_COMMAND = OBS_UNILATERAL_DIM,
     OBS_HOP_DIM,
-    OBS_COM_DRIFT = OBS_HOP_DIM, /* with the hop's observe_drift */
+    OBS_COM_DRIFT = OBS_HOP_DIM, /* with the hop's observe_progress */
+    OBS_GROUND_TIME,
     OBS_MAX_DIM
 } obs_index;
 

@@ -795,7 +795,9 @@ static const field STATE_PUSH_FIELDS[] = {
     TASK(env_state, task.push.x_com0, "x_com0", "f8", 1), TASK(env_state, task.push.force, "push_force", "f8", PUSH_MAX),
     {NULL, 0, NULL, 0}};
 static const field STATE_HOP_FIELDS[] = {
-    TASK(env_state, task.hop.command, "command", "f8", 1), TASK(env_state, task.hop.x_com0, "x_com0", "f8", 1), {NULL, 0, NULL, 0}};
+    TASK(env_state, task.hop.command, "command", "f8", 1), TASK(env_state, task.hop.x_com0, "x_com0", "f8", 1),
+    TASK(env_state, task.hop.flight_run, "flight_run", "f8", 1), TASK(env_state, task.hop.ground_time, "ground_time", "f8", 1),
+    {NULL, 0, NULL, 0}};
 
 static const field ROBOT_FIELDS[] = {
     F(env_robot, p, "leg_params", 1), F(env_robot, mu, "f8", 1), F(env_robot, torque_limit, "f8", LEG_NU),
@@ -816,8 +818,11 @@ static const field SETTINGS_HOP_FIELDS[] = {
     TASK(env_settings, task.hop.w_height, "w_height", "f8", 1), TASK(env_settings, task.hop.height_scale, "height_scale", "f8", 1),
     TASK(env_settings, task.hop.w_drift, "w_drift", "f8", 1), TASK(env_settings, task.hop.w_tilt, "w_tilt", "f8", 1),
     TASK(env_settings, task.hop.w_impact, "w_impact", "f8", 1), TASK(env_settings, task.hop.w_slip, "w_slip", "f8", 1),
+    TASK(env_settings, task.hop.height_scale_fine, "height_scale_fine", "f8", 1),
+    TASK(env_settings, task.hop.min_flight, "min_flight", "f8", 1),
+    TASK(env_settings, task.hop.max_ground_time, "max_ground_time", "f8", 1),
     TASK(env_settings, task.hop.flight_height, "flight_height", "?", 1),
-    TASK(env_settings, task.hop.observe_drift, "observe_drift", "?", 1),
+    TASK(env_settings, task.hop.observe_progress, "observe_progress", "?", 1),
     {NULL, 0, NULL, 0}};
 
 static const field OUT_FIELDS[] = {
@@ -890,11 +895,11 @@ static PyObject *py_layouts(PyObject *self, PyObject *unused)
 static PyObject *py_observation(PyObject *self, PyObject *unused)
 {
     return Py_BuildValue(
-        "{sisisisisisisisisisisisisisisisisisisisisisisisi}", "base_x", OBS_BASE_X, "base_y", OBS_BASE_Y, "th_b", OBS_TH_B, "q1",
+        "{sisisisisisisisisisisisisisisisisisisisisisisisisi}", "base_x", OBS_BASE_X, "base_y", OBS_BASE_Y, "th_b", OBS_TH_B, "q1",
         OBS_Q1, "q2", OBS_Q2, "vx_b", OBS_VX_B, "vy_b", OBS_VY_B, "w_b", OBS_W_B, "w_q1", OBS_W_Q1, "w_q2", OBS_W_Q2, "lam_x",
         OBS_LAM_X, "lam_y", OBS_LAM_Y, "foot_height", OBS_FOOT_HEIGHT, "foot_vx", OBS_FOOT_VX, "foot_vy", OBS_FOOT_VY, "contact",
         OBS_CONTACT, "slip", OBS_SLIP, "impulse_y", OBS_IMPULSE_Y, "command", OBS_COMMAND, "pinned_dim", OBS_PINNED_DIM,
-        "unilateral_dim", OBS_UNILATERAL_DIM, "hop_dim", OBS_HOP_DIM, "com_drift", OBS_COM_DRIFT, "hop_drift_dim", OBS_MAX_DIM);
+        "unilateral_dim", OBS_UNILATERAL_DIM, "hop_dim", OBS_HOP_DIM, "com_drift", OBS_COM_DRIFT, "ground_time", OBS_GROUND_TIME, "hop_progress_dim", OBS_MAX_DIM);
 }
 
 /* ------------------------------------------------------------------------------------------------ */

@@ -73,7 +73,7 @@ static int obs_fits(int task, const env_batch *b)
         return 1;
     const Py_ssize_t need = task_obs_dim(task, b->settings);
     if (b->obs_cols != need) {
-        PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and its settings (unilateral, observe_drift), got (%zd, %zd)",
+        PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and its settings (unilateral, observe_progress), got (%zd, %zd)",
                      b->n, need, b->n, b->obs_cols);
         return 0;
     }
@@ -659,14 +659,38 @@ fail:
  * Batch: one env's arrays handed to C once (the single environment's step is one call)
  * ------------------------------------------------------------------------------------------------ */
 
+/* One key of a bound info spec (Batch.bind_info): read from the out (0) or state (1) row at `offset` as `kind`. */
+typedef struct {
+    PyObject *key;
+    int source;
+    Py_ssize_t offset;
+    char kind;
+} info_item;
+
 typedef struct {
     PyObject_HEAD held h;
     env_batch b;
     int task;
+    info_item *items;    /* the bound info spec, NULL before bind_info */
+    Py_ssize_t n_items;  /* its keys with the reward terms */
+    Py_ssize_t n_plain;  /* without them (the first n_plain) */
+    Py_ssize_t n_vec;    /* doubles of its array-valued keys */
+    PyObject *names;     /* the contact modes' names */
 } BatchObject;
+
+static void info_unbind(BatchObject *self)
+{
+    for (Py_ssize_t k = 0; self->items != NULL && k < self->n_items; k++)
+        Py_XDECREF(self->items[k].key);
+    PyMem_Free(self->items);
+    self->items = NULL;
+    self->n_items = self->n_plain = self->n_vec = 0;
+    Py_CLEAR(self->names);
+}
 
 static void Batch_dealloc(BatchObject *self)
 {
+    info_unbind(self);
     release_all(&self->h);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
@@ -690,6 +714,9 @@ static PyObject *Batch_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
     if (self == NULL)
         return NULL;
     self->h.n = 0;
+    self->items = NULL;
+    self->n_items = self->n_plain = self->n_vec = 0;
+    self->names = NULL;
     self->task = (int)(task < 0 || task >= N_TASKS ? -1 : task);
     if (!batch_of(self->task, state, robots, settings, out, obs, &self->h, &self->b, 0)) {
         Py_DECREF(self);
@@ -750,55 +777,115 @@ static PyObject *Batch_start(BatchObject *self, PyObject *const *args, Py_ssize_
     Py_RETURN_NONE;
 }
 
-/* info(spec, names, vectors) -> dict: robot 0's info, read from its out and state rows by `spec`, a tuple of
- * (key, source, offset, kind): source 0 the out row, 1 the state row; offset in bytes; kind 'd' a double,
- * 'i' an int32, '?' a byte flag, 'm' an int32 contact mode given as names[mode], 'v' two doubles written into
- * `vectors` (a fresh float64 array) at the next free pair, and the key's value is that pair (a slice of it).
- * The single env's info in one call: the keys are built once in Python (leg_env.info), the values here. */
+/* bind_info(spec, n_plain, names): the info keys robot 0's info() reads, parsed once: spec is a tuple of
+ * (key, source, offset, kind): source 0 the out row, 1 the state row; offset in bytes; kind 'd' a double, 'i' an
+ * int32, '?' a byte flag, 'm' an int32 contact mode given as names[mode], 'v' two doubles (a slice of info()'s
+ * vectors array); the first n_plain entries are the keys without the reward terms. */
+static PyObject *Batch_bind_info(BatchObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    Py_ssize_t n_plain;
+    if (nargs != 3 || !PyTuple_Check(args[0]) || !PyTuple_Check(args[2])) {
+        PyErr_SetString(PyExc_TypeError, "bind_info takes (spec tuple, n_plain, mode names tuple)");
+        return NULL;
+    }
+    if (!int_arg(args[1], "n_plain", &n_plain))
+        return NULL;
+    PyObject *spec = args[0];
+    const Py_ssize_t n = PyTuple_GET_SIZE(spec);
+    if (n_plain < 0 || n_plain > n) {
+        PyErr_Format(PyExc_ValueError, "bind_info: n_plain must be in [0, %zd], got %zd", n, n_plain);
+        return NULL;
+    }
+    info_item *items = PyMem_Calloc(n ? n : 1, sizeof(info_item));
+    if (items == NULL)
+        return PyErr_NoMemory();
+    Py_ssize_t n_vec = 0;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        PyObject *item = PyTuple_GET_ITEM(spec, k);
+        if (!PyTuple_Check(item) || PyTuple_GET_SIZE(item) != 4 || !PyUnicode_Check(PyTuple_GET_ITEM(item, 0))
+            || !PyUnicode_Check(PyTuple_GET_ITEM(item, 3))) {
+            PyErr_SetString(PyExc_TypeError, "bind_info: every spec entry must be (key, source, offset, kind)");
+            goto fail;
+        }
+        const long source = PyLong_AsLong(PyTuple_GET_ITEM(item, 1));
+        const long offset = PyLong_AsLong(PyTuple_GET_ITEM(item, 2));
+        const char *kind = PyUnicode_AsUTF8(PyTuple_GET_ITEM(item, 3));
+        if (PyErr_Occurred() || kind == NULL)
+            goto fail;
+        if (strlen(kind) != 1 || strchr("di?mv", kind[0]) == NULL) {
+            PyErr_Format(PyExc_ValueError, "bind_info: unknown kind %s", kind);
+            goto fail;
+        }
+        const size_t size = source == 0 ? sizeof(env_out) : sizeof(env_state);
+        const size_t width = kind[0] == 'd' ? 8 : (kind[0] == 'v' ? 16 : (kind[0] == '?' ? 1 : 4));
+        if ((source != 0 && source != 1) || offset < 0 || (size_t)offset + width > size) {
+            PyErr_Format(PyExc_ValueError, "bind_info: spec entry %zd reads outside its row", k);
+            goto fail;
+        }
+        items[k].key = PyTuple_GET_ITEM(item, 0);
+        Py_INCREF(items[k].key);
+        items[k].source = (int)source;
+        items[k].offset = offset;
+        items[k].kind = kind[0];
+        n_vec += kind[0] == 'v' ? 2 : 0;
+    }
+    info_unbind(self);
+    self->items = items;
+    self->n_items = n;
+    self->n_plain = n_plain;
+    self->n_vec = n_vec;
+    self->names = args[2];
+    Py_INCREF(self->names);
+    Py_RETURN_NONE;
+fail:
+    for (Py_ssize_t k = 0; k < n; k++)
+        Py_XDECREF(items[k].key);
+    PyMem_Free(items);
+    return NULL;
+}
+
+/* info(rewards, vectors) -> dict: robot 0's info by the bound spec (with the reward terms if rewards is true);
+ * the array-valued keys are slices of `vectors`, a fresh float64 array of the spec's n_vec doubles. */
 static PyObject *Batch_info(BatchObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     held h;
     h.n = 0;
-    if (nargs != 3 || !PyTuple_Check(args[0]) || !PyTuple_Check(args[1])) {
-        PyErr_SetString(PyExc_TypeError, "info takes (spec tuple, mode names tuple, vectors array)");
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "info takes (rewards, vectors)");
         return NULL;
     }
-    PyObject *spec = args[0], *names = args[1], *vec_obj = args[2];
+    if (self->items == NULL) {
+        PyErr_SetString(PyExc_ValueError, "info: no spec bound (call bind_info first)");
+        return NULL;
+    }
+    const int rewards = PyObject_IsTrue(args[0]);
+    if (rewards < 0)
+        return NULL;
+    PyObject *vec_obj = args[1];
     Py_ssize_t n_vec = 0;
     double *vec = (double *)buffer_of(vec_obj, "vectors", F64, -1, 1, &h, &n_vec);
     if (vec == NULL)
         return NULL;
+    if (n_vec < self->n_vec) {
+        PyErr_Format(PyExc_ValueError, "info: vectors must hold %zd doubles, got %zd", self->n_vec, n_vec);
+        goto fail_h;
+    }
     const char *out = (const char *)self->b.out, *state = (const char *)self->b.state;
+    const Py_ssize_t n = rewards ? self->n_items : self->n_plain;
     PyObject *info = PyDict_New();
     if (info == NULL)
-        goto fail;
+        goto fail_h;
     Py_ssize_t used = 0;
-    for (Py_ssize_t k = 0; k < PyTuple_GET_SIZE(spec); k++) {
-        PyObject *item = PyTuple_GET_ITEM(spec, k), *value = NULL;
-        long source, offset;
-        const char *kind;
-        if (!PyTuple_Check(item) || PyTuple_GET_SIZE(item) != 4 || !PyUnicode_Check(PyTuple_GET_ITEM(item, 0))) {
-            PyErr_SetString(PyExc_TypeError, "info: every spec entry must be (key, source, offset, kind)");
-            goto fail;
-        }
-        source = PyLong_AsLong(PyTuple_GET_ITEM(item, 1));
-        offset = PyLong_AsLong(PyTuple_GET_ITEM(item, 2));
-        kind = PyUnicode_AsUTF8(PyTuple_GET_ITEM(item, 3));
-        if (PyErr_Occurred() || kind == NULL)
-            goto fail;
-        const size_t size = source == 0 ? sizeof(env_out) : sizeof(env_state);
-        const size_t width = kind[0] == 'd' ? 8 : (kind[0] == 'v' ? 16 : (kind[0] == '?' ? 1 : 4));
-        if ((source != 0 && source != 1) || offset < 0 || (size_t)offset + width > size) {
-            PyErr_Format(PyExc_ValueError, "info: spec entry %zd reads outside its row", k);
-            goto fail;
-        }
-        const char *at = (source == 0 ? out : state) + offset;
-        double x[2];
+    for (Py_ssize_t k = 0; k < n; k++) {
+        const info_item *it = self->items + k;
+        const char *at = (it->source == 0 ? out : state) + it->offset;
+        PyObject *value = NULL;
+        double x;
         int32_t i32;
-        switch (kind[0]) {
+        switch (it->kind) {
         case 'd':
-            memcpy(x, at, 8);
-            value = PyFloat_FromDouble(x[0]);
+            memcpy(&x, at, 8);
+            value = PyFloat_FromDouble(x);
             break;
         case 'i':
             memcpy(&i32, at, 4);
@@ -809,27 +896,20 @@ static PyObject *Batch_info(BatchObject *self, PyObject *const *args, Py_ssize_t
             break;
         case 'm':
             memcpy(&i32, at, 4);
-            if (i32 < 0 || i32 >= PyTuple_GET_SIZE(names)) {
+            if (i32 < 0 || i32 >= PyTuple_GET_SIZE(self->names)) {
                 PyErr_Format(PyExc_ValueError, "info: contact mode %d has no name", (int)i32);
                 goto fail;
             }
-            value = PyTuple_GET_ITEM(names, i32);
+            value = PyTuple_GET_ITEM(self->names, i32);
             Py_INCREF(value);
             break;
-        case 'v':
-            if (used + 2 > n_vec) {
-                PyErr_SetString(PyExc_ValueError, "info: vectors is too short for the spec's array-valued keys");
-                goto fail;
-            }
+        default: /* 'v' */
             memcpy(vec + used, at, 16);
             value = PySequence_GetSlice(vec_obj, used, used + 2);
             used += 2;
             break;
-        default:
-            PyErr_Format(PyExc_ValueError, "info: unknown kind %s", kind);
-            goto fail;
         }
-        if (value == NULL || PyDict_SetItem(info, PyTuple_GET_ITEM(item, 0), value) < 0) {
+        if (value == NULL || PyDict_SetItem(info, it->key, value) < 0) {
             Py_XDECREF(value);
             goto fail;
         }
@@ -838,14 +918,17 @@ static PyObject *Batch_info(BatchObject *self, PyObject *const *args, Py_ssize_t
     release_all(&h);
     return info;
 fail:
-    Py_XDECREF(info);
+    Py_DECREF(info);
+fail_h:
     release_all(&h);
     return NULL;
 }
 
 static PyMethodDef Batch_methods[] = {
+    {"bind_info", (PyCFunction)(void (*)(void))Batch_bind_info, METH_FASTCALL,
+     "bind_info(spec, n_plain, names): the info keys info() reads, parsed once."},
     {"info", (PyCFunction)(void (*)(void))Batch_info, METH_FASTCALL,
-     "info(spec, mode names, vectors) -> dict: robot 0's info keys read from its out and state rows (leg_env.info)."},
+     "info(rewards, vectors) -> dict: robot 0's info keys read from its out and state rows by the bound spec (leg_env.info)."},
     {"step_one", (PyCFunction)(void (*)(void))Batch_step_one, METH_FASTCALL,
      "step_one(a0, a1) -> reward: robot 0's action, control step and evaluation."},
     {"start", (PyCFunction)(void (*)(void))Batch_start, METH_FASTCALL,

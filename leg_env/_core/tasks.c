@@ -213,7 +213,7 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     const leg_params *P = &r->p;
     env_state *s = state_row(b, i);
     env_out *o = out_row(b, i);
-    const hop_state *t = &s->task.hop;
+    hop_state *t = &s->task.hop;
     double *terms = o->terms;
     double stance_terms[STANCE_TERMS];
     const double m = P->m_b + P->m1 + P->m2, g = P->g, weight = weight_of(P);
@@ -231,12 +231,23 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     const double dx = x_com - t->x_com0;
     const double px = o->kick[0], py = o->kick[1];
     const env_settings *c = b->settings;
+    /* hops: a flight of at least min_flight; the ground time runs from the end of the last one */
+    t->flight_run = s->mode == LEG_FLIGHT ? t->flight_run + o->flight_time : 0.0;
+    t->ground_time = t->flight_run >= c->task.hop.min_flight ? 0.0 : t->ground_time + c->dt;
     terms[0] = stance_terms[0]; /* alive: the balance task's health predicate */
+    if (t->ground_time > c->task.hop.max_ground_time) /* and hopping */
+        terms[0] = 0.0;
     terms[1] = w_height * exp(-err * err);
+    if (c->task.hop.height_scale_fine > 0.0) { /* a coarse kernel to find the apex, a fine one to hit it */
+        const double fine = (e_v - e_star) / (weight * c->task.hop.height_scale_fine);
+        terms[1] = w_height * (exp(-err * err) + exp(-fine * fine));
+    }
     if (c->task.hop.flight_height) /* in flight E_v is m g times the arc's apex height: paid for the step's flight */
         terms[1] = s->mode == LEG_FLIGHT ? terms[1] * (o->flight_time / c->dt) : 0.0;
-    if (c->task.hop.observe_drift)
+    if (c->task.hop.observe_progress) {
         b->obs[i * b->obs_cols + OBS_COM_DRIFT] = (float)dx;
+        b->obs[i * b->obs_cols + OBS_GROUND_TIME] = (float)t->ground_time;
+    }
     terms[2] = -b->settings->task.hop.w_drift * dx * dx;
     terms[3] = -b->settings->task.hop.w_tilt * s->q[2] * s->q[2];
     terms[4] = -b->settings->task.hop.w_impact * (px * px + py * py) / (m * m);
@@ -255,8 +266,12 @@ static void hop_start(const env_batch *b, Py_ssize_t i)
     for (int j = 0; j < HOP_TERMS; j++)
         o->terms[j] = 0.0;
     b->obs[i * b->obs_cols + OBS_COMMAND] = (float)s->task.hop.command;
-    if (b->settings->task.hop.observe_drift)
+    s->task.hop.flight_run = 0.0;
+    s->task.hop.ground_time = 0.0;
+    if (b->settings->task.hop.observe_progress) {
         b->obs[i * b->obs_cols + OBS_COM_DRIFT] = 0.0f;
+        b->obs[i * b->obs_cols + OBS_GROUND_TIME] = 0.0f;
+    }
     s->task.hop.x_com0 = o->com[0];
 }
 
@@ -269,7 +284,7 @@ static int task_terms(int task) { return task == TASK_STANCE ? STANCE_TERMS : (t
 static Py_ssize_t task_obs_dim(int task, const env_settings *c)
 {
     if (task == TASK_HOP)
-        return c->task.hop.observe_drift ? OBS_MAX_DIM : OBS_HOP_DIM;
+        return c->task.hop.observe_progress ? OBS_MAX_DIM : OBS_HOP_DIM;
     return c->unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM;
 }
 

@@ -1,7 +1,13 @@
-"""Controllers for the leg-env tasks with Stable-Baselines3's ``predict`` interface.
+"""Controllers for the leg-env tasks with Stable-Baselines3's ``predict`` interface, and the shipped policies.
 
-``policies.lqr.LQRController`` is the model-based reference for balancing, ``policies.hopper.HopperController``
-for hopping, and ``policies.gated.GatedController`` adds a backward hop to the LQR for the unilateral balance
-task's starts that need one. The shipped PPO policies are folders (``policies/ppo_stance/``,
-``policies/ppo_stance_randomized/``, ``policies/ppo_stance_v1/``, ``policies/ppo_hop/``); load them with ``train.evaluate.load_policy``.
+The model-based controllers: ``policies.lqr.LQRController`` (balancing; stateless), ``policies.hopper.HopperController``
+(hopping), ``policies.gated.GatedController`` (a backward hop before the LQR for the unilateral balance task's
+starts that need one) and ``policies.stepping.SteppingController`` (the LQR, and a quick hop after a large push).
+The stateful ones share ``policies.base.BatchedController``: one ``predict`` for one observation or a batch, the
+per-robot state, SB3's ``episode_start``; all read the observation by the task's named columns
+(``leg_env.tasks.stance.Obs``).
+
+The shipped PPO policies are folders, each with its card (``README.md``): ``ppo_stance``, ``ppo_stance_randomized``
+and ``ppo_hop_v1`` are plain PPO from scratch; ``ppo_stance_v1``, ``ppo_push`` and ``ppo_hop`` are residual PPO on a
+controller. Load any of them with ``train.evaluate.load_policy``.
 """

@@ -29,7 +29,8 @@ from __future__ import annotations
 import numpy as np
 
 from leg_env.params import LegParams
-from policies.recovery import com_from_observation, lqr_and_hopper, observation_batch
+from policies.base import BatchedController
+from policies.recovery import com_from_observation, lqr_and_hopper
 
 __all__ = ["GatedController", "HOP_GAINS", "capture_point"]
 
@@ -53,7 +54,7 @@ def capture_point(obs, params: LegParams) -> np.ndarray:
     return x_com + vx_com / np.sqrt(params.g / np.maximum(y_com, 1e-9))
 
 
-class GatedController:
+class GatedController(BatchedController):
     """Hop back from a start whose capture point is behind ``threshold``, else the LQR (module docstring).
 
     Args:
@@ -84,37 +85,25 @@ class GatedController:
         gains = HOP_GAINS if hop_gains is None else hop_gains
         self.params, self.config, self.lqr, self.hopper = lqr_and_hopper(params, config, StanceConfig, gains)
         self.threshold, self.hop_steps, self.hop_command = float(threshold), int(hop_steps), float(hop_command)
-        self._n = 0
 
-    def reset(self) -> None:
-        """Start every robot anew at the next ``predict``."""
-        self._n = 0
+    widths, task = (18,), "the unilateral balance tasks"
 
     def decide(self, observation) -> np.ndarray:
         """Whether each robot, at this (first) observation of its episode, hops: ``capture_point < threshold``."""
         return capture_point(observation, self.params) < self.threshold
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        """SB3-style ``predict``: actions in [-1, 1] for one observation (18,) or a batch (N, 18).
+    def _allocate(self, n: int) -> None:
+        self.hopping, self.steps = np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
 
-        Returns:
-            ``(action, None)`` with ``action`` float32 of shape (2,) or (N, 2).
-        """
-        obs, batch = observation_batch(observation)
-        n = batch.shape[0]
-        starts = np.zeros(n, dtype=bool)
-        if self._n != n:
-            self._n = n
-            self.hopping, self.steps = np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
-            starts[:] = True
-        if episode_start is not None:
-            starts |= np.asarray(episode_start, dtype=bool).reshape(-1)
-        if starts.any():
-            self.hopping[starts] = self.decide(batch[starts])
-            self.steps[starts] = 0
+    def _start(self, rows: np.ndarray, batch: np.ndarray) -> None:
+        if rows.any():
+            self.hopping[rows] = self.decide(batch[rows])
+            self.steps[rows] = 0
+
+    def act(self, batch: np.ndarray) -> np.ndarray:
         action, _ = self.lqr.predict(batch)
         hop = self.hopping & (self.steps < self.hop_steps)
         if hop.any():
             self.hopper.act_on(batch, self.hop_command, hop & (self.steps == 0), hop, action)
         self.steps += 1
-        return (action[0] if obs.ndim == 1 else action), None
+        return action

@@ -67,13 +67,14 @@ import numpy as np
 
 from leg_env.params import LegParams
 from leg_env.tasks.stance import Obs
+from policies.base import BatchedController
 
 __all__ = ["HopperController"]
 
 _CROUCH, _PUSH, _RELEASE = 0, 1, 2  # stance phases
 
 
-class HopperController:
+class HopperController(BatchedController):
     """Raibert-style hopping controller with SB3's ``predict`` (module docstring).
 
     Args:
@@ -134,13 +135,16 @@ class HopperController:
         self.apex_gain = apex_gain
         self.T_s, self.k_v, self.k_x = stance_time, speed_gain, position_gain
         self.attitude_gains, self.friction_margin, self.swing_gains = attitude_gains, friction_margin, swing_gains
-        self._n = 0  # batch size of the per-robot state (0: none yet)
 
-    def reset(self) -> None:
-        """Forget every robot's state (the next observation starts new episodes)."""
-        self._n = 0
+    # PlanarLegHop's 19 entries (v0) or 21 (v1, whose last two, the COM's drift and the ground time, the
+    # controller does not read: it keeps its own dead reckoning and hops all the time)
+    widths, task, dtype = (19, 21), "PlanarLegHop: 19 entries (v0) or 21 (v1)", np.float64
 
-    def _start(self, rows: np.ndarray) -> None:
+    def _allocate(self, n: int) -> None:
+        self._x0, self._bias, self._apex = np.zeros(n), np.zeros(n), np.zeros(n)
+        self._phase, self._was_flight = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
+
+    def _start(self, rows: np.ndarray, batch: np.ndarray | None = None) -> None:
         self._x0[rows] = 0.0
         self._phase[rows] = _CROUCH
         self._bias[rows] = 0.0
@@ -282,27 +286,10 @@ class HopperController:
         hop_action, _ = self.predict(hop_obs, episode_start=starts)
         action[rows] = hop_action[rows]
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        """SB3-style ``predict``: actions in [-1, 1] for one observation or a batch of ``PlanarLegHop``'s: 19 entries
-        (v0) or 21 (v1, whose last two, the COM's drift and the ground time, the controller does not read: it keeps
-        its own dead reckoning and hops all the time)."""
-        obs = np.asarray(observation, dtype=np.float64)
-        width = obs.shape[-1] if obs.ndim in (1, 2) else None
-        if width not in (19, 21):
-            raise ValueError(f"observation must have shape (19,) or (N, 19) (PlanarLegHop-v0), or 21 entries (v1), got {obs.shape}")
-        batch = obs.reshape(-1, width)
-        n = batch.shape[0]
-        if self._n != n:
-            self._n = n
-            self._x0, self._bias, self._apex = np.zeros(n), np.zeros(n), np.zeros(n)
-            self._phase, self._was_flight = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
-            self._start(np.ones(n, dtype=bool))
-        if episode_start is not None:
-            self._start(np.asarray(episode_start, dtype=bool).reshape(-1))
+    def act(self, batch: np.ndarray) -> np.ndarray:
         tau = self.torque(batch)
         self._x0 += self._vx * self.config.dt  # dead reckoning of the COM's x: the foot's x is not observed
-        action = np.clip(tau / self.torque_limit, -1.0, 1.0).astype(np.float32)
-        return (action[0] if obs.ndim == 1 else action), None
+        return np.clip(tau / self.torque_limit, -1.0, 1.0).astype(np.float32)
 
 
 def _wrap(angle):

@@ -8,7 +8,7 @@ import numpy as np
 from leg_env.params import LegParams
 from leg_env.tasks.stance import Obs
 
-__all__ = ["com_from_observation", "lqr_and_hopper", "observation_batch"]
+__all__ = ["com_from_observation", "lqr_and_hopper"]
 
 
 def com_from_observation(obs, params: LegParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -57,15 +57,3 @@ def lqr_and_hopper(params, config, config_type, gains: dict):
         config = config_type.from_kwargs(config)
     shared = {k: getattr(config, k) for k in ("dt", "torque_limit", "mu", "nominal_knee") if hasattr(config, k)}
     return params, config, LQRController(params, config), HopperController(params, HopConfig.from_kwargs(shared), **gains)
-
-
-def observation_batch(observation) -> tuple[np.ndarray, np.ndarray]:
-    """``(obs, batch)``: the observation as an array, and as a batch ``(N, 18)`` of the unilateral balance tasks'.
-
-    Raises:
-        ValueError: the observation is not of shape (18,) or (N, 18).
-    """
-    obs = np.asarray(observation)
-    if obs.shape[-1:] != (18,) or obs.ndim not in (1, 2):
-        raise ValueError(f"observation must have shape (18,) or (N, 18) (the unilateral balance tasks), got {obs.shape}")
-    return obs, obs.reshape(-1, 18)

@@ -39,7 +39,8 @@ import numpy as np
 
 from leg_env.params import LegParams
 from leg_env.tasks.stance import Obs
-from policies.recovery import com_from_observation, lqr_and_hopper, observation_batch
+from policies.base import BatchedController
+from policies.recovery import com_from_observation, lqr_and_hopper
 
 __all__ = ["SteppingController", "STEP_GAINS"]
 
@@ -60,7 +61,7 @@ search over those 12 numbers: 12 candidates per round, each run on 160 robots wi
 below 28 N; 49 rounds, the mean of the best three kept, starting from the gated Stance-v1 hop's gains."""
 
 
-class SteppingController:
+class SteppingController(BatchedController):
     """The LQR, and a hop when the observed push exceeds ``force_threshold`` (module docstring).
 
     Args:
@@ -102,13 +103,16 @@ class SteppingController:
         p = self.params
         self.mass = p.m_b + p.m1 + p.m2
         self.weight = self.mass * p.g
-        self._n = 0
 
-    def reset(self) -> None:
-        """Start every robot anew at the next ``predict``."""
-        self._n = 0
+    widths, task = (18,), "the unilateral balance tasks"
 
-    def _start(self, rows: np.ndarray) -> None:
+    def _allocate(self, n: int) -> None:
+        self.hopping, self.push_estimate = np.zeros(n, dtype=bool), np.zeros(n)
+        self._age, self._landed_at, self._cool = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+        self._flew, self._run = np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
+        self._v, self._lam_x = np.zeros(n), np.zeros(n)
+
+    def _start(self, rows: np.ndarray, batch: np.ndarray) -> None:
         self.hopping[rows] = False
         self.push_estimate[rows] = 0.0
         self._age[rows] = 0
@@ -117,23 +121,7 @@ class SteppingController:
         self._cool[rows] = 0
         self._run[rows] = -1  # the reset's observation counts for nothing: its force is not under a step's torque
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        """SB3-style ``predict``: actions in [-1, 1] for one observation (18,) or a batch (N, 18).
-
-        Returns:
-            ``(action, None)`` with ``action`` float32 of shape (2,) or (N, 2).
-        """
-        obs, batch = observation_batch(observation)
-        n = batch.shape[0]
-        if self._n != n:
-            self._n = n
-            self.hopping, self.push_estimate = np.zeros(n, dtype=bool), np.zeros(n)
-            self._age, self._landed_at, self._cool = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
-            self._flew, self._run = np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
-            self._v, self._lam_x = np.zeros(n), np.zeros(n)
-            self._start(np.ones(n, dtype=bool))
-        if episode_start is not None:
-            self._start(np.asarray(episode_start, dtype=bool).reshape(-1))
+    def act(self, batch: np.ndarray) -> np.ndarray:
 
         # 1. the push observer, between two sticking observations (``_run``: sticking observations in a row)
         _, _, v = com_from_observation(batch, self.params)
@@ -163,4 +151,4 @@ class SteppingController:
             self.hopper.act_on(batch, self.hop_command, start, self.hopping, action)
         self._age += 1
         self._cool -= 1
-        return (action[0] if obs.ndim == 1 else action), None
+        return action

@@ -351,8 +351,9 @@ def test_hop_reward_peaks_at_the_commanded_apex_on_scripted_flights():
 
 def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping():
     """The same seeds and actions on v0 and v1 give the same motion (only the reward and two observation entries
-    differ). v1's height term, when the step ends in flight, is its weight times the sum of two Gaussian kernels
-    of the COM's ballistic apex error (scales 5 cm and 1 cm), times the step's flight share, else 0; its alive
+    differ). v1's height term of a step that ends in flight is its weight times the sum of two Gaussian kernels
+    of the COM's ballistic apex error (scales 5 cm and 1 cm), times the step's flight share; a flight's terms are
+    banked and paid at the step where it lands, unless the robot falls there, and nothing is paid otherwise; its alive
     bonus is v0's while the ground time (since the end of the last flight of at least ``min_flight``, or the start,
     recomputed here from the contact modes and flight times) is at most ``max_ground_time``; entries 19 and 20 are
     the COM's x from its start and the ground time."""
@@ -363,13 +364,13 @@ def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping
     assert v0.observation_space.shape == (19,) and v1.observation_space.shape == (21,)
     cfg = v1.config
     assert cfg.flight_height and cfg.observe_progress and cfg.max_ground_time == 1.0 and cfg.min_flight == 0.05
-    assert cfg.height_scale == 0.05 and cfg.height_scale_fine == 0.01
+    assert cfg.height_scale == 0.05 and cfg.height_scale_fine == 0.01 and cfg.pay_on_landing
     y_stand = dyn.com_position(v1.nominal.q, v1.params)[1]
-    flights = grounded = unpaid = 0
+    flights = grounded = unpaid = landings = 0
     for seed in range(6):
         o0, i0 = v0.reset(seed=seed)
         o1, i1 = v1.reset(seed=seed)
-        x0, run, ground = i1["com_position"][0], 0.0, 0.0
+        x0, run, ground, banked = i1["com_position"][0], 0.0, 0.0, 0.0
         assert np.array_equal(o0, o1[:19]) and o1[Obs.com_drift] == 0.0 and o1[Obs.ground_time] == 0.0
         for k, a in enumerate(actions(300, 1, seed=seed)[:, 0]):
             if seed % 2 and k < 150:  # standing for 1.5 s first
@@ -380,6 +381,7 @@ def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping
             o1, r1, t1, _, i1 = v1.step(a)
             assert np.array_equal(o0, o1[:19]) and t0 == t1
             assert o1[Obs.com_drift] == np.float32(i1["com_position"][0] - x0)
+            landed = i1["contact_mode"] != "flight" and run > 0.0
             run = run + i1["flight_time"] if i1["contact_mode"] == "flight" else 0.0
             ground = 0.0 if run >= cfg.min_flight else ground + v1.dt
             assert i1["ground_time"] == ground and o1[Obs.ground_time] == np.float32(ground)
@@ -388,18 +390,21 @@ def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping
                 (y, vy), command = (i1["com_position"][1], i1["com_velocity"][1]), i1["command"]
                 err = y + vy * vy / (2.0 * v1.params.g) - (y_stand + command)  # the arc's apex above the ground's
                 kernel = np.exp(-((err / cfg.height_scale) ** 2)) + np.exp(-((err / cfg.height_scale_fine) ** 2))
-                expected = 0.0 if t1 else cfg.height_weight * kernel * i1["flight_time"] / v1.dt  # a fall pays none
-                assert i1["reward_height"] == pytest.approx(expected, rel=1e-9, abs=1e-12)
+                banked += cfg.height_weight * kernel * i1["flight_time"] / v1.dt
+                assert i1["reward_height"] == 0.0  # banked, not paid
             else:
                 grounded += 1
-                assert i1["reward_height"] == 0.0
+                expected = banked if landed and not t1 else 0.0  # a landing pays the flight; a fall pays none
+                assert i1["reward_height"] == pytest.approx(expected, rel=1e-9, abs=1e-12)
+                landings += expected > 0.0
+                banked = 0.0 if landed else banked
             assert i1["reward_alive"] == (i0["reward_alive"] if ground <= cfg.max_ground_time else 0.0)
             unpaid += i0["reward_alive"] > 0.0 and i1["reward_alive"] == 0.0
             others = [k for k in i0 if k.startswith("reward_") and k not in ("reward_height", "reward_alive")]
             assert all(i0[k] == i1[k] for k in others)
             if t0:
                 break
-    assert flights > 10 and grounded > 10 and unpaid > 0
+    assert flights > 10 and grounded > 10 and unpaid > 0 and landings > 2
 
 
 def test_hop_v1_pays_nothing_for_standing_after_a_second_where_v0_paid_its_height_term():

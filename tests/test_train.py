@@ -130,7 +130,10 @@ def test_resume_continues_the_step_counter(tmp_path):
     history = record["evaluations"]
     assert [e["timesteps"] for e in history] == [128, 256, 384, 512]
     assert history[:2] == first  # the first invocation's evaluations are kept, not redone
-    assert len((out / "command.txt").read_text().splitlines()) == 2
+    commands = (out / "command.txt").read_text().splitlines()
+    assert len(commands) == 2
+    # a command anyone can run: the interpreter is "python", not this machine's path to it
+    assert all(c.split()[0] == "python" for c in commands) and sys.executable not in "".join(commands)
     assert yaml.safe_load((out / "config.yaml").read_text())["total_timesteps"] == 2 * STEPS
 
 

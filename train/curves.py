@@ -27,7 +27,6 @@ The results page, ``<out>/README.md`` (headed by the machine, the versions and t
 from __future__ import annotations
 
 import json
-import platform
 import sys
 import time
 from dataclasses import dataclass, field
@@ -36,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from train.cli import parse_args
+from train.machine import describe
 
 __all__ = ["CurvesArgs", "iqm_interval", "sweep", "main"]
 
@@ -114,30 +114,6 @@ def iqm_interval(scores: np.ndarray, reps: int = BOOTSTRAP_REPS, seed: int = 0) 
     return float(point["ppo"][0]), float(interval["ppo"][0, 0]), float(interval["ppo"][1, 0])
 
 
-def _machine() -> str:
-    import gymnasium
-    import stable_baselines3
-    import torch
-
-    import leg_env
-
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    import os
-
-    return (
-        f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; Python {platform.python_version()}; "
-        f"leg-env {leg_env.__version__}, numpy {np.__version__}, gymnasium {gymnasium.__version__}, "
-        f"stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}"
-    )
-
-
 def _train_seed(args: CurvesArgs, seed: int) -> Path:
     """Train (or finish) one seed's run folder; returns it."""
     from train.ppo import TrainArgs, train
@@ -188,9 +164,9 @@ def _curves(histories: dict[int, list[dict]]) -> dict:
 
 
 def _plot(curves: dict, path: Path, x_key: str, x_label: str, title: str) -> None:
-    from train.plots import _pyplot
+    from train.plots import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(METRICS), figsize=(10.0, 3.6), dpi=100)
     labels = {"survival_rate": "survival rate [%]", "mean_return": "episode return"}
     x = np.asarray(curves[x_key], dtype=float) / (60.0 if x_key == "time_s" else 1.0)
@@ -212,8 +188,18 @@ def _plot(curves: dict, path: Path, x_key: str, x_label: str, title: str) -> Non
     plt.close(fig)
 
 
+_COLUMNS = {  # a held-out score's column: its heading and how its value is written
+    "survival_rate": ("survival", lambda v: f"{100 * v:.0f}%"),
+    "mean_return": ("return", lambda v: f"{v:.1f}"),
+    "mean_length": ("length", lambda v: f"{v:.0f}"),
+    "hops_per_episode": ("hops of 50 ms+ per episode", lambda v: f"{v:.1f}"),
+    "mean_abs_apex_error": ("mean abs apex error [cm]", lambda v: f"{100 * v:.2f}"),
+    "mean_drift_10s": ("mean COM drift after 10 s [cm]", lambda v: "-" if v != v else f"{100 * v:.2f}"),
+}
+
+
 def _fmt(v: float, metric: str) -> str:
-    return f"{100 * v:.0f}%" if metric == "survival_rate" else f"{v:.1f}"
+    return _COLUMNS[metric][1](v) if metric in _COLUMNS else f"{v:.3g}"
 
 
 def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: dict | None, command: str) -> str:
@@ -253,19 +239,20 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
         f"Final scores: each seed's selected policy on {args.episodes} held-out episodes (seeds {TEST_SEED}..{TEST_SEED + args.episodes - 1}, "
         "never used in training or selection)" + (f"; `{args.baseline}` (model-based controller) on the same episodes." if baseline else "."),
         "",
-        "| policy | rank | " + " | ".join(keys) + " |",
+        "| policy | rank | " + " | ".join(_COLUMNS[k][0] for k in keys) + " |",
         "|---|---:|" + "---:|" * len(keys),
     ]
     for s in seeds:
         row = final["per_seed"][str(s)]
         label = f"PPO seed {s}" + (" (shipped)" if s == args.shipped_seed else "")
-        lines.append(f"| {label} | {final['rank'][str(s)]} | " + " | ".join(_fmt(row[k], k) if k in METRICS else f"{row[k]:.3g}" for k in keys) + " |")
+        lines.append(f"| {label} | {final['rank'][str(s)]} | " + " | ".join(_fmt(row[k], k) for k in keys) + " |")
     for metric in METRICS:
         iqm, low, high = final["iqm"][metric]
         lines.append(f"| PPO, IQM of {len(seeds)} seeds [95% CI]: {metric} | | {_fmt(iqm, metric)} [{_fmt(low, metric)}, {_fmt(high, metric)}] |" + " |" * (len(keys) - 1))
     if baseline:
-        lines.append(f"| {args.baseline} (controller) | | " + " | ".join(_fmt(baseline[k], k) if k in METRICS else f"{baseline.get(k, float('nan')):.3g}" for k in keys) + " |")
-    lines += ["", f"Rank: by held-out survival, then return, among the {len(seeds)} seeds (1 = best). Every number is in `scores.json`.", ""]
+        lines.append(f"| {args.baseline} (controller) | | " + " | ".join(_fmt(baseline.get(k, float("nan")), k) for k in keys) + " |")
+    lines += ["", f"Rank: by held-out survival, then return, among the {len(seeds)} seeds (1 = best). The drift is over the episodes "
+              "that ran their 10 s (- if none did). Every number is in `scores.json`.", ""]
     return "\n".join(lines)
 
 
@@ -274,7 +261,7 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
     from train.evaluate import load_policy
 
     command = command or "python -m train.curves " + " ".join(sys.argv[1:])
-    header = _machine()
+    header = describe()
     args.out.mkdir(parents=True, exist_ok=True)
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     plan = {"env_id": args.env_id, "seeds": seeds, "shipped_seed": args.shipped_seed, "params": list(args.params), "command": command}

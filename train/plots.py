@@ -7,7 +7,7 @@ from pathlib import Path
 __all__ = ["plot_learning_curve", "plot_time_series", "plot_hops", "plot_push_curve"]
 
 
-def _pyplot():
+def pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
@@ -22,7 +22,7 @@ def plot_learning_curve(history: list[dict], path: Path, title: str = "", refere
     ``reference`` (optional) is a summary of the same metrics for a reference controller, drawn
     as dashed horizontal lines (``mean_return``, ``rms_base_drift``).
     """
-    plt = _pyplot()
+    plt = pyplot()
     steps = [h["timesteps"] for h in history]
     mean = [h["mean_return"] for h in history]
     std = [h["std_return"] for h in history]
@@ -68,7 +68,7 @@ def plot_time_series(series: dict[str, dict], path: Path, dt: float, torque_limi
     """
     import numpy as np
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(5, 1, figsize=(7.0, 9.5), dpi=100, sharex=True)
     for k, (label, s) in enumerate(series.items()):
         t = dt * np.arange(1, len(s["base_drift"]) + 1)
@@ -107,7 +107,7 @@ def plot_hops(series: dict[str, dict], path: Path, dt: float, seconds: float = 3
     contact mode, contact force and impact impulses (``train.evaluate``'s series with a ``hop`` entry)."""
     import numpy as np
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(4, 1, figsize=(7.0, 8.0), dpi=100, sharex=True, height_ratios=(3, 1, 2, 2))
     for k, (label, s) in enumerate(series.items()):
         if s.get("hop") is None:
@@ -141,7 +141,7 @@ def plot_hops(series: dict[str, dict], path: Path, dt: float, seconds: float = 3
 
 def plot_push_curve(curves: dict[str, list], best: dict[str, float], path: Path) -> Path:
     """Survival rate against push impulse for each controller, with the 90% level and each one's largest impulse there."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=100)
     for k, (label, rows) in enumerate(curves.items()):
         color = f"C{k}"

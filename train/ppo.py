@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import os
 import platform
-import shlex
 import shutil
 import signal
 import sys
@@ -62,36 +61,14 @@ from train.checkpoints import (
     write_text_atomic,
 )
 from train.cli import parse_args
-from train.runfolder import RunFolderError, prepare_run_folder, run_locked
+from train.hyperparameters import DEFAULT_HYPERPARAMS, display_path, load_hyperparams, parse_override
+from train.machine import cpu_name
+from train.runfolder import RunFolderError, prepare_run_folder, run_locked, runnable_command
 
 __all__ = ["TrainArgs", "train", "resolve_config", "load_hyperparams", "ENV_ID", "DEFAULT_HYPERPARAMS"]
 
-DEFAULT_HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
 EVAL_SEED = 20_000
 """Seed of the in-training evaluation episodes (training envs use small seeds, ``train.evaluate`` 10_000+)."""
-
-# keys of a Zoo entry that are not PPO constructor arguments
-_ZOO_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_kwargs")
-_PPO_KEYS = (
-    "learning_rate",
-    "n_steps",
-    "batch_size",
-    "n_epochs",
-    "gamma",
-    "gae_lambda",
-    "clip_range",
-    "clip_range_vf",
-    "normalize_advantage",
-    "ent_coef",
-    "vf_coef",
-    "max_grad_norm",
-    "use_sde",
-    "sde_sample_freq",
-    "target_kl",
-    "stats_window_size",
-    "policy_kwargs",
-)
-
 
 @dataclass
 class TrainArgs:
@@ -173,29 +150,6 @@ def _controllers() -> tuple:
     return tuple(BASELINES)
 
 
-def _parse_override(item: str) -> tuple[str, object]:
-    key, sep, value = item.partition(":")
-    if not sep or not key:
-        raise ValueError(f"hyperparameter override must be key:value, got {item!r}")
-    return key.strip(), yaml.safe_load(value)
-
-
-def load_hyperparams(path: Path, env_id: str, overrides: list[str] = ()) -> dict:
-    """The Zoo-format entry for ``env_id`` in ``path``, with ``key:value`` overrides applied."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"hyperparameter file not found: {path}")
-    data = yaml.safe_load(path.read_text()) or {}
-    if env_id not in data:
-        raise KeyError(f"{path} has no entry for {env_id!r} (entries: {sorted(data)})")
-    hp = dict(data[env_id])
-    hp.update(_parse_override(item) for item in overrides)
-    unknown = set(hp) - set(_ZOO_KEYS) - set(_PPO_KEYS)
-    if unknown:
-        raise ValueError(f"unknown hyperparameter(s) {sorted(unknown)} for {env_id} in {path}")
-    return hp
-
-
 def resolve_config(args: TrainArgs) -> dict:
     """Everything that defines the run, as plain data (saved as ``config.yaml``)."""
     hp = load_hyperparams(args.hyperparams, args.env_id, args.params)
@@ -213,11 +167,11 @@ def resolve_config(args: TrainArgs) -> dict:
     return {
         "env_id": args.env_id,
         "env_kwargs": hp.pop("env_kwargs", None) or {},
-        "eval_env_kwargs": dict(_parse_override(item) for item in args.eval_env_kwargs),
+        "eval_env_kwargs": dict(parse_override(item) for item in args.eval_env_kwargs),
         "seed": int(args.seed),
         "residual": None if args.residual is None else {"controller": args.residual.lower(), "scale": float(args.residual_scale)},
         "critic_warmup": int(args.critic_warmup) if args.residual is not None or (args.init_from is not None and args.init_from.lower() in ("lqr", "hopper")) else 0,
-        "init_from": None if args.init_from is None else (args.init_from if args.init_from.lower() in ("lqr", "hopper") else _display_path(Path(args.init_from))),
+        "init_from": None if args.init_from is None else (args.init_from if args.init_from.lower() in ("lqr", "hopper") else display_path(Path(args.init_from))),
         "n_envs": int(hp.pop("n_envs", 1)),
         "total_timesteps": int(total),
         "policy": hp.pop("policy", "MlpPolicy"),
@@ -225,18 +179,9 @@ def resolve_config(args: TrainArgs) -> dict:
         "ppo": hp,
         "eval": {"freq": int(args.eval_freq), "episodes": int(args.eval_episodes), "seed": EVAL_SEED},
         "checkpoint_freq": int(args.checkpoint_freq),
-        "hyperparams_file": _display_path(args.hyperparams),
+        "hyperparams_file": display_path(args.hyperparams),
         "overrides": list(args.params),
     }
-
-
-def _display_path(path: Path) -> str:
-    """``path`` relative to the working directory when it lies below it (no machine paths in configs)."""
-    path = Path(path).resolve()
-    try:
-        return str(path.relative_to(Path.cwd()))
-    except ValueError:
-        return str(path)
 
 
 def _schedule(value):
@@ -303,7 +248,7 @@ def _machine() -> dict:
 
     return {
         "cpu_count": os.cpu_count(),
-        "processor": platform.processor() or platform.machine(),
+        "processor": cpu_name(),
         "python": platform.python_version(),
         "torch": torch.__version__,
         "torch_threads": torch.get_num_threads(),
@@ -358,7 +303,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
         progress = {"resumes": 0, "wall_time": 0.0, "evaluations": []}
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config, sort_keys=False))  # a resume may change the totals
     with open(out / "command.txt", "a") as f:
-        f.write(shlex.join(getattr(sys, "orig_argv", sys.argv)) + "\n")
+        f.write(runnable_command() + "\n")
 
     n_envs, seed = config["n_envs"], config["seed"]
     set_random_seed(seed)

@@ -42,6 +42,7 @@ The run folder::
     config.yaml         the resolved configuration (the RLlib settings and what did not map)
     command.txt         the command line of every invocation
     progress.json       one entry per training iteration (steps, return, sampling throughput, time)
+    runners.json        the node (Ray's id and IP) of every env runner of the latest invocation
     checkpoints/<steps>/    RLlib checkpoints (``Algorithm.save_to_path``) with progress.json, the two newest
     train.lock          while a process trains into the folder (``train.runfolder.RunLock``)
 
@@ -59,7 +60,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import shlex
 import shutil
 import signal
 import sys
@@ -73,16 +73,17 @@ import yaml
 from leg_env import ENV_ID
 from train.checkpoints import write_json_atomic, write_text_atomic
 from train.cli import parse_args
-from train.ppo import DEFAULT_HYPERPARAMS, _display_path, _parse_override, load_hyperparams
-from train.runfolder import RunFolderError, run_locked
+from train.hyperparameters import DEFAULT_HYPERPARAMS, display_path, load_hyperparams, parse_override
+from train.runfolder import RunFolderError, run_locked, runnable_command
 
-__all__ = ["RLlibArgs", "train", "resolve_config", "rllib_config", "latest_checkpoint", "RLlibPolicy", "is_rllib_checkpoint", "is_rllib_run"]
+__all__ = ["RLlibArgs", "train", "resolve_config", "rllib_config", "latest_checkpoint", "RLlibPolicy", "is_rllib_checkpoint", "is_rllib_run", "runner_nodes"]
 
 TRAINER = "rllib-ppo"
 """``config.yaml``'s ``trainer`` entry: how ``train.evaluate`` tells an RLlib run from an SB3 one."""
 CHECKPOINT_MARKER = "rllib_checkpoint.json"
 """The file RLlib writes at the top of an algorithm checkpoint."""
 PROGRESS = "progress.json"
+RUNNERS = "runners.json"  # where the env runners of the latest invocation ran
 RESUME_KEYS = ("env_id", "env_kwargs", "seed", "learning_rate", "ppo", "model")
 """Entries of ``config.yaml`` a resume must match (the scaling knobs may change between invocations)."""
 
@@ -214,7 +215,7 @@ def resolve_config(args: RLlibArgs) -> dict:
         "trainer": TRAINER,
         "env_id": args.env,
         "env_kwargs": env_kwargs,
-        "eval_env_kwargs": dict(_parse_override(item) for item in args.eval_env_kwargs),
+        "eval_env_kwargs": dict(parse_override(item) for item in args.eval_env_kwargs),
         "seed": int(args.seed),
         "n_envs": n_envs,
         "total_timesteps": total,
@@ -230,7 +231,7 @@ def resolve_config(args: RLlibArgs) -> dict:
             "env_threads": args.env_threads,
         },
         "checkpoint_freq": int(args.checkpoint_freq),
-        "hyperparams_file": _display_path(args.hyperparams),
+        "hyperparams_file": display_path(args.hyperparams),
         "overrides": list(args.params),
     }
 
@@ -411,7 +412,8 @@ def _train_locked(args: RLlibArgs, config: dict, out: Path) -> Path:
             print(f"resuming {out} from {progress['timesteps']:,} steps")
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config, sort_keys=False))
     with open(out / "command.txt", "a") as f:
-        f.write(shlex.join(getattr(sys, "orig_argv", sys.argv)) + "\n")
+        f.write(runnable_command() + "\n")
+    write_json_atomic(out / RUNNERS, {"runners": runner_nodes(algo)})
     history_file = out / PROGRESS
     history = json.loads(history_file.read_text())["iterations"] if history_file.is_file() else []
     history = [h for h in history if h["timesteps"] <= progress["timesteps"]]
@@ -458,6 +460,19 @@ def _train_locked(args: RLlibArgs, config: dict, out: Path) -> Path:
     finally:
         algo.stop()
     return out
+
+
+def runner_nodes(algo) -> list[dict]:
+    """Where each remote env runner of ``algo`` runs: ``{"worker_index", "node_id", "node_ip"}`` (Ray's ids),
+    by worker index; empty when the driver samples (``--num-env-runners 0``)."""
+
+    def where(runner) -> dict:
+        import ray
+
+        return {"worker_index": int(runner.worker_index), "node_id": ray.get_runtime_context().get_node_id(), "node_ip": ray.util.get_node_ip_address()}
+
+    found = algo.env_runner_group.foreach_env_runner(where, local_env_runner=False)
+    return sorted(found, key=lambda r: r["worker_index"])
 
 
 def _finite(value):

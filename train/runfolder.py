@@ -22,6 +22,7 @@ It also tidies what a killed process leaves: the temporary files of atomic write
 from __future__ import annotations
 
 import os
+import shlex
 import shutil
 import sys
 from collections.abc import Callable
@@ -32,7 +33,7 @@ import yaml
 
 from train.checkpoints import checkpoint_dirs, file_mode, recover_snapshot
 
-__all__ = ["RunFolderError", "RunLockedError", "RunLock", "prepare_run_folder", "LOCK_NAME", "RESUME_KEYS"]
+__all__ = ["RunFolderError", "RunLockedError", "RunLock", "prepare_run_folder", "LOCK_NAME", "RESUME_KEYS", "runnable_command"]
 
 LOCK_NAME = "train.lock"
 # configuration entries that define the training; a resume must match them
@@ -201,3 +202,10 @@ def prepare_run_folder(out: Path, config: dict, resume: bool = True, overwrite: 
         return False
     why = "has a checkpoint but --no-resume was given" if has_checkpoint else "already holds a run"
     raise ExistingRunError(f"{out} {why}; use another --out, or --overwrite to replace it")
+
+
+def runnable_command() -> str:
+    """This process's command line as anyone can run it (``command.txt`` of a run folder): ``python -m
+    train.ppo ...``, the interpreter's path, a machine's own, written as ``python``."""
+    argv = list(getattr(sys, "orig_argv", None) or [sys.executable, *sys.argv])
+    return shlex.join(["python", *argv[1:]])

@@ -32,6 +32,7 @@ typedef struct {
     double x_com0;      /* the whole-body COM's x at the start [m] */
     double flight_run;  /* the current flight's time so far (0 on the ground) [s] */
     double ground_time; /* time since the last flight of at least min_flight ended, or since the start [s] */
+    double banked;      /* the height term of the current flight, paid at its landing (pay_on_landing) */
 } hop_state;
 
 /* One robot's state. */
@@ -87,6 +88,7 @@ typedef struct {
             double max_ground_time;   /* the alive bonus stops after this long without a hop [s] (inf: never) */
             uint8_t flight_height;    /* the height term is paid in flight only (else at every step) */
             uint8_t observe_progress; /* the COM's x from its start and the ground time are observation entries */
+            uint8_t pay_on_landing;   /* a flight's height term is paid at its landing, if the robot stays up */
         } hop;
     } task;
 } env_settings;

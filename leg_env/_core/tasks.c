@@ -232,6 +232,7 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     const double px = o->kick[0], py = o->kick[1];
     const env_settings *c = b->settings;
     /* hops: a flight of at least min_flight; the ground time runs from the end of the last one */
+    const int landed = s->mode != LEG_FLIGHT && t->flight_run > 0.0; /* a flight ended in this step */
     t->flight_run = s->mode == LEG_FLIGHT ? t->flight_run + o->flight_time : 0.0;
     t->ground_time = t->flight_run >= c->task.hop.min_flight ? 0.0 : t->ground_time + c->dt;
     terms[0] = stance_terms[0]; /* alive: the balance task's health predicate */
@@ -244,6 +245,14 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     }
     if (c->task.hop.flight_height) /* in flight E_v is m g times the arc's apex height: paid for the step's flight */
         terms[1] = s->mode == LEG_FLIGHT ? terms[1] * (o->flight_time / c->dt) : 0.0;
+    if (c->task.hop.pay_on_landing) { /* banked over the flight, paid when it lands (and not if the landing falls) */
+        t->banked += terms[1];
+        terms[1] = 0.0;
+        if (landed) {
+            terms[1] = t->banked;
+            t->banked = 0.0;
+        }
+    }
     if (c->task.hop.observe_progress) {
         b->obs[i * b->obs_cols + OBS_COM_DRIFT] = (float)dx;
         b->obs[i * b->obs_cols + OBS_GROUND_TIME] = (float)t->ground_time;
@@ -268,6 +277,7 @@ static void hop_start(const env_batch *b, Py_ssize_t i)
     b->obs[i * b->obs_cols + OBS_COMMAND] = (float)s->task.hop.command;
     s->task.hop.flight_run = 0.0;
     s->task.hop.ground_time = 0.0;
+    s->task.hop.banked = 0.0;
     if (b->settings->task.hop.observe_progress) {
         b->obs[i * b->obs_cols + OBS_COM_DRIFT] = 0.0f;
         b->obs[i * b->obs_cols + OBS_GROUND_TIME] = 0.0f;

@@ -30,7 +30,9 @@ ended, or since the start.
   v1 pays it in flight only: ``f`` is the share of the step spent in flight when the step ends in flight,
   else 0 (``flight_height=True``), and its kernel is the sum of that one and a fine one of scale
   ``height_scale_fine`` = 1 cm (a coarse kernel to find the apex, a fine one to hit it: up to twice the weight). v0 pays it at every
-  step (``f = 1``), in stance too, where ``E_v`` is not an apex: see the version history.
+  step (``f = 1``), in stance too, where ``E_v`` is not an apex: see the version history. v1 banks a flight's
+  terms and pays them at the step where it lands, and not at all if the robot falls there
+  (``pay_on_landing=True``): a hop counts once it is landed.
 - ``reward_drift = -drift_com_weight (x_com - x_com,0)^2`` (10 per m^2): the COM stays over its start.
 - ``reward_tilt = -tilt_weight th_b^2`` (1 per rad^2).
 - ``reward_impact = -impact_weight (|P| / m)^2`` (0.5 per (m/s)^2): ``P`` the step's impact impulses on
@@ -73,8 +75,10 @@ apex error under 2 cm, a drift under 10 cm and 95% survival.)
   ground-time rule makes hopping the only way to keep the alive bonus. With it and the 5 cm kernel alone, PPO
   learnt to hop (100% survival) but low and fast; with a 2 cm kernel alone, or the two kernels averaged, it kept
   the alive bonus with the smallest hops that count and left the height term. The sum of the two kernels keeps
-  the coarse one's pull and adds one for precision. Everything else (dynamics, the other terms, starts, ends)
-  is v0's.
+  the coarse one's pull and adds one for precision. Over 5 training seeds (30M steps each) two learnt to hop
+  (one meeting every bar of Solved: 100% survival, 33 hops, 1.20 cm, 1.06 cm) and two found a single precise
+  jump and a fall, collecting the height term of one flight: paying a flight at its landing takes that away.
+  Everything else (dynamics, the other terms, starts, ends) is v0's.
 * v0: Initial release. Still registered, with its behaviour unchanged; Gymnasium warns that it is out of date.
 """
 
@@ -117,6 +121,7 @@ class HopConfig(StanceConfig):
     min_flight: float = 0.05  # [s] a flight at least this long is a hop
     max_ground_time: float = float("inf")  # [s] the alive bonus stops after this long without a hop (v1: 1 s)
     observe_progress: bool = False  # the COM's x from its start and the ground time as observation entries 19, 20 (v1)
+    pay_on_landing: bool = False  # a flight's height term paid at its landing, none if the landing falls (v1)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -129,7 +134,7 @@ class HopConfig(StanceConfig):
         for name in ("height_weight", "drift_com_weight", "tilt_weight", "impact_weight", "slip_weight"):
             object.__setattr__(self, name, checks.real(f"HopConfig.{name}", getattr(self, name), 0.0, _BIG))
         object.__setattr__(self, "height_scale", checks.real("HopConfig.height_scale", self.height_scale, 0.0, _BIG, lo_open=True, unit="m"))
-        for name in ("flight_height", "observe_progress"):
+        for name in ("flight_height", "observe_progress", "pay_on_landing"):
             object.__setattr__(self, name, checks.boolean(f"HopConfig.{name}", getattr(self, name)))
         object.__setattr__(self, "min_flight", checks.real("HopConfig.min_flight", self.min_flight, 0.0, _BIG, unit="s"))
         object.__setattr__(self, "height_scale_fine", checks.real("HopConfig.height_scale_fine", self.height_scale_fine, 0.0, _BIG, unit="m"))
@@ -141,7 +146,7 @@ class HopConfig(StanceConfig):
         row["w_tilt"], row["w_impact"], row["w_slip"] = self.tilt_weight, self.impact_weight, self.slip_weight
         row["flight_height"], row["observe_progress"] = self.flight_height, self.observe_progress
         row["min_flight"], row["max_ground_time"] = self.min_flight, self.max_ground_time
-        row["height_scale_fine"] = self.height_scale_fine
+        row["height_scale_fine"], row["pay_on_landing"] = self.height_scale_fine, self.pay_on_landing
 
 
 def observation_space(params, config: HopConfig):

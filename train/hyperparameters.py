@@ -1,0 +1,68 @@
+"""Hyperparameters of the trainers: RL Baselines3 Zoo's file format (``train/hyperparams/ppo.yml``, one entry
+per env id, literals only), ``key:value`` overrides from the command line, and paths as a run's config
+records them. Shared by ``train.ppo`` and ``train.rllib``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+__all__ = ["DEFAULT_HYPERPARAMS", "ZOO_KEYS", "PPO_KEYS", "parse_override", "load_hyperparams", "display_path"]
+
+DEFAULT_HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
+
+# keys of a Zoo entry that are not PPO constructor arguments
+ZOO_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_kwargs")
+PPO_KEYS = (
+    "learning_rate",
+    "n_steps",
+    "batch_size",
+    "n_epochs",
+    "gamma",
+    "gae_lambda",
+    "clip_range",
+    "clip_range_vf",
+    "normalize_advantage",
+    "ent_coef",
+    "vf_coef",
+    "max_grad_norm",
+    "use_sde",
+    "sde_sample_freq",
+    "target_kl",
+    "stats_window_size",
+    "policy_kwargs",
+)
+
+
+def parse_override(item: str) -> tuple[str, object]:
+    """``"key:value"`` as ``(key, value)``, the value read as a YAML literal (``learning_rate:1.0e-3``)."""
+    key, sep, value = item.partition(":")
+    if not sep or not key:
+        raise ValueError(f"hyperparameter override must be key:value, got {item!r}")
+    return key.strip(), yaml.safe_load(value)
+
+
+def load_hyperparams(path: Path, env_id: str, overrides: list[str] = ()) -> dict:
+    """The Zoo-format entry for ``env_id`` in ``path``, with ``key:value`` overrides applied."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"hyperparameter file not found: {path}")
+    data = yaml.safe_load(path.read_text()) or {}
+    if env_id not in data:
+        raise KeyError(f"{path} has no entry for {env_id!r} (entries: {sorted(data)})")
+    hp = dict(data[env_id])
+    hp.update(parse_override(item) for item in overrides)
+    unknown = set(hp) - set(ZOO_KEYS) - set(PPO_KEYS)
+    if unknown:
+        raise ValueError(f"unknown hyperparameter(s) {sorted(unknown)} for {env_id} in {path}")
+    return hp
+
+
+def display_path(path: Path) -> str:
+    """``path`` relative to the working directory when it lies below it (no machine paths in configs)."""
+    path = Path(path).resolve()
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)

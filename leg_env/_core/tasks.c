@@ -238,13 +238,16 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     terms[0] = stance_terms[0]; /* alive: the balance task's health predicate */
     if (t->ground_time > c->task.hop.max_ground_time) /* and hopping */
         terms[0] = 0.0;
-    terms[1] = w_height * exp(-err * err);
-    if (c->task.hop.height_scale_fine > 0.0) { /* a coarse kernel to find the apex, a fine one to hit it */
-        const double fine = (e_v - e_star) / (weight * c->task.hop.height_scale_fine);
-        terms[1] = w_height * (exp(-err * err) + exp(-fine * fine));
+    terms[1] = 0.0;
+    if (!c->task.hop.flight_height || s->mode == LEG_FLIGHT) { /* (the kernels are not evaluated when unpaid) */
+        terms[1] = w_height * exp(-err * err);
+        if (c->task.hop.height_scale_fine > 0.0) { /* a coarse kernel to find the apex, a fine one to hit it */
+            const double fine = (e_v - e_star) / (weight * c->task.hop.height_scale_fine);
+            terms[1] = w_height * (exp(-err * err) + exp(-fine * fine));
+        }
+        if (c->task.hop.flight_height) /* in flight E_v is m g times the arc's apex height: paid for the step's flight */
+            terms[1] = terms[1] * (o->flight_time / c->dt);
     }
-    if (c->task.hop.flight_height) /* in flight E_v is m g times the arc's apex height: paid for the step's flight */
-        terms[1] = s->mode == LEG_FLIGHT ? terms[1] * (o->flight_time / c->dt) : 0.0;
     if (c->task.hop.pay_on_landing) { /* banked over the flight, paid when it lands (and not if the landing falls) */
         t->banked += terms[1];
         terms[1] = 0.0;

@@ -1,8 +1,9 @@
-"""The cluster commands of the training page (docs/training.md), run on this machine: a head node and a worker
-node started with ``ray start`` on the loopback address, the worker and the driver with ``RAY_AUTH_MODE=token``
-(Ray 2.60 turns token authentication on for ``ray start --head``, which writes ``~/.ray/auth_token``), then
-``python -m train.rllib --address`` with one env runner per node. Each node has one CPU and each runner needs
-one, so the runners can only run on both nodes; ``runners.json`` says where they ran.
+"""The cluster commands of the training page (docs/training.md), run on this machine: a token made with
+``ray get-auth-token --generate`` (``~/.ray/auth_token``), a head node and a worker node started with
+``ray start`` on the loopback address, each with ``RAY_AUTH_MODE=token``, then ``python -m train.rllib
+--address`` with one env runner per node, also with the token. Each node has one CPU and each runner needs one,
+so the runners can only run on both nodes; ``runners.json`` says where they ran. A node without the token
+mode is refused.
 
 ``HOME`` is a temporary folder, so the token is written there and nothing of the user's is touched; the
 nodes are stopped at the end (``ray stop``), whatever happens.
@@ -49,13 +50,14 @@ def cluster(tmp_path):
     env.pop("RAY_ADDRESS", None)
     port = free_port()
     address = f"127.0.0.1:{port}"
+    token = dict(env, RAY_AUTH_MODE="token")
     try:
+        run([RAY, "get-auth-token", "--generate"], env)
+        assert (home / ".ray" / "auth_token").is_file(), "ray get-auth-token --generate wrote no token"
         run([RAY, "start", "--head", f"--port={port}", "--node-ip-address=127.0.0.1", "--num-cpus=1", "--include-dashboard=false",
-             "--disable-usage-stats"], env)
-        assert (home / ".ray" / "auth_token").is_file(), "ray start --head wrote no token"
-        joined = dict(env, RAY_AUTH_MODE="token")
-        run([RAY, "start", f"--address={address}", "--node-ip-address=127.0.0.1", "--num-cpus=1", "--disable-usage-stats"], joined)
-        yield address, joined
+             "--disable-usage-stats"], token)
+        run([RAY, "start", f"--address={address}", "--node-ip-address=127.0.0.1", "--num-cpus=1", "--disable-usage-stats"], token)
+        yield address, token
     finally:
         subprocess.run([RAY, "stop", "--force"], env=env, capture_output=True, timeout=120)
 

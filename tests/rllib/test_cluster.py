@@ -2,8 +2,7 @@
 ``ray get-auth-token --generate`` (``~/.ray/auth_token``), a head node and a worker node started with
 ``ray start`` on the loopback address, each with ``RAY_AUTH_MODE=token``, then ``python -m train.rllib
 --address`` with one env runner per node, also with the token. Each node has one CPU and each runner needs one,
-so the runners can only run on both nodes; ``runners.json`` says where they ran. A node without the token
-mode is refused.
+so the runners can only run on both nodes; ``runners.json`` says where they ran.
 
 ``HOME`` is a temporary folder, so the token is written there and nothing of the user's is touched; the
 nodes are stopped at the end (``ray stop``), whatever happens.

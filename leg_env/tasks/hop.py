@@ -59,10 +59,11 @@ over all hops) at most 1.5 cm; mean horizontal COM drift after 10 s at most 5 cm
 apex error under 2 cm, a drift under 10 cm and 95% survival.)
 
 ## Version History
-* v1: the height term is paid in flight only (``flight_height=True``), with a fine kernel beside the coarse
-  one (``height_scale_fine=0.01``); the alive bonus stops after a second
-  on the ground without a hop (``max_ground_time=1.0``); the COM's distance from its start and the ground time
-  are observation entries 19 and 20 (``observe_progress=True``). Why: plain PPO from scratch on v0 (512 envs,
+* v1: the height term is paid for flight only (``flight_height=True``), at the flight's landing and not if it
+  falls (``pay_on_landing=True``), with a fine kernel beside the coarse one (``height_scale_fine=0.01``); the
+  alive bonus stops after a second on the ground without a hop (``max_ground_time=1.0``); the COM's distance
+  from its start and the ground time are observation entries 19 and 20 (``observe_progress=True``). Each
+  change answers what plain PPO from scratch found, a probe at a time. On v0 (512 envs,
   12M steps) found that the vertical-energy term pays in stance as well: standing tall and bobbing keeps
   ``E_v`` near ``E*`` without hopping. Against the model-based hopper on 100 episodes it scored a higher
   return (1884 vs 1516) from a larger height-term return (1070 vs 593) while hopping less than half as

@@ -79,7 +79,10 @@ def _gifs() -> dict[str, Path]:
             continue
         for line in config.read_text().splitlines():
             if line.startswith("env_id:"):
-                found.setdefault(line.split(":", 1)[1].strip().strip("'\""), gif)
+                from leg_env.tasks import ALIASES
+
+                env_id = line.split(":", 1)[1].strip().strip("'\"")
+                found.setdefault(ALIASES.get(env_id, env_id), gif)  # a deprecated id's policy is its task's
     return found
 
 
@@ -158,8 +161,16 @@ def _task_page(env_id: str, task: str, kwargs: dict, gif: Path | None) -> str:
         target = GENERATED / "tasks" / f"{name}.gif"
         shutil.copyfile(gif, target)
         run = gif.parent.parent.name
-        lines += ["## A trained policy", "", f"An episode of the shipped policy `policies/{run}`:", "",
+        lines += ["## A trained policy", "", f"An episode of the shipped policy `policies/{run}` (its card says what it is):", "",
                   f"![An episode of {name}]({target.name})", ""]
+        plots = {"hops.png": "a few hops, next to the baseline: COM height, contact mode, contact force, impulses",
+                 "push_curve.png": "survival against the push impulse, next to the baselines",
+                 "timeseries.png": "the first evaluation episode: base drift, torques and contact force, next to the baseline"}
+        for plot, caption in plots.items():
+            if (gif.parent / plot).is_file():
+                copy = GENERATED / "tasks" / f"{name}-{plot}"
+                shutil.copyfile(gif.parent / plot, copy)
+                lines += [f"![{caption}]({copy.name})", "", f"*{caption[0].upper() + caption[1:]}.*", ""]
     lines += ["## The task", "", f"From the docstring of `leg_env.tasks.{task}`:", "", _docstring_block(module.__doc__), ""]
     if task == "stance":
         from leg_env.envs.stance import PlanarLegStanceEnv

@@ -1,10 +1,10 @@
 """The balance task (``leg_env/PlanarLegStance-v0``, ``leg_env/PlanarLegBalance-v0``): configuration,
 observation, reward, termination.
 
-A control step is two calls of the compiled core on the structured arrays of ``leg_env.layout``: the shared
-physics (``leg_env.step.physics_range``) and this task's kernel ``assess`` (``leg_env/_core/tasks.c``:
-observation, every reward term, every termination flag). The single environment calls them with a batch of
-one and the vector environment with a batch of N, so the two cannot disagree. ``StanceConfig`` holds every
+A control step runs, in one call of the compiled core on the structured arrays of ``leg_env.layout``, the
+shared physics (``leg_env.step.physics_range``) and then this task's kernel ``assess``
+(``leg_env/_core/tasks.c``: observation, every reward term, every termination flag). The single environment
+runs them with a batch of one and the vector environment with a batch of N, so the two cannot disagree. ``StanceConfig`` holds every
 setting; tasks built on this one (``leg_env.tasks.push``, ``hop``) extend it, and their kernels call this
 one's.
 
@@ -40,7 +40,7 @@ from .. import checks, layout
 from ..dynamics import com_position, static_equilibrium
 from ..integrate import MAX_ANGLE, MAX_SUBSTEPS, SUBSTEPS, DT
 from ..params import LegParams
-from ..step import FLAG_NAMES, BitGeneratorRows, physics_range
+from ..step import FLAG_NAMES, BitGeneratorRows
 
 __all__ = [
     "StanceConfig",
@@ -291,8 +291,7 @@ def step_batch(state, robots, settings, out, obs):
     """
     _check_obs(state, settings, obs)  # before the physics changes anything
     n = state.shape[0] if isinstance(state, np.ndarray) and state.ndim >= 1 else 0  # the core refuses what is not a state
-    physics_range(0, n, state, robots, settings, out)
-    TASK.assess(state, robots, settings, out, obs)
+    TASK.step(state, robots, settings, out, obs, 0, n)  # the physics, then the task's kernel, in one call
 
 
 def step_range(lo, hi, state, robots, settings, out, obs):
@@ -301,8 +300,7 @@ def step_range(lo, hi, state, robots, settings, out, obs):
     Robots are independent: the rows of a batch stepped in any split are bitwise those of ``step_batch``.
     """
     _check_obs(state, settings, obs)  # before the physics changes anything
-    physics_range(lo, hi, state, robots, settings, out)
-    TASK.assess(state[lo:hi], robots if robots.shape[0] == 1 else robots[lo:hi], settings, out[lo:hi], obs[lo:hi])
+    TASK.step(state, robots, settings, out, obs, lo, hi)
 
 
 def _check_obs(state, settings, obs) -> None:

@@ -25,7 +25,8 @@ def test_iqm_is_the_mean_of_the_middle_half_and_its_interval_contains_it():
 
 @pytest.mark.parametrize(
     "kwargs, field",
-    [({"seeds": 0}, "seeds"), ({"seeds": 3, "shipped_seed": 3}, "shipped_seed"), ({"eval_freq": 0}, "eval_freq"), ({"episodes": 0}, "episodes")],
+    [({"seeds": 0}, "seeds"), ({"seeds": 3, "shipped_seed": 3}, "shipped_seed"), ({"eval_freq": 0}, "eval_freq"), ({"episodes": 0}, "episodes"),
+     ({"jobs": 0}, "jobs")],
 )
 def test_bad_arguments_name_the_field(kwargs, field):
     with pytest.raises(ValueError, match=field):
@@ -66,3 +67,17 @@ def test_a_sweep_of_five_seeds_on_a_tiny_budget(tmp_path):
     assert len(stamps) == 5
     main(argv)
     assert {p: p.stat().st_mtime_ns for p in runs.glob("seed_*/model.zip")} == stamps
+
+
+def test_seeds_trained_in_parallel_processes_learn_what_one_process_learns(tmp_path):
+    base = ["--env-id", "leg_env/PlanarLegBalance-v0", "--total-timesteps", "512", "--eval-freq", "256", "--eval-episodes", "2",
+            "--episodes", "2", "--params", *TINY]
+    main(base + ["--seeds", "2", "--jobs", "2", "--runs", str(tmp_path / "parallel"), "--out", str(tmp_path / "page_parallel")])
+    main(base + ["--seeds", "1", "--first-seed", "1", "--runs", str(tmp_path / "serial"), "--out", str(tmp_path / "page_serial")])
+
+    def evaluations(folder):
+        return [(e["timesteps"], e["mean_return"], e["survival_rate"]) for e in json.loads((folder / "evaluations.json").read_text())["evaluations"]]
+
+    assert len(evaluations(tmp_path / "parallel" / "seed_1")) == 2
+    assert evaluations(tmp_path / "parallel" / "seed_1") == evaluations(tmp_path / "serial" / "seed_1")
+    assert evaluations(tmp_path / "parallel" / "seed_0") != evaluations(tmp_path / "parallel" / "seed_1")

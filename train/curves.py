@@ -2,7 +2,7 @@
 summarised as RL results should be (Agarwal et al. 2021, the ``rliable`` package).
 
     python -m train.curves --env-id leg_env/PlanarLegHop-v1 --seeds 5
-    python -m train.curves --env-id leg_env/PlanarLegBalance-v0 --seeds 5 --baseline lqr
+    python -m train.curves --env-id leg_env/PlanarLegBalance-v0 --seeds 5 --baseline gated --jobs 2
 
 Seed ``s`` trains ``python -m train.ppo --seed s`` (the task's entry in ``train/hyperparams/ppo.yml``, the
 same for every seed) into ``<runs>/seed_<s>``, evaluated during training on the same fixed episodes
@@ -79,6 +79,9 @@ class CurvesArgs:
     """Folder of the results page (None: benchmarks/results/learning/<task name>)."""
     torch_threads: int = 1
     """Threads of torch in each seed's training (train.ppo's --torch-threads)."""
+    jobs: int = 1
+    """Seeds trained at once, each in a process of its own with torch_threads threads (the wall-clock
+    curves then show each seed's own time, on its share of the cores)."""
     progress_bar: bool = False
     """Show SB3's progress bar while a seed trains."""
 
@@ -91,6 +94,8 @@ class CurvesArgs:
             self.shipped_seed = self.first_seed
         if not self.first_seed <= self.shipped_seed < self.first_seed + self.seeds:
             raise ValueError(f"shipped_seed must be one of the trained seeds {self.first_seed}..{self.first_seed + self.seeds - 1}, got {self.shipped_seed}")
+        if self.jobs < 1:
+            raise ValueError(f"jobs must be >= 1, got {self.jobs}")
         if self.episodes < 1 or self.eval_episodes < 1:
             raise ValueError(f"episodes and eval_episodes must be >= 1, got {self.episodes} and {self.eval_episodes}")
         if self.eval_freq < 1:
@@ -267,6 +272,13 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
     plan = {"env_id": args.env_id, "seeds": seeds, "shipped_seed": args.shipped_seed, "params": list(args.params), "command": command}
     (args.out / "plan.json").write_text(json.dumps(plan, indent=2) + "\n")  # the shipped seed, on record before training
     histories, final = {}, {"per_seed": {}}
+    if args.jobs > 1 and len(seeds) > 1:  # train in parallel processes; the loop below then finds every seed finished
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(min(args.jobs, len(seeds)), mp_context=multiprocessing.get_context("spawn")) as pool:
+            for _ in pool.map(_train_seed, [args] * len(seeds), seeds):
+                pass
     for seed in seeds:
         folder = _train_seed(args, seed)
         log = json.loads((folder / "evaluations.json").read_text())

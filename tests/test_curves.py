@@ -81,3 +81,7 @@ def test_seeds_trained_in_parallel_processes_learn_what_one_process_learns(tmp_p
     assert len(evaluations(tmp_path / "parallel" / "seed_1")) == 2
     assert evaluations(tmp_path / "parallel" / "seed_1") == evaluations(tmp_path / "serial" / "seed_1")
     assert evaluations(tmp_path / "parallel" / "seed_0") != evaluations(tmp_path / "parallel" / "seed_1")
+    # each seed's folder says how to train it alone, whichever process trained it
+    for folder in ("parallel", "serial"):
+        line = (tmp_path / folder / "seed_1" / "command.txt").read_text().splitlines()[0]
+        assert line.startswith("python -m train.ppo --env-id leg_env/PlanarLegBalance-v0 --seed 1 --out ") and "--params n_envs:8" in line

@@ -139,9 +139,23 @@ def _train_seed(args: CurvesArgs, seed: int) -> Path:
             progress_bar=args.progress_bar,
             verbose=1,
             torch_threads=args.torch_threads,
-        )
+        ),
+        command=seed_command(args, seed),
     )
     return folder
+
+
+def seed_command(args: CurvesArgs, seed: int) -> str:
+    """The ``python -m train.ppo`` command that trains seed ``seed`` of the sweep alone (its ``command.txt``)."""
+    import shlex
+
+    argv = ["python", "-m", "train.ppo", "--env-id", args.env_id, "--seed", str(seed), "--out", str(args.runs / f"seed_{seed}"),
+            "--eval-freq", str(args.eval_freq), "--eval-episodes", str(args.eval_episodes), "--torch-threads", str(args.torch_threads)]
+    if args.total_timesteps is not None:
+        argv += ["--total-timesteps", str(args.total_timesteps)]
+    if args.params:
+        argv += ["--params", *args.params]
+    return shlex.join(argv)
 
 
 def _held_out(policy, args: CurvesArgs, env_kwargs: dict) -> dict:

@@ -260,8 +260,10 @@ def _notice(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
-def train(args: TrainArgs) -> Path:
+def train(args: TrainArgs, command: str | None = None) -> Path:
     """Train (or resume) a run as described by ``args``; returns the run folder.
+
+    ``command``: the line added to the folder's ``command.txt`` (None: this process's command line).
 
     Raises:
         RunLockedError: another process is training into ``args.out`` (a ``RunFolderError``).
@@ -275,12 +277,12 @@ def train(args: TrainArgs) -> Path:
     try:
         out = Path(args.out)
         config = resolve_config(args)
-        return run_locked(out, lambda: _train_locked(args, config, out))
+        return run_locked(out, lambda: _train_locked(args, config, out, command or runnable_command()))
     finally:
         torch.set_num_threads(threads)  # the caller's, as it was
 
 
-def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
+def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Path:
     from stable_baselines3 import PPO
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
@@ -303,7 +305,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path) -> Path:
         progress = {"resumes": 0, "wall_time": 0.0, "evaluations": []}
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config, sort_keys=False))  # a resume may change the totals
     with open(out / "command.txt", "a") as f:
-        f.write(runnable_command() + "\n")
+        f.write(command + "\n")
 
     n_envs, seed = config["n_envs"], config["seed"]
     set_random_seed(seed)

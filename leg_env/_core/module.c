@@ -955,6 +955,10 @@ PyMODINIT_FUNC PyInit_kernels(void)
 {
     if (PyType_Ready(&BatchType) < 0)
         return NULL;
+    name_capsule = PyUnicode_InternFromString("capsule");
+    name_bit_generator = PyUnicode_InternFromString("bit_generator");
+    if (name_capsule == NULL || name_bit_generator == NULL)
+        return NULL;
     PyObject *m = PyModule_Create(&module);
     if (m == NULL)
         return NULL;

@@ -358,21 +358,23 @@ static PyObject *py_robot_params(PyObject *self, PyObject *const *args, Py_ssize
 /* The bit generator of one entry of `generators`: a numpy Generator or BitGenerator. A new reference to the
  * BitGenerator is left in *owner, held for as long as it is drawn from. A bare capsule is refused: it does not
  * keep its BitGenerator alive (numpy's capsule holds a pointer into it). NULL with a ValueError. */
+static PyObject *name_capsule, *name_bit_generator; /* interned at import: looked up for every drawn row */
+
 static bitgen_t *bitgen_of(PyObject *entry, long long index, PyObject **owner)
 {
     PyObject *capsule = NULL, *bit_generator = NULL;
     *owner = NULL;
     if (entry != Py_None && !PyCapsule_CheckExact(entry)) { /* a bare capsule does not keep its generator alive */
-        capsule = PyObject_GetAttrString(entry, "capsule"); /* a BitGenerator */
+        capsule = PyObject_GetAttr(entry, name_capsule); /* a BitGenerator */
         if (capsule != NULL) {
             Py_INCREF(entry);
             bit_generator = entry;
         } else {
             PyErr_Clear();
-            bit_generator = PyObject_GetAttrString(entry, "bit_generator"); /* a Generator */
+            bit_generator = PyObject_GetAttr(entry, name_bit_generator); /* a Generator */
             if (bit_generator == NULL)
                 PyErr_Clear();
-            else if ((capsule = PyObject_GetAttrString(bit_generator, "capsule")) == NULL)
+            else if ((capsule = PyObject_GetAttr(bit_generator, name_capsule)) == NULL)
                 PyErr_Clear();
         }
         *owner = bit_generator;
@@ -554,6 +556,8 @@ fail:
  * kind 'd' a double into doubles[row], 'i' an int32 (or 'm', the contact mode) into ints[row] (int64), '?' a
  * byte into flags[row] (bool), 'v' two doubles into vectors[row] (an (N, 2) block). leg_env.info makes the
  * blocks and the keys' views of them. */
+#define INFO_BLOCK_ROWS 128 /* rows of out and state read per block: 128 x 680 bytes stay in L1/L2 */
+
 static PyObject *py_info_columns(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     held h;
@@ -613,38 +617,43 @@ static PyObject *py_info_columns(PyObject *self, PyObject *const *args, Py_ssize
         spec[4 * k + 2] = kind[0];
         spec[4 * k + 3] = row;
     }
-    for (Py_ssize_t k = 0; k < m; k++) { /* a key at a time: one strided read, one contiguous write */
-        const size_t stride = spec[4 * k] == 0 ? sizeof(env_out) : sizeof(env_state);
-        const char *at = (spec[4 * k] == 0 ? out : state) + spec[4 * k + 1];
-        const long row = spec[4 * k + 3];
-        switch ((char)spec[4 * k + 2]) {
-        case 'd': {
-            double *dst = doubles + row * n;
-            for (Py_ssize_t i = 0; i < n; i++)
-                memcpy(dst + i, at + i * stride, 8);
-            break;
-        }
-        case 'i':
-        case 'm': {
-            int64_t *dst = ints + row * n;
-            for (Py_ssize_t i = 0; i < n; i++) {
-                int32_t i32;
-                memcpy(&i32, at + i * stride, 4);
-                dst[i] = i32;
+    /* a block of rows at a time (their out and state rows stay in cache), in it a key at a time: one strided
+     * read, one contiguous write */
+    for (Py_ssize_t i0 = 0; i0 < n; i0 += INFO_BLOCK_ROWS) {
+        const Py_ssize_t i1 = i0 + INFO_BLOCK_ROWS < n ? i0 + INFO_BLOCK_ROWS : n;
+        for (Py_ssize_t k = 0; k < m; k++) {
+            const size_t stride = spec[4 * k] == 0 ? sizeof(env_out) : sizeof(env_state);
+            const char *at = (spec[4 * k] == 0 ? out : state) + spec[4 * k + 1];
+            const long row = spec[4 * k + 3];
+            switch ((char)spec[4 * k + 2]) {
+            case 'd': {
+                double *dst = doubles + row * n;
+                for (Py_ssize_t i = i0; i < i1; i++)
+                    memcpy(dst + i, at + i * stride, 8);
+                break;
             }
-            break;
-        }
-        case '?': {
-            unsigned char *dst = flags + row * n;
-            for (Py_ssize_t i = 0; i < n; i++)
-                dst[i] = at[i * stride] != 0;
-            break;
-        }
-        default: {
-            double *dst = vectors + row * n * 2;
-            for (Py_ssize_t i = 0; i < n; i++)
-                memcpy(dst + 2 * i, at + i * stride, 16);
-        }
+            case 'i':
+            case 'm': {
+                int64_t *dst = ints + row * n;
+                for (Py_ssize_t i = i0; i < i1; i++) {
+                    int32_t i32;
+                    memcpy(&i32, at + i * stride, 4);
+                    dst[i] = i32;
+                }
+                break;
+            }
+            case '?': {
+                unsigned char *dst = flags + row * n;
+                for (Py_ssize_t i = i0; i < i1; i++)
+                    dst[i] = at[i * stride] != 0;
+                break;
+            }
+            default: {
+                double *dst = vectors + row * n * 2;
+                for (Py_ssize_t i = i0; i < i1; i++)
+                    memcpy(dst + 2 * i, at + i * stride, 16);
+            }
+            }
         }
     }
     PyMem_Free(spec);

@@ -433,19 +433,21 @@ class LegVectorEnv(VectorEnv):
         columns = np.zeros((len(FIELDS), n))  # one block for every field's column, one for every mask
         values = self._robots.view(np.float64).reshape(n, -1)  # a ROBOT row is doubles only
         columns[:, custom] = values[custom][:, FIELD_COLUMNS].T
-        masks = np.zeros((len(FIELDS) + 1, n), dtype=np.bool_)
-        masks[:, custom] = True
+        mask = np.zeros(n, dtype=np.bool_)
+        mask[custom] = True
+        masks = np.empty((len(FIELDS) + 1, n), dtype=np.bool_)
+        masks[:] = mask  # a broadcast copy: cheaper than scattering into every row
         params = {}
         for j, name in enumerate(FIELDS):
             params[name] = columns[j]
             params["_" + name] = masks[j]
         info["params"] = params
-        info["_params"] = mask = masks[-1]
+        info["_params"] = masks[-1]
         if rejected is not None:
             column = np.zeros(n, dtype=np.int64)
             column[rows] = rejected
             info["params_rejected"] = column
-            info["_params_rejected"] = mask.copy()
+            info["_params_rejected"] = mask
 
     def _draw_starts(self, rows: np.ndarray, explicit=None):
         """The draws of fresh starts of ``rows``, each from its own generator as the single env draws them:

@@ -141,8 +141,12 @@ LEG_INLINE leg_accel flight_m(const leg_model *M, double s1, double co1, double 
     const double s12 = s1 * co2 - co1 * s2;
     const double K12 = kf * c12;
     const double v1 = w1 * w1, v2 = w2 * w2;
-    const double r1 = (tau_hip - tau_knee) - kf * s12 * v2 + F * a * s1 / m;
-    const double r2 = tau_knee + kf * s12 * v1 + F * b * s2 / m;
+    double r1 = (tau_hip - tau_knee) - kf * s12 * v2;
+    double r2 = tau_knee + kf * s12 * v1;
+    if (F != 0.0) { /* a force on the torso's COM (two divisions saved without one: adding 0 changes nothing) */
+        r1 += F * a * s1 / m;
+        r2 += F * b * s2 / m;
+    }
     const double inv_det = 1.0 / (K11 * K22 - K12 * K12);
     const double dd1 = (K22 * r1 - K12 * r2) * inv_det;
     const double dd2 = (K11 * r2 - K12 * r1) * inv_det;

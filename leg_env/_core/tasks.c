@@ -144,10 +144,13 @@ static int evaluate(const env_batch *b, Py_ssize_t i, double *terms, int n_terms
         kept[j] = obs[j];
     const double a0 = leg_fmin(1.0, leg_fmax(-1.0, s->action[0])), a1 = leg_fmin(1.0, leg_fmax(-1.0, s->action[1]));
     stance_assess(b, i, a0, a1, terms);
-    double total = 0.0; /* finite for any finite float32 entries, inf or NaN if one of them is */
-    for (Py_ssize_t j = 0; j < b->obs_cols; j++)
-        total += obs[j];
-    if (isfinite(total))
+    uint32_t non_finite = 0; /* an all-ones exponent: inf or NaN (a test of the bits, with no chain of additions) */
+    for (Py_ssize_t j = 0; j < b->obs_cols; j++) {
+        uint32_t bits;
+        memcpy(&bits, obs + j, sizeof bits);
+        non_finite |= (bits & 0x7f800000u) == 0x7f800000u;
+    }
+    if (!non_finite)
         return 1;
     /* the state is finite, but the observation overflowed float32 */
     for (Py_ssize_t j = 0; j < b->obs_cols; j++)

@@ -250,12 +250,24 @@ class PlanarLegStanceEnv(LegEnv):
     twice as wide, ten times the weight on the base offset, a discount of 0.998, and a small entropy bonus
     (0.005). Without the entropy bonus, four of five seeds stopped at the same 56 of the 64 evaluation starts
     from 30M steps on; the fifth reached 97% on held-out starts by leaning its torso about 30 degrees (a
-    return of 620). With it, one of those four seeds survived all 64. What the other shapings did, each from
-    scratch:
+    return of 620). With it, one of those four seeds survived all 64. Changes to it, each from scratch on
+    seed 2 (93%, a return of 763 on 100 held-out starts; the gated controller 96%, 908):
+
+    - the torso angle's weight at 3: the policy's 20-degree lean goes (the drift term charges 30 per episode
+      instead of 153), 93%, 888: the same seven falls on the starts that need a step back;
+    - that and an entropy bonus of 0.01: 95%, 844 (at 0.02 the training collapsed after 30M steps);
+    - that and flight charged 2: 97%, 927. It recovers from four of the seven hard starts without leaving
+      the ground: its foot slides (the friction term charges 14 per episode). On seeds 0 and 1 the same
+      settings stopped at 77% and 89% of the 64 training-evaluation starts, where the configuration above
+      reached 100% on both: a gain on one seed was within the spread between seeds, so it is not the
+      shipped configuration.
+
+    Neither a decaying learning rate (86% in training evaluations) nor, with the angle weight at 3, starts
+    three times as wide (84%) helped seed 2. What the other shapings did, each from scratch:
 
     - an alive bonus of 3 with flight at 0.5: the policy hops all the time (a return of about -3,800 on the task);
     - an alive bonus of 3 with flight at 10: it slides its foot instead (93% survival, return 674);
-    - the torso-angle weight at 10 as well: early on every step costs more than the alive bonus, and the
+    - the torso-angle weight at 10: early on every step costs more than the alive bonus, and the
       policy learns to fall at once (0% survival after 21M steps).
 
     The results over five seeds are in ``benchmarks/results/learning/PlanarLegBalance-v0``.

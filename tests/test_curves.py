@@ -5,6 +5,11 @@ nothing again."""
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -85,3 +90,74 @@ def test_seeds_trained_in_parallel_processes_learn_what_one_process_learns(tmp_p
     for folder in ("parallel", "serial"):
         line = (tmp_path / folder / "seed_1" / "command.txt").read_text().splitlines()[0]
         assert line.startswith("python -m train.ppo --env-id leg_env/PlanarLegBalance-v0 --seed 1 --out ") and "--params n_envs:8" in line
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, dead but not yet reaped by its new parent, does not)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state not in ("Z", "X")
+
+
+def _wait_for(condition, seconds: float, what: str) -> None:
+    deadline = time.monotonic() + seconds
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"not within {seconds:.0f} s: {what}")
+        time.sleep(0.2)
+
+
+def _worker_pids(runs: Path, seeds) -> dict:
+    """The process training each seed's folder, from its lock file, once every seed has one."""
+    pids = {}
+    for seed in seeds:
+        try:
+            pids[seed] = int((runs / f"seed_{seed}" / "train.lock").read_text())
+        except (FileNotFoundError, ValueError):
+            return {}
+    return pids
+
+
+def _checkpoints(runs: Path, seed: int) -> dict:
+    """Each checkpoint of a seed's run and when it was written (a save at the same step count replaces one)."""
+    return {p.name: p.stat().st_mtime_ns for p in (runs / f"seed_{seed}" / "checkpoints").glob("0*")}
+
+
+def _logged(runs: Path, seed: int) -> int:
+    """Bytes of a seed's TensorBoard log: it grows as PPO iterations end."""
+    return sum(p.stat().st_size for p in (runs / f"seed_{seed}" / "tb").rglob("events.*"))
+
+
+def test_stopping_a_parallel_sweep_stops_every_worker_at_a_checkpoint(tmp_path):
+    """``--jobs 2``: a SIGTERM to the command stops both workers at a checkpoint before it exits (130); when the
+    command is killed outright (SIGKILL), each worker notices and stops the same way by itself. Nothing keeps
+    training after the command is gone, and the same command resumes."""
+    runs = tmp_path / "runs"
+    command = [sys.executable, "-m", "train.curves", "--env-id", "leg_env/PlanarLegBalance-v0", "--seeds", "2", "--jobs", "2",
+               "--total-timesteps", "100000000", "--eval-freq", "100000000", "--episodes", "2", "--runs", str(runs),
+               "--out", str(tmp_path / "page"), "--params", *TINY]
+    root = Path(__file__).resolve().parents[1]
+    for how in (signal.SIGTERM, signal.SIGKILL):
+        before = {seed: _checkpoints(runs, seed) for seed in (0, 1)}
+        sweep = subprocess.Popen(command, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        try:
+            _wait_for(lambda: len(_worker_pids(runs, (0, 1))) == 2, 180, "both seeds training")
+            pids = _worker_pids(runs, (0, 1))
+            assert sweep.pid not in pids.values() and all(_alive(pid) for pid in pids.values())
+            logged = {seed: _logged(runs, seed) for seed in (0, 1)}
+            _wait_for(lambda: all(_logged(runs, seed) > logged[seed] + 20_000 for seed in (0, 1)), 180, "both seeds in PPO iterations")
+            sweep.send_signal(how)
+            code = sweep.wait(timeout=120)
+            if how == signal.SIGTERM:
+                assert code == 130, sweep.stderr.read().decode()[-2000:]
+                assert not any(_alive(pid) for pid in pids.values())  # waited for: none outlives the command
+            else:
+                _wait_for(lambda: not any(_alive(pid) for pid in pids.values()), 60, "the orphaned workers stopping")
+            for seed in (0, 1):  # each stopped at a checkpoint of its own, a new one
+                assert _checkpoints(runs, seed).items() - before[seed].items(), f"seed {seed} saved no checkpoint on stopping ({how!r})"
+        finally:
+            if sweep.poll() is None:
+                sweep.kill()
+                sweep.wait()

@@ -7,7 +7,10 @@ summarised as RL results should be (Agarwal et al. 2021, the ``rliable`` package
 Seed ``s`` trains ``python -m train.ppo --seed s`` (the task's entry in ``train/hyperparams/ppo.yml``, the
 same for every seed) into ``<runs>/seed_<s>``, evaluated during training on the same fixed episodes
 (seeds 20000+) for every seed. A finished seed is not trained again and an interrupted one resumes from its
-checkpoint, so rerunning the command after a stop finishes the sweep. Each seed's selected policy is then
+checkpoint, so rerunning the command after a stop finishes the sweep. With ``--jobs k`` the seeds train k at a
+time in worker processes; a Ctrl-C or a ``kill`` of the command stops every worker at a checkpoint (as
+``train.ppo`` stops), and a worker whose command was killed outright stops the same way by itself. Each
+seed's selected policy is then
 evaluated on ``--episodes`` held-out episodes (seeds 10000+, never used in training or selection), and so is
 ``--baseline``, a model-based controller, on the same episodes.
 
@@ -27,7 +30,10 @@ The results page, ``<out>/README.md`` (headed by the machine, the versions and t
 from __future__ import annotations
 
 import json
+import os
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -143,6 +149,63 @@ def _train_seed(args: CurvesArgs, seed: int) -> Path:
         command=seed_command(args, seed),
     )
     return folder
+
+
+PARENT_POLL_S = 1.0  # how often a worker checks that the command that started it is still there
+
+
+def _train_in_processes(args: CurvesArgs, seeds: list[int]) -> None:
+    """Train ``seeds``, ``args.jobs`` at a time, each in a spawned process of its own (``_train_seed_in_worker``).
+
+    Raises ``RuntimeError`` naming the seed if a worker fails. On any way out before every seed is done (a
+    failure, a Ctrl-C, a SIGTERM turned into ``KeyboardInterrupt`` by ``main``), every running worker gets one
+    SIGTERM, saves a checkpoint and stops, and is waited for: no worker outlives the command.
+    """
+    import multiprocessing
+    from multiprocessing.connection import wait
+
+    context = multiprocessing.get_context("spawn")
+    pending, running = list(seeds), {}
+    try:
+        while pending or running:
+            while pending and len(running) < args.jobs:
+                seed = pending.pop(0)
+                running[seed] = context.Process(target=_train_seed_in_worker, args=(args, seed), name=f"train.curves seed {seed}")
+                running[seed].start()
+            wait([worker.sentinel for worker in running.values()])
+            for seed, worker in list(running.items()):
+                if worker.exitcode is None:
+                    continue
+                del running[seed]
+                if worker.exitcode != 0:
+                    raise RuntimeError(f"seed {seed} failed in its worker process (exit code {worker.exitcode}); its traceback is above")
+    finally:
+        for worker in running.values():
+            if worker.is_alive():
+                worker.terminate()  # SIGTERM: train.ppo saves a checkpoint and stops
+        for worker in running.values():
+            worker.join()
+
+
+def _train_seed_in_worker(args: CurvesArgs, seed: int) -> None:
+    """A worker process's seed (``_train_seed``). Ctrl-C reaches the command only, which passes it on as one
+    SIGTERM; SIGTERM saves a checkpoint and stops the worker (exit code 130); so does the command's death."""
+    from train.ppo import _interrupt
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _interrupt)
+    parent = os.getppid()
+
+    def watch_parent() -> None:
+        while os.getppid() == parent:
+            time.sleep(PARENT_POLL_S)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=watch_parent, name="watch the command", daemon=True).start()
+    try:
+        _train_seed(args, seed)
+    except KeyboardInterrupt:
+        raise SystemExit(130) from None
 
 
 def seed_command(args: CurvesArgs, seed: int) -> str:
@@ -287,12 +350,7 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
     (args.out / "plan.json").write_text(json.dumps(plan, indent=2) + "\n")  # the shipped seed, on record before training
     histories, final = {}, {"per_seed": {}}
     if args.jobs > 1 and len(seeds) > 1:  # train in parallel processes; the loop below then finds every seed finished
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(min(args.jobs, len(seeds)), mp_context=multiprocessing.get_context("spawn")) as pool:
-            for _ in pool.map(_train_seed, [args] * len(seeds), seeds):
-                pass
+        _train_in_processes(args, seeds)
     for seed in seeds:
         folder = _train_seed(args, seed)
         log = json.loads((folder / "evaluations.json").read_text())
@@ -315,8 +373,16 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
 
 
 def main(argv: list[str] | None = None) -> None:
+    from train.ppo import _interrupt
+
     args = parse_args(CurvesArgs, argv, prog="python -m train.curves")
-    sweep(args)
+    previous = signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops the sweep at checkpoints, like Ctrl-C
+    try:
+        sweep(args)
+    except KeyboardInterrupt:
+        raise SystemExit(130) from None
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -64,6 +64,7 @@ def test_a_sweep_of_five_seeds_on_a_tiny_budget(tmp_path):
     assert scores["baseline"]["survival_rate"] >= 0.0 and "mean_return" in scores["baseline"]
     page = (out / "README.md").read_text()
     assert "PPO seed 2 (shipped)" in page and "IQM" in page and "lqr (controller)" in page and "Machine:" in page
+    assert "Resumed" not in page  # every seed trained in one go
     assert page.count("| PPO seed ") == 5
     for png in ("curves_steps.png", "curves_time.png"):
         assert (out / png).stat().st_size > 1000
@@ -161,3 +162,11 @@ def test_stopping_a_parallel_sweep_stops_every_worker_at_a_checkpoint(tmp_path):
             if sweep.poll() is None:
                 sweep.kill()
                 sweep.wait()
+
+
+def test_the_page_says_which_seeds_were_resumed():
+    from train.curves import _resumed
+
+    assert _resumed({"0": 0, "1": 0}) == []
+    line = _resumed({"0": 1, "1": 0, "2": 3})[0]
+    assert "seed 0 once, seed 2 3 times." in line and "seed 1" not in line

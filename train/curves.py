@@ -284,6 +284,16 @@ def _fmt(v: float, metric: str) -> str:
     return _COLUMNS[metric][1](v) if metric in _COLUMNS else f"{v:.3g}"
 
 
+def _resumed(resumes: dict) -> list[str]:
+    """The page's line on the seeds whose training was resumed from a checkpoint (none: no line)."""
+    resumed = {seed: n for seed, n in resumes.items() if n > 0}
+    if not resumed:
+        return []
+    each = ", ".join(f"seed {seed} {'once' if n == 1 else f'{n} times'}" for seed, n in resumed.items())
+    return [f"Resumed from a checkpoint (`train.ppo`'s resume: the same run continued with fresh episodes, not bit-identical "
+            f"to an uninterrupted one): {each}.", ""]
+
+
 def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: dict | None, command: str) -> str:
     name = args.env_id.split("/")[-1]
     seeds = curves["seeds"]
@@ -302,6 +312,7 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
         "episodes (seeds 20000+); the line is the interquartile mean (IQM) across seeds, the band its 95% "
         "stratified-bootstrap confidence interval (rliable), the faint lines the seeds.",
         "",
+        *_resumed(final.get("resumes", {})),
         f"![against steps](curves_steps.png)",
         "",
         f"![against wall-clock](curves_time.png)",
@@ -355,6 +366,7 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
         folder = _train_seed(args, seed)
         log = json.loads((folder / "evaluations.json").read_text())
         histories[seed] = log["evaluations"]
+        final.setdefault("resumes", {})[str(seed)] = int(log.get("resumes", 0))
         policy = load_policy(folder)
         final["per_seed"][str(seed)] = _held_out(policy, args, policy.env_kwargs)
     order = sorted(seeds, key=lambda s: (-final["per_seed"][str(s)]["survival_rate"], -final["per_seed"][str(s)]["mean_return"]))

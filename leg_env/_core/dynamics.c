@@ -143,7 +143,7 @@ LEG_INLINE leg_accel flight_m(const leg_model *M, double s1, double co1, double 
     const double v1 = w1 * w1, v2 = w2 * w2;
     double r1 = (tau_hip - tau_knee) - kf * s12 * v2;
     double r2 = tau_knee + kf * s12 * v1;
-    if (F != 0.0) { /* a force on the torso's COM (two divisions saved without one: adding 0 changes nothing) */
+    if (F != 0.0) { /* a force on the torso's COM; without one these terms are 0 and their two divisions are skipped */
         r1 += F * a * s1 / m;
         r2 += F * b * s2 / m;
     }

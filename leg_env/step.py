@@ -59,16 +59,19 @@ class BitGeneratorRows:
 
     ``draw(rows, out)`` fills ``out[k]`` with ``out.shape[1]`` draws from generator ``rows[k]``: exactly the
     numbers (and the state advance) of ``rng.random(out=out[k])``, through the C interface numpy gives every
-    bit generator (its ``capsule``, read from the bit generator at each call, which the call holds).
+    bit generator (its ``capsule``, read when a generator is set, held with the generator by a
+    ``kernels.Generators``).
     """
 
     def __init__(self, n: int):
         self.generators: list[np.random.Generator | None] = [None] * n
-        self.bit_generators: list = [None] * n  # what the compiled draws read (one attribute look-up fewer)
+        # what the compiled draws read: each row's bit generator, held with the pointer to its C interface (no
+        # attribute look-ups through Python objects per row and draw)
+        self.bit_generators = kernels.Generators(n)
 
     def __setitem__(self, i: int, rng: np.random.Generator) -> None:
         self.generators[i] = rng
-        self.bit_generators[i] = rng.bit_generator
+        self.bit_generators.set(i, rng.bit_generator)
 
     def __getitem__(self, i: int) -> np.random.Generator | None:
         return self.generators[i]

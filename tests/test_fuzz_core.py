@@ -1007,6 +1007,42 @@ def fuzz_draws(run, rng):
     run.case(where, "(all)", "no rows, no generators", kernels.draw_uniform, [[], np.zeros(0, np.int64), np.zeros((0, 3))], expect=OK)
     run.case(where, "(all)", "no columns", kernels.draw_uniform, [gens(), rows, np.zeros((5, 0))], expect=OK)
 
+    def held(kind="mixed", unset=()):
+        g = kernels.Generators(len(bgs))
+        for k, entry in enumerate(gens(kind)):
+            if k not in unset:
+                g.set(k, entry)
+        return g
+
+    for kind in ("mixed", "Generator", "BitGenerator"):
+        out = _filled((5, 3))
+        run.case(where, "(all)", f"valid, a Generators of {kind}", kernels.draw_uniform, [held(kind), rows, out], expect=OK,
+                 check=check_draw(rows, out), outs=[out])
+    for val in (-1, 4, 2**62):
+        r_ = rows.copy()
+        r_[2] = val
+        run.case(where, "rows", f"a value {val} past a Generators", kernels.draw_uniform, [held(), r_, _filled((5, 3))], expect=R,
+                 names=("rows", "generators"), watch=states)
+    r_ = rows.copy()
+    r_[1] = 3
+    run.case(where, "generators", "a Generators with a row not set", kernels.draw_uniform, [held(unset=(3,)), r_, _filled((5, 3))], expect=R,
+             names=("generators",), watch=states)
+    run.case(where, "(all)", "no rows, an empty Generators", kernels.draw_uniform, [kernels.Generators(0), np.zeros(0, np.int64), np.zeros((0, 3))],
+             expect=OK)
+    where = "kernels.Generators"
+    for kind, args, expect in (("n = -1", (-1,), R), ("n huge", (2**40,), R), ("n a float", (2.0,), A), ("n a str", ("4",), A), ("no n", (), A)):
+        run.case(where, "n", kind, kernels.Generators, list(args), expect=expect, names=("n",))
+    g = held()
+    for kind, args, expect in (("row -1", (-1, bgs[0]), R), ("row n", (4, bgs[0]), R), ("a bare capsule", (0, bgs[0].capsule), R),
+                               ("None", (0, None), R), ("an int", (0, 7), R), ("numpy RandomState", (0, np.random.RandomState(0)), A),
+                               ("row a float", (0.0, bgs[0]), A)):
+        run.case(where, "set", kind, g.set, list(args), expect=expect, names=("row", "generators", "set", "index", "integer"), watch=states)
+    expected = drawn(range(4), 2)  # the refused sets left every row drawing from its own generator
+    after = np.empty((4, 2))
+    kernels.draw_uniform(g, np.arange(4, dtype=np.int64), after)
+    if not np.array_equal(after, expected):
+        run.problem(where, "set", "a refused set", "changed a row's generator")
+
     class Meddler:  # looking up its generator empties the list it is in
         def __init__(self, box):
             self.box = box

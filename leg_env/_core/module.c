@@ -953,7 +953,7 @@ static struct PyModuleDef module = {
 
 PyMODINIT_FUNC PyInit_kernels(void)
 {
-    if (PyType_Ready(&BatchType) < 0)
+    if (PyType_Ready(&BatchType) < 0 || PyType_Ready(&GeneratorsType) < 0)
         return NULL;
     name_capsule = PyUnicode_InternFromString("capsule");
     name_bit_generator = PyUnicode_InternFromString("bit_generator");
@@ -965,6 +965,12 @@ PyMODINIT_FUNC PyInit_kernels(void)
     Py_INCREF(&BatchType);
     if (PyModule_AddObject(m, "Batch", (PyObject *)&BatchType) < 0) {
         Py_DECREF(&BatchType);
+        Py_DECREF(m);
+        return NULL;
+    }
+    Py_INCREF(&GeneratorsType);
+    if (PyModule_AddObject(m, "Generators", (PyObject *)&GeneratorsType) < 0) {
+        Py_DECREF(&GeneratorsType);
         Py_DECREF(m);
         return NULL;
     }

@@ -390,14 +390,151 @@ static bitgen_t *bitgen_of(PyObject *entry, long long index, PyObject **owner)
     return bg;
 }
 
-/* The bit generators of `generators` (a list of numpy Generators or BitGenerators) at
- * `rows`, with a reference to each one's owner in owners[k] (release_owners() frees them). */
+/* Generators(n): the bit generators of n rows, each held with a pointer to its C interface, so that a draw
+ * reads the pointers of the rows it draws from instead of looking each one up through Python attributes. A row
+ * is set by set(i, generator) (a numpy Generator or BitGenerator), which holds a reference to its BitGenerator
+ * for as long as the row keeps it: the pointer stays valid. draw_uniform and draw_robots take one in place of
+ * a list. */
+typedef struct {
+    PyObject_HEAD Py_ssize_t n;
+    PyObject **owners; /* the BitGenerators (NULL: not set) */
+    bitgen_t **bg;     /* their C interfaces */
+} GeneratorsObject;
+
+#define GENERATORS_MAX ((Py_ssize_t)1 << 26)
+
+static int Generators_traverse(GeneratorsObject *self, visitproc visit, void *arg)
+{
+    for (Py_ssize_t i = 0; i < self->n; i++)
+        Py_VISIT(self->owners[i]);
+    return 0;
+}
+
+static int Generators_clear(GeneratorsObject *self)
+{
+    for (Py_ssize_t i = 0; i < self->n; i++) {
+        self->bg[i] = NULL;
+        Py_CLEAR(self->owners[i]);
+    }
+    return 0;
+}
+
+static void Generators_dealloc(GeneratorsObject *self)
+{
+    PyObject_GC_UnTrack(self);
+    if (self->owners != NULL)
+        Generators_clear(self);
+    PyMem_Free(self->owners);
+    PyMem_Free(self->bg);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyObject *Generators_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
+{
+    static char *names[] = {"n", NULL};
+    PyObject *n_obj;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O:Generators", names, &n_obj))
+        return NULL;
+    if (!PyLong_Check(n_obj) || PyBool_Check(n_obj)) {
+        PyErr_Format(PyExc_TypeError, "Generators: n must be an int, got %.80s", Py_TYPE(n_obj)->tp_name);
+        return NULL;
+    }
+    const Py_ssize_t n = PyLong_AsSsize_t(n_obj);
+    if (n == -1 && PyErr_Occurred()) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_ValueError, "Generators: n must be in [0, %zd], got %R", GENERATORS_MAX, n_obj);
+        return NULL;
+    }
+    if (n < 0 || n > GENERATORS_MAX) {
+        PyErr_Format(PyExc_ValueError, "Generators: n must be in [0, %zd], got %zd", GENERATORS_MAX, n);
+        return NULL;
+    }
+    GeneratorsObject *self = (GeneratorsObject *)type->tp_alloc(type, 0);
+    if (self == NULL)
+        return NULL;
+    self->n = 0;
+    self->owners = PyMem_Calloc(n ? n : 1, sizeof(PyObject *));
+    self->bg = PyMem_Calloc(n ? n : 1, sizeof(bitgen_t *));
+    if (self->owners == NULL || self->bg == NULL) {
+        Py_DECREF(self);
+        return PyErr_NoMemory();
+    }
+    self->n = n;
+    return (PyObject *)self;
+}
+
+static PyObject *Generators_set(GeneratorsObject *self, PyObject *args)
+{
+    PyObject *row, *generator, *owner = NULL;
+    if (!PyArg_ParseTuple(args, "OO:set", &row, &generator))
+        return NULL;
+    if (!PyLong_Check(row) || PyBool_Check(row)) {
+        PyErr_Format(PyExc_TypeError, "Generators.set: row must be an int, got %.80s", Py_TYPE(row)->tp_name);
+        return NULL;
+    }
+    const Py_ssize_t i = PyLong_AsSsize_t(row);
+    if (i == -1 && PyErr_Occurred()) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_ValueError, "Generators.set: row %R is not in [0, %zd)", row, self->n);
+        return NULL;
+    }
+    if (i < 0 || i >= self->n) {
+        PyErr_Format(PyExc_ValueError, "Generators.set: row %zd is not in [0, %zd)", i, self->n);
+        return NULL;
+    }
+    bitgen_t *bg = bitgen_of(generator, (long long)i, &owner);
+    if (bg == NULL)
+        return NULL;
+    self->bg[i] = bg;
+    Py_XSETREF(self->owners[i], owner); /* the new reference bitgen_of left */
+    Py_RETURN_NONE;
+}
+
+static Py_ssize_t Generators_len(GeneratorsObject *self) { return self->n; }
+
+static PyMethodDef Generators_methods[] = {
+    {"set", (PyCFunction)Generators_set, METH_VARARGS, "set(i, generator): row i draws from this numpy Generator or BitGenerator."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PySequenceMethods Generators_sequence = {.sq_length = (lenfunc)Generators_len};
+
+static PyTypeObject GeneratorsType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "leg_env._core.kernels.Generators",
+    .tp_basicsize = sizeof(GeneratorsObject),
+    .tp_dealloc = (destructor)Generators_dealloc,
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_doc = "Generators(n): the bit generators of n rows, held for compiled draws (set(i, generator)).",
+    .tp_traverse = (traverseproc)Generators_traverse,
+    .tp_clear = (inquiry)Generators_clear,
+    .tp_methods = Generators_methods,
+    .tp_as_sequence = &Generators_sequence,
+    .tp_new = Generators_new,
+};
+
+/* The bit generators of `generators` (a list of numpy Generators or BitGenerators, or a Generators) at
+ * `rows`, with a reference to each listed one's owner in owners[k] (release_owners() frees them; a Generators
+ * holds its own, and owners stay NULL). */
 static int bitgens_of(PyObject *generators, const int64_t *rows, Py_ssize_t n_rows, bitgen_t **out, PyObject **owners)
 {
     for (Py_ssize_t k = 0; k < n_rows; k++)
         owners[k] = NULL;
+    if (Py_IS_TYPE(generators, &GeneratorsType)) { /* held: the pointers are valid while it is (the caller holds it) */
+        const GeneratorsObject *G = (const GeneratorsObject *)generators;
+        for (Py_ssize_t k = 0; k < n_rows; k++) {
+            if (rows[k] < 0 || rows[k] >= G->n) {
+                PyErr_Format(PyExc_ValueError, "rows[%zd] = %lld is not an index of generators", k, (long long)rows[k]);
+                return 0;
+            }
+            if ((out[k] = G->bg[rows[k]]) == NULL) {
+                PyErr_Format(PyExc_ValueError, "generators[%lld] is not set", (long long)rows[k]);
+                return 0;
+            }
+        }
+        return 1;
+    }
     if (!PyList_Check(generators)) {
-        PyErr_Format(PyExc_TypeError, "generators must be a list of numpy Generators or BitGenerators, got %.80R",
+        PyErr_Format(PyExc_TypeError, "generators must be a list of numpy Generators or BitGenerators (or a Generators), got %.80R",
                      (PyObject *)Py_TYPE(generators));
         return 0;
     }

@@ -433,18 +433,9 @@ static PyObject *Generators_new(PyTypeObject *type, PyObject *args, PyObject *kw
 {
     static char *names[] = {"n", NULL};
     PyObject *n_obj;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O:Generators", names, &n_obj))
+    Py_ssize_t n;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O:Generators", names, &n_obj) || !int_arg(n_obj, "n", &n))
         return NULL;
-    if (!PyLong_Check(n_obj) || PyBool_Check(n_obj)) {
-        PyErr_Format(PyExc_TypeError, "Generators: n must be an int, got %.80s", Py_TYPE(n_obj)->tp_name);
-        return NULL;
-    }
-    const Py_ssize_t n = PyLong_AsSsize_t(n_obj);
-    if (n == -1 && PyErr_Occurred()) {
-        PyErr_Clear();
-        PyErr_Format(PyExc_ValueError, "Generators: n must be in [0, %zd], got %R", GENERATORS_MAX, n_obj);
-        return NULL;
-    }
     if (n < 0 || n > GENERATORS_MAX) {
         PyErr_Format(PyExc_ValueError, "Generators: n must be in [0, %zd], got %zd", GENERATORS_MAX, n);
         return NULL;
@@ -466,18 +457,9 @@ static PyObject *Generators_new(PyTypeObject *type, PyObject *args, PyObject *kw
 static PyObject *Generators_set(GeneratorsObject *self, PyObject *args)
 {
     PyObject *row, *generator, *owner = NULL;
-    if (!PyArg_ParseTuple(args, "OO:set", &row, &generator))
+    Py_ssize_t i;
+    if (!PyArg_ParseTuple(args, "OO:set", &row, &generator) || !int_arg(row, "row", &i))
         return NULL;
-    if (!PyLong_Check(row) || PyBool_Check(row)) {
-        PyErr_Format(PyExc_TypeError, "Generators.set: row must be an int, got %.80s", Py_TYPE(row)->tp_name);
-        return NULL;
-    }
-    const Py_ssize_t i = PyLong_AsSsize_t(row);
-    if (i == -1 && PyErr_Occurred()) {
-        PyErr_Clear();
-        PyErr_Format(PyExc_ValueError, "Generators.set: row %R is not in [0, %zd)", row, self->n);
-        return NULL;
-    }
     if (i < 0 || i >= self->n) {
         PyErr_Format(PyExc_ValueError, "Generators.set: row %zd is not in [0, %zd)", i, self->n);
         return NULL;

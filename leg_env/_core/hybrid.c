@@ -173,7 +173,9 @@ static int choose_mode(int mode, leg_x *X, double *anchor, const leg_model *M, c
 }
 
 /* The earliest watched witness of a substep X -> X1 of length h at or past zero: the substep length s
- * (just past the root), the state and derivative there and the substep's sums; returns the event. */
+ * (just past the root), the state and derivative there and the substep's sums; returns the event. In flight
+ * the derivative is not formed (the touchdown witness needs none, and the caller forms the new mode's): k
+ * then holds X1's. */
 typedef struct {
     double s;
     leg_x X;
@@ -210,7 +212,8 @@ static int locate(int mode, const leg_model *M, const leg_drive *u, const double
             s = 0.5 * (a + b);
         leg_sums sums = {0.0, 0.0, 0.0};
         const leg_x Xs = rk4_substep(mode, M, u, anchor, X, k, s, &sums);
-        const leg_accel ks = derivative(mode, M, u, &Xs);
+        /* the touchdown witness needs no derivative, and the caller reads none: flight skips it */
+        const leg_accel ks = mode == LEG_FLIGHT ? *k1 : derivative(mode, M, u, &Xs);
         witnesses(mode, M, u, &Xs, &ks, anchor, &wa, &wb);
         const double fs = watched_min(watch_a, watch_b, wa, wb);
         if (fs < 0.0) {

@@ -15,7 +15,7 @@ import types
 import typing
 from pathlib import Path
 
-__all__ = ["field_docs", "parser_for", "parse_args"]
+__all__ = ["field_docs", "parser_for", "parse_args", "interrupt"]
 
 
 def field_docs(cls: type) -> dict[str, str]:
@@ -94,3 +94,9 @@ def parse_args(cls: type, argv: list[str] | None = None, positional: tuple[str, 
         return cls(**vars(ns))
     except ValueError as e:
         parser.error(str(e))
+
+
+def interrupt(signum, frame):
+    """A signal handler that raises ``KeyboardInterrupt``: installed for SIGTERM, a ``kill`` stops a command as a
+    Ctrl-C does (training saves a checkpoint and exits with 130)."""
+    raise KeyboardInterrupt

@@ -60,7 +60,7 @@ from train.checkpoints import (
     write_json_atomic,
     write_text_atomic,
 )
-from train.cli import parse_args
+from train.cli import interrupt, parse_args
 from train.hyperparameters import DEFAULT_HYPERPARAMS, display_path, load_hyperparams, parse_override
 from train.machine import cpu_name
 from train.runfolder import RunFolderError, prepare_run_folder, run_locked, runnable_command
@@ -435,13 +435,9 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
     return out
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(TrainArgs, argv, prog="python -m train.ppo")
-    signal.signal(signal.SIGTERM, _interrupt)  # `kill` saves a checkpoint like Ctrl-C
+    signal.signal(signal.SIGTERM, interrupt)  # `kill` saves a checkpoint like Ctrl-C
     try:
         train(args)
     except KeyboardInterrupt:

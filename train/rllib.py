@@ -72,7 +72,7 @@ import yaml
 
 from leg_env import ENV_ID
 from train.checkpoints import write_json_atomic, write_text_atomic
-from train.cli import parse_args
+from train.cli import interrupt, parse_args
 from train.hyperparameters import DEFAULT_HYPERPARAMS, display_path, load_hyperparams, parse_override
 from train.runfolder import RunFolderError, run_locked, runnable_command
 
@@ -537,13 +537,9 @@ class RLlibPolicy:
         return cls(module, env_kwargs, run if is_rllib_run(run) else checkpoint)
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(RLlibArgs, argv, prog="python -m train.rllib")
-    signal.signal(signal.SIGTERM, _interrupt)  # `kill` saves a checkpoint like Ctrl-C
+    signal.signal(signal.SIGTERM, interrupt)  # `kill` saves a checkpoint like Ctrl-C
     try:
         train(args)
     except KeyboardInterrupt:

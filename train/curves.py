@@ -12,7 +12,10 @@ time in worker processes; a Ctrl-C or a ``kill`` of the command stops every work
 ``train.ppo`` stops), and a worker whose command was killed outright stops the same way by itself. Each
 seed's selected policy is then
 evaluated on ``--episodes`` held-out episodes (seeds 10000+, never used in training or selection), and so is
-``--baseline``, a model-based controller, on the same episodes.
+``--baseline``, a model-based controller, on the same episodes. ``--eval-env-kwargs`` sets the evaluation env
+of the in-training and held-out episodes alike (the push task's fixed push magnitude, say); on the push task
+the final scores also hold the push curve's headline, the largest impulse survived in 90% of the held-out
+episodes with every push of an episode at that impulse (``train.evaluate --push-curve``).
 
 The results page, ``<out>/README.md`` (headed by the machine, the versions and the date), gives:
 
@@ -31,6 +34,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import signal
 import sys
 import threading
@@ -40,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from train.cli import parse_args
+from train.cli import interrupt, parse_args
 from train.machine import describe
 
 __all__ = ["CurvesArgs", "iqm_interval", "sweep", "main"]
@@ -50,8 +54,10 @@ METRICS = ("survival_rate", "mean_return")
 """The in-training evaluation metrics whose curves are drawn (``train.callbacks.PeriodicEvaluation``)."""
 BOOTSTRAP_REPS = 5000
 TEST_SEED = 10_000  # the held-out episodes: train.evaluate's default
-KEYS = ("survival_rate", "mean_return", "mean_length", "hops_per_episode", "mean_abs_apex_error", "mean_drift_10s")
-"""The held-out scores on the page (the hop metrics for the hop task: ``train.task_metrics.HopTracker``)."""
+KEYS = ("push_impulse_90", "survival_rate", "mean_return", "mean_length", "hops_per_episode", "mean_abs_apex_error", "mean_drift_10s")
+"""The held-out scores on the page (the push curve's headline for the push task; the hop metrics for the hop
+task: ``train.task_metrics.HopTracker``)."""
+PUSH_TASK = "leg_env/PlanarLegPush-v0"
 
 
 @dataclass
@@ -75,6 +81,9 @@ class CurvesArgs:
     """Environment steps between in-training evaluations (the points of the curves)."""
     eval_episodes: int = 32
     """Episodes per in-training evaluation (seeds 20000 + i, the same for every seed)."""
+    eval_env_kwargs: list[str] = field(default_factory=list)
+    """Arguments of the evaluation env, in training and on the held-out episodes, for every seed and the
+    baseline (train.ppo's --eval-env-kwargs; none: the task as registered)."""
     episodes: int = 100
     """Held-out episodes per seed for the final scores (seeds 10000 + i)."""
     baseline: str | None = None
@@ -106,6 +115,10 @@ class CurvesArgs:
             raise ValueError(f"episodes and eval_episodes must be >= 1, got {self.episodes} and {self.eval_episodes}")
         if self.eval_freq < 1:
             raise ValueError(f"eval_freq must be >= 1 (the curves are made of the evaluations), got {self.eval_freq}")
+        try:
+            eval_env_kwargs(self)
+        except ValueError as e:
+            raise ValueError(f"eval_env_kwargs: {e}") from None
         name = self.env_id.split("/")[-1]
         if self.runs is None:
             self.runs = Path("runs/curves") / name
@@ -142,6 +155,7 @@ def _train_seed(args: CurvesArgs, seed: int) -> Path:
             seed=seed,
             eval_freq=args.eval_freq,
             eval_episodes=args.eval_episodes,
+            eval_env_kwargs=list(args.eval_env_kwargs),
             progress_bar=args.progress_bar,
             verbose=1,
             torch_threads=args.torch_threads,
@@ -190,10 +204,8 @@ def _train_in_processes(args: CurvesArgs, seeds: list[int]) -> None:
 def _train_seed_in_worker(args: CurvesArgs, seed: int) -> None:
     """A worker process's seed (``_train_seed``). Ctrl-C reaches the command only, which passes it on as one
     SIGTERM; SIGTERM saves a checkpoint and stops the worker (exit code 130); so does the command's death."""
-    from train.ppo import _interrupt
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
     parent = os.getppid()
 
     def watch_parent() -> None:
@@ -216,19 +228,31 @@ def seed_command(args: CurvesArgs, seed: int) -> str:
             "--eval-freq", str(args.eval_freq), "--eval-episodes", str(args.eval_episodes), "--torch-threads", str(args.torch_threads)]
     if args.total_timesteps is not None:
         argv += ["--total-timesteps", str(args.total_timesteps)]
+    if args.eval_env_kwargs:
+        argv += ["--eval-env-kwargs", *args.eval_env_kwargs]
     if args.params:
         argv += ["--params", *args.params]
     return shlex.join(argv)
 
 
+def eval_env_kwargs(args: CurvesArgs) -> dict:
+    """The evaluation env's arguments, parsed as train.ppo parses its --eval-env-kwargs."""
+    from train.hyperparameters import parse_override
+
+    return dict(parse_override(item) for item in args.eval_env_kwargs)
+
+
 def _held_out(policy, args: CurvesArgs, env_kwargs: dict) -> dict:
-    """A policy's scores on the held-out episodes (``train.evaluate.run_episodes``)."""
-    from train.evaluate import run_episodes
+    """A policy's scores on the held-out episodes (``train.evaluate.run_episodes``); on the push task also the
+    push curve's 90% impulse (``train.task_metrics.push_survival``, every push of an episode at one magnitude)."""
+    from train.evaluate import PUSH_FORCES, run_episodes
+    from train.task_metrics import largest_survived_impulse, push_survival
 
     seeds = [TEST_SEED + i for i in range(args.episodes)]
     summary, _ = run_episodes(policy, seeds, env_kwargs, env_id=args.env_id)
-    keep = KEYS
-    return {k: summary[k] for k in keep if k in summary}
+    if args.env_id == PUSH_TASK:
+        summary["push_impulse_90"] = largest_survived_impulse(push_survival(policy, PUSH_FORCES, args.episodes, TEST_SEED, env_kwargs))
+    return {k: summary[k] for k in KEYS if k in summary}
 
 
 def _curves(histories: dict[int, list[dict]]) -> dict:
@@ -271,6 +295,7 @@ def _plot(curves: dict, path: Path, x_key: str, x_label: str, title: str) -> Non
 
 
 _COLUMNS = {  # a held-out score's column: its heading and how its value is written
+    "push_impulse_90": ("90% survival up to [N s]", lambda v: f"{v:.2f}"),
     "survival_rate": ("survival", lambda v: f"{100 * v:.0f}%"),
     "mean_return": ("return", lambda v: f"{v:.1f}"),
     "mean_length": ("length", lambda v: f"{v:.0f}"),
@@ -294,6 +319,12 @@ def _resumed(resumes: dict) -> list[str]:
             f"to an uninterrupted one): {each}.", ""]
 
 
+def _on(args: CurvesArgs) -> str:
+    """How the page names the evaluation env: nothing for the task as registered."""
+    kwargs = eval_env_kwargs(args)
+    return f" of the task with {', '.join(f'{k}={v!r}' for k, v in kwargs.items())}" if kwargs else ""
+
+
 def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: dict | None, command: str) -> str:
     name = args.env_id.split("/")[-1]
     seeds = curves["seeds"]
@@ -309,7 +340,7 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
         f"{len(seeds)} training seeds ({seeds[0]}..{seeds[-1]}). The shipped seed, named before training: {args.shipped_seed}.",
         "",
         f"Curves: every {args.eval_freq:,} steps each seed's policy runs the same {args.eval_episodes} deterministic "
-        "episodes (seeds 20000+); the line is the interquartile mean (IQM) across seeds, the band its 95% "
+        f"episodes (seeds 20000+){_on(args)}; the line is the interquartile mean (IQM) across seeds, the band its 95% "
         "stratified-bootstrap confidence interval (rliable), the faint lines the seeds.",
         "",
         *_resumed(final.get("resumes", {})),
@@ -330,7 +361,7 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
     lines += [
         "",
         f"Final scores: each seed's selected policy on {args.episodes} held-out episodes (seeds {TEST_SEED}..{TEST_SEED + args.episodes - 1}, "
-        "never used in training or selection)" + (f"; `{args.baseline}` (model-based controller) on the same episodes." if baseline else "."),
+        f"never used in training or selection){_on(args)}" + (f"; `{args.baseline}` (model-based controller) on the same episodes." if baseline else "."),
         "",
         "| policy | rank | " + " | ".join(_COLUMNS[k][0] for k in keys) + " |",
         "|---|---:|" + "---:|" * len(keys),
@@ -339,21 +370,29 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
         row = final["per_seed"][str(s)]
         label = f"PPO seed {s}" + (" (shipped)" if s == args.shipped_seed else "")
         lines.append(f"| {label} | {final['rank'][str(s)]} | " + " | ".join(_fmt(row[k], k) for k in keys) + " |")
-    for metric in METRICS:
+    for metric in final["iqm"]:
         iqm, low, high = final["iqm"][metric]
-        lines.append(f"| PPO, IQM of {len(seeds)} seeds [95% CI]: {metric} | | {_fmt(iqm, metric)} [{_fmt(low, metric)}, {_fmt(high, metric)}] |" + " |" * (len(keys) - 1))
+        cells = ["" if k != metric else f"{_fmt(iqm, metric)} [{_fmt(low, metric)}, {_fmt(high, metric)}]" for k in keys]  # under its own column
+        lines.append(f"| PPO, IQM of {len(seeds)} seeds [95% CI]: {_COLUMNS[metric][0]} | | " + " | ".join(cells) + " |")
     if baseline:
         lines.append(f"| {args.baseline} (controller) | | " + " | ".join(_fmt(baseline.get(k, float("nan")), k) for k in keys) + " |")
-    lines += ["", f"Rank: by held-out survival, then return, among the {len(seeds)} seeds (1 = best). The drift is over the episodes "
+    by = "the push curve's 90% impulse, then held-out survival, then return" if "push_impulse_90" in keys else "held-out survival, then return"
+    lines += ["", f"Rank: by {by}, among the {len(seeds)} seeds (1 = best). The drift is over the episodes "
               "that ran their 10 s (- if none did). Every number is in `scores.json`.", ""]
     return "\n".join(lines)
+
+
+def _rank_key(scores: dict) -> tuple:
+    """The order of the seeds on the page: by the push curve's 90% impulse where there is one, then held-out
+    survival, then return (best first)."""
+    return (-scores.get("push_impulse_90", 0.0), -scores["survival_rate"], -scores["mean_return"])
 
 
 def sweep(args: CurvesArgs, command: str | None = None) -> Path:
     """Train every seed, evaluate them and write the results page; returns its folder."""
     from train.evaluate import load_policy
 
-    command = command or "python -m train.curves " + " ".join(sys.argv[1:])
+    command = command or shlex.join(["python", "-m", "train.curves", *sys.argv[1:]])  # quoted: the page's command can be pasted
     header = describe()
     args.out.mkdir(parents=True, exist_ok=True)
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
@@ -369,10 +408,12 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
         final.setdefault("resumes", {})[str(seed)] = int(log.get("resumes", 0))
         policy = load_policy(folder)
         final["per_seed"][str(seed)] = _held_out(policy, args, policy.env_kwargs)
-    order = sorted(seeds, key=lambda s: (-final["per_seed"][str(s)]["survival_rate"], -final["per_seed"][str(s)]["mean_return"]))
+    order = sorted(seeds, key=lambda s: _rank_key(final["per_seed"][str(s)]))
     final["rank"] = {str(s): order.index(s) + 1 for s in seeds}
-    final["iqm"] = {m: iqm_interval([final["per_seed"][str(s)][m] for s in seeds]) for m in METRICS}
-    baseline = _held_out(load_policy(args.baseline, env_id=args.env_id), args, {}) if args.baseline else None
+    summarised = (*METRICS, "push_impulse_90") if "push_impulse_90" in final["per_seed"][str(seeds[0])] else METRICS
+    final["iqm"] = {m: iqm_interval([final["per_seed"][str(s)][m] for s in seeds]) for m in summarised}
+    kwargs = eval_env_kwargs(args)
+    baseline = _held_out(load_policy(args.baseline, kwargs, env_id=args.env_id), args, kwargs) if args.baseline else None
     curves = _curves(histories)
     title = f"{args.env_id}: plain PPO, {len(seeds)} seeds"
     _plot(curves, args.out / "curves_steps.png", "timesteps", "environment steps", title)
@@ -385,10 +426,8 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from train.ppo import _interrupt
-
     args = parse_args(CurvesArgs, argv, prog="python -m train.curves")
-    previous = signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops the sweep at checkpoints, like Ctrl-C
+    previous = signal.signal(signal.SIGTERM, interrupt)  # `kill` stops the sweep at checkpoints, like Ctrl-C
     try:
         sweep(args)
     except KeyboardInterrupt:

@@ -16,8 +16,9 @@ import leg_env
 from leg_env import dynamics as dyn
 from leg_env.tasks import REGISTRY
 
-NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1")
-OUT_OF_DATE = ("leg_env/PlanarLegHop-v0",)  # a higher version of its name is registered
+NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1",
+           "leg_env/PlanarLegHop-v2")
+OUT_OF_DATE = ("leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1")  # a higher version of its name is registered
 ALL_IDS = tuple(REGISTRY)
 NUM_ENVS = 4
 SEED = 5
@@ -31,6 +32,7 @@ KWARGS = {
     "leg_env/PlanarLegPush-v0": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
     "leg_env/PlanarLegHop-v0": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
     "leg_env/PlanarLegHop-v1": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
+    "leg_env/PlanarLegHop-v2": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
 }
 
 
@@ -237,7 +239,7 @@ def test_sb3_adapter_contract(env_id):
                 assert info["terminal_observation"].shape == venv.observation_space.shape
     assert done_seen >= 4
     bad = {"ctrl_cost_weight": -1.0, "com_weight": "1", "command_range": (0.2, 0.1)}
-    field = {NEW_IDS[0]: "ctrl_cost_weight", PUSH: "com_weight", HOP: "command_range", HOP1: "command_range"}[env_id]
+    field = {NEW_IDS[0]: "ctrl_cost_weight", PUSH: "com_weight", HOP: "command_range", HOP1: "command_range", HOP2: "command_range"}[env_id]
     with pytest.raises(ValueError, match=field):  # ArgumentTypeError is a ValueError too
         make_sb3_vec_env(2, env_id=env_id, **{field: bad[field]})
 
@@ -349,31 +351,45 @@ def test_hop_reward_peaks_at_the_commanded_apex_on_scripted_flights():
     assert abs(rises[np.argmax(rewards[:-1])] - command) <= 0.0025
 
 
-def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping():
-    """The same seeds and actions on v0 and v1 give the same motion (only the reward and two observation entries
-    differ). v1's height term of a step that ends in flight is its weight times the sum of two Gaussian kernels
-    of the COM's ballistic apex error (scales 5 cm and 1 cm), times the step's flight share; a flight's terms are
-    banked and paid at the step where it lands, unless the robot falls there, and nothing is paid otherwise; its alive
-    bonus is v0's while the ground time (since the end of the last flight of at least ``min_flight``, or the start,
-    recomputed here from the contact modes and flight times) is at most ``max_ground_time``; entries 19 and 20 are
-    the COM's x from its start and the ground time."""
+@pytest.mark.parametrize("version", [1, 2])
+def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping(version):
+    """The same seeds and actions on v0 and v1 (or v2) give the same motion (only the reward and two observation
+    entries differ). v1's height term of a step that ends in flight is its weight times the sum of two Gaussian
+    kernels of the COM's ballistic apex error (scales 5 cm and 1 cm), times the step's flight
+    share; a flight's terms are banked and paid at the step where it lands, unless the robot falls there, and nothing
+    is paid otherwise. v2 pays a flight only if it lasted ``min_flight`` (with the landing step's share of it), and not
+    at its landing: at the step where the next flight has lasted ``min_flight`` (unless the robot falls there). The
+    alive bonus is v0's while the ground time (since the end of the last flight of at least ``min_flight``, or the
+    start, recomputed here from the contact modes and flight times) is at most ``max_ground_time``; entries 19 and
+    20 are the COM's x from its start and the ground time. The episodes: random torques with knee kicks, standing
+    first or not; a throw and a landing held; the model-based hopper's hops."""
     from leg_env.tasks.stance import Obs
+    from policies.hopper import HopperController
 
-    v0, v1 = (gym.make(f"leg_env/PlanarLegHop-v{k}", reset_noise_scale=0.002).unwrapped for k in (0, 1))
+    v0, v1 = (gym.make(f"leg_env/PlanarLegHop-v{k}", reset_noise_scale=0.002).unwrapped for k in (0, version))
     hold = (v1.nominal.tau / np.asarray(v1.config.torque_limit)).astype(np.float32)
     assert v0.observation_space.shape == (19,) and v1.observation_space.shape == (21,)
     cfg = v1.config
     assert cfg.flight_height and cfg.observe_progress and cfg.max_ground_time == 1.0 and cfg.min_flight == 0.05
     assert cfg.height_scale == 0.05 and cfg.height_scale_fine == 0.01 and cfg.pay_on_landing
+    assert cfg.pay_hops_only == cfg.pay_on_next_hop == (version == 2)
     y_stand = dyn.com_position(v1.nominal.q, v1.params)[1]
-    flights = grounded = unpaid = landings = 0
-    for seed in range(6):
-        o0, i0 = v0.reset(seed=seed)
-        o1, i1 = v1.reset(seed=seed)
-        x0, run, ground, banked = i1["com_position"][0], 0.0, 0.0, 0.0
+    hopper = HopperController(v1.params, v1.config)
+    flights = grounded = unpaid = landings = short_landings = withheld = 0
+    q_up, qd_up = v1.nominal.q.copy(), np.zeros(5)
+    q_up[1] += 0.001
+    qd_up[1] = 1.0  # thrown up at 1 m/s: a flight of about 0.2 s, landed holding the posture
+    for seed in range(8):
+        thrown = {"qpos": q_up, "qvel": qd_up} if seed == 6 else None
+        o0, i0 = v0.reset(seed=seed, options=thrown)
+        o1, i1 = v1.reset(seed=seed, options=thrown)
+        hopper.reset()
+        x0, run, ground, banked, pending = i1["com_position"][0], 0.0, 0.0, 0.0, 0.0
         assert np.array_equal(o0, o1[:19]) and o1[Obs.com_drift] == 0.0 and o1[Obs.ground_time] == 0.0
         for k, a in enumerate(actions(300, 1, seed=seed)[:, 0]):
-            if seed % 2 and k < 150:  # standing for 1.5 s first
+            if seed == 7:  # hopping
+                a = hopper.predict(o1)[0].astype(np.float32)
+            elif thrown is not None or seed % 2 and k < 150:  # standing for 1.5 s first (or after the throw)
                 a = hold
             else:  # random torques and, now and then, a kick of the knee
                 a = a if k % 60 < 30 else np.float32([0.0, -1.0]) if k % 60 < 36 else np.float32([0.0, 1.0])
@@ -382,6 +398,8 @@ def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping
             assert np.array_equal(o0, o1[:19]) and t0 == t1
             assert o1[Obs.com_drift] == np.float32(i1["com_position"][0] - x0)
             landed = i1["contact_mode"] != "flight" and run > 0.0
+            length = run + i1["flight_time"]  # the flight's, when it landed in this step
+            became_hop = i1["contact_mode"] == "flight" and run < cfg.min_flight <= length
             run = run + i1["flight_time"] if i1["contact_mode"] == "flight" else 0.0
             ground = 0.0 if run >= cfg.min_flight else ground + v1.dt
             assert i1["ground_time"] == ground and o1[Obs.ground_time] == np.float32(ground)
@@ -391,12 +409,20 @@ def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping
                 err = y + vy * vy / (2.0 * v1.params.g) - (y_stand + command)  # the arc's apex above the ground's
                 kernel = np.exp(-((err / cfg.height_scale) ** 2)) + np.exp(-((err / cfg.height_scale_fine) ** 2))
                 banked += cfg.height_weight * kernel * i1["flight_time"] / v1.dt
-                assert i1["reward_height"] == 0.0  # banked, not paid
-            else:
-                grounded += 1
-                expected = banked if landed and not t1 else 0.0  # a landing pays the flight; a fall pays none
+                expected = 0.0  # banked, not paid
+                if cfg.pay_on_next_hop and became_hop:  # v2: the landed hops before this one
+                    expected, pending = (0.0 if t1 else pending), 0.0
                 assert i1["reward_height"] == pytest.approx(expected, rel=1e-9, abs=1e-12)
                 landings += expected > 0.0
+            else:
+                grounded += 1
+                short = cfg.pay_hops_only and length < cfg.min_flight  # v2: a flight shorter than a hop pays none
+                due = banked if landed and not t1 and not short else 0.0  # a landing pays the flight; a fall none
+                if cfg.pay_on_next_hop:  # v2: paid when the next hop has lasted min_flight
+                    pending, due = pending + due, 0.0
+                assert i1["reward_height"] == pytest.approx(due, rel=1e-9, abs=1e-12)
+                landings += due > 0.0
+                short_landings += bool(landed and short and banked > 0.0)
                 banked = 0.0 if landed else banked
             assert i1["reward_alive"] == (i0["reward_alive"] if ground <= cfg.max_ground_time else 0.0)
             unpaid += i0["reward_alive"] > 0.0 and i1["reward_alive"] == 0.0
@@ -404,7 +430,29 @@ def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping
             assert all(i0[k] == i1[k] for k in others)
             if t0:
                 break
+        withheld += pending > 0.0  # v2: a landed hop with no hop after it (the throw) is never paid
     assert flights > 10 and grounded > 10 and unpaid > 0 and landings > 2
+    assert (short_landings > 0) == (version == 2) and (withheld > 0) == (version == 2)
+
+
+def test_hop_v2_with_min_flight_zero_pays_each_landed_flight_at_the_next_lift_off():
+    """With ``min_flight=0`` every flight is a hop: v2 pays a landed one at the first step of the next flight."""
+    from policies.hopper import HopperController
+
+    env = gym.make("leg_env/PlanarLegHop-v2", min_flight=0.0).unwrapped
+    hopper = HopperController(env.params, env.config)
+    obs, _ = env.reset(seed=3)
+    hopper.reset()
+    at_lift_off, was_flight = [], False
+    for _ in range(300):
+        obs, _, terminated, _, info = env.step(hopper.predict(obs)[0])
+        flight = info["contact_mode"] == "flight"
+        if info["reward_height"] > 0.0:
+            at_lift_off.append(flight and not was_flight)
+        was_flight = flight
+        if terminated:
+            break
+    assert len(at_lift_off) >= 2 and all(at_lift_off)
 
 
 def test_hop_v1_pays_nothing_for_standing_after_a_second_where_v0_paid_its_height_term():
@@ -450,7 +498,7 @@ def test_push_reward_charges_the_com_leaving_the_start():
     assert r == pytest.approx(sum(info[k] for k in env.task.reward_keys), abs=0.0)
 
 
-PUSH, HOP, HOP1 = "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1"
+PUSH, HOP, HOP1, HOP2 = "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1", "leg_env/PlanarLegHop-v2"
 BAD_CONFIGS = [
     (PUSH, {"push_force": (50.0, 20.0)}, ValueError, "push_force"),
     (PUSH, {"push_force": (-1.0, 20.0)}, ValueError, "push_force"),
@@ -478,6 +526,11 @@ BAD_CONFIGS = [
     (HOP1, {"observe_progress": "yes"}, TypeError, "observe_progress"),
     (HOP1, {"max_ground_time": 0.0}, ValueError, "max_ground_time"),
     (HOP1, {"min_flight": -0.01}, ValueError, "min_flight"),
+    (HOP1, {"pay_hops_only": "no"}, TypeError, "pay_hops_only"),
+    (HOP1, {"pay_hops_only": True, "pay_on_landing": False}, ValueError, "pay_hops_only"),
+    (HOP, {"pay_hops_only": True}, ValueError, "pay_hops_only"),
+    (HOP, {"pay_on_next_hop": True}, ValueError, "pay_on_next_hop"),
+    (HOP2, {"pay_on_next_hop": 2}, TypeError, "pay_on_next_hop"),
 ]
 
 

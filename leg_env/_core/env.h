@@ -33,6 +33,7 @@ typedef struct {
     double flight_run;  /* the current flight's time so far (0 on the ground) [s] */
     double ground_time; /* time since the last flight of at least min_flight ended, or since the start [s] */
     double banked;      /* the height term of the current flight, paid at its landing (pay_on_landing) */
+    double pending;     /* a landed hop's banked term, paid when the next hop lasts min_flight (pay_on_next_hop) */
 } hop_state;
 
 /* One robot's state. */
@@ -89,6 +90,8 @@ typedef struct {
             uint8_t flight_height;    /* the height term is paid in flight only (else at every step) */
             uint8_t observe_progress; /* the COM's x from its start and the ground time are observation entries */
             uint8_t pay_on_landing;   /* a flight's height term is paid at its landing, if the robot stays up */
+            uint8_t pay_hops_only;    /* ... and only if the flight was a hop (at least min_flight long) */
+            uint8_t pay_on_next_hop;  /* ... and not at its landing but when the next hop has lasted min_flight */
         } hop;
     } task;
 } env_settings;

@@ -797,7 +797,7 @@ static const field STATE_PUSH_FIELDS[] = {
 static const field STATE_HOP_FIELDS[] = {
     TASK(env_state, task.hop.command, "command", "f8", 1), TASK(env_state, task.hop.x_com0, "x_com0", "f8", 1),
     TASK(env_state, task.hop.flight_run, "flight_run", "f8", 1), TASK(env_state, task.hop.ground_time, "ground_time", "f8", 1),
-    TASK(env_state, task.hop.banked, "banked", "f8", 1),
+    TASK(env_state, task.hop.banked, "banked", "f8", 1), TASK(env_state, task.hop.pending, "pending", "f8", 1),
     {NULL, 0, NULL, 0}};
 
 static const field ROBOT_FIELDS[] = {
@@ -825,6 +825,8 @@ static const field SETTINGS_HOP_FIELDS[] = {
     TASK(env_settings, task.hop.flight_height, "flight_height", "?", 1),
     TASK(env_settings, task.hop.observe_progress, "observe_progress", "?", 1),
     TASK(env_settings, task.hop.pay_on_landing, "pay_on_landing", "?", 1),
+    TASK(env_settings, task.hop.pay_hops_only, "pay_hops_only", "?", 1),
+    TASK(env_settings, task.hop.pay_on_next_hop, "pay_on_next_hop", "?", 1),
     {NULL, 0, NULL, 0}};
 
 static const field OUT_FIELDS[] = {

@@ -236,6 +236,9 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     const env_settings *c = b->settings;
     /* hops: a flight of at least min_flight; the ground time runs from the end of the last one */
     const int landed = s->mode != LEG_FLIGHT && t->flight_run > 0.0; /* a flight ended in this step */
+    const double flight_length = t->flight_run + o->flight_time;      /* with this step's share, when it landed */
+    const int hop_began = s->mode == LEG_FLIGHT && t->flight_run + o->flight_time >= c->task.hop.min_flight
+                          && (t->flight_run < c->task.hop.min_flight || t->flight_run == 0.0); /* this flight became a hop */
     t->flight_run = s->mode == LEG_FLIGHT ? t->flight_run + o->flight_time : 0.0;
     t->ground_time = t->flight_run >= c->task.hop.min_flight ? 0.0 : t->ground_time + c->dt;
     terms[0] = stance_terms[0]; /* alive: the balance task's health predicate */
@@ -254,9 +257,17 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     if (c->task.hop.pay_on_landing) { /* banked over the flight, paid when it lands (and not if the landing falls) */
         t->banked += terms[1];
         terms[1] = 0.0;
-        if (landed) {
-            terms[1] = t->banked;
+        if (landed) { /* a flight shorter than a hop (a stumble, a chattering foot) pays nothing if pay_hops_only */
+            terms[1] = c->task.hop.pay_hops_only && flight_length < c->task.hop.min_flight ? 0.0 : t->banked;
             t->banked = 0.0;
+            if (c->task.hop.pay_on_next_hop) { /* a hop counts once the robot has hopped again: a jump and a fall pays nothing */
+                t->pending += terms[1];
+                terms[1] = 0.0;
+            }
+        }
+        if (c->task.hop.pay_on_next_hop && hop_began) {
+            terms[1] = t->pending;
+            t->pending = 0.0;
         }
     }
     if (c->task.hop.observe_progress) {
@@ -284,6 +295,7 @@ static void hop_start(const env_batch *b, Py_ssize_t i)
     s->task.hop.flight_run = 0.0;
     s->task.hop.ground_time = 0.0;
     s->task.hop.banked = 0.0;
+    s->task.hop.pending = 0.0;
     if (b->settings->task.hop.observe_progress) {
         b->obs[i * b->obs_cols + OBS_COM_DRIFT] = 0.0f;
         b->obs[i * b->obs_cols + OBS_GROUND_TIME] = 0.0f;

@@ -1,6 +1,6 @@
 """Soak: millions of env-steps of abuse through ``gymnasium.make_vec``, counting what went wrong.
 
-For each case of ``CASES`` (both contact models of ``leg_env/PlanarLegStance-v0``, the push task and both hop versions, and
+For each case of ``CASES`` (both contact models of ``leg_env/PlanarLegStance-v0``, the push task and every hop version, and
 each of them again with a robot per sub-env drawn at every reset, ``randomize=True``) and
 each action kind (``random``: uniform in [-1, 1]; ``bang_bang``: every joint at -1 or +1, each flipping
 with probability 0.1 per step), at ten times the default torque limit (``torque_limit=500``), this steps
@@ -39,11 +39,13 @@ CASES = {  # name: (env id, keyword arguments)
     "push": ("leg_env/PlanarLegPush-v0", {}),
     "hop": ("leg_env/PlanarLegHop-v0", {}),
     "hop v1": ("leg_env/PlanarLegHop-v1", {}),
+    "hop v2": ("leg_env/PlanarLegHop-v2", {}),
     "stance pinned randomised": (leg_env.ENV_ID, {"contact": "pinned", "randomize": True}),
     "stance unilateral randomised": (leg_env.ENV_ID, {"contact": "unilateral", "randomize": True}),
     "push randomised": ("leg_env/PlanarLegPush-v0", {"randomize": True}),
     "hop randomised": ("leg_env/PlanarLegHop-v0", {"randomize": True}),
     "hop v1 randomised": ("leg_env/PlanarLegHop-v1", {"randomize": True}),
+    "hop v2 randomised": ("leg_env/PlanarLegHop-v2", {"randomize": True}),
 }
 ACTIONS = ("random", "bang_bang")
 TORQUE_LIMIT = 500.0  # ten times the default 50 N m

@@ -236,8 +236,8 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     const env_settings *c = b->settings;
     /* hops: a flight of at least min_flight; the ground time runs from the end of the last one */
     const int landed = s->mode != LEG_FLIGHT && t->flight_run > 0.0; /* a flight ended in this step */
-    const double flight_length = t->flight_run + o->flight_time;      /* with this step's share, when it landed */
-    const int hop_began = s->mode == LEG_FLIGHT && t->flight_run + o->flight_time >= c->task.hop.min_flight
+    const double flight_length = t->flight_run + o->flight_time; /* with this step's share */
+    const int hop_began = s->mode == LEG_FLIGHT && flight_length >= c->task.hop.min_flight
                           && (t->flight_run < c->task.hop.min_flight || t->flight_run == 0.0); /* this flight became a hop */
     t->flight_run = s->mode == LEG_FLIGHT ? t->flight_run + o->flight_time : 0.0;
     t->ground_time = t->flight_run >= c->task.hop.min_flight ? 0.0 : t->ground_time + c->dt;

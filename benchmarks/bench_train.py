@@ -4,8 +4,9 @@
     .venv/bin/python benchmarks/bench_train.py --env-id leg_env/PlanarLegBalance-v0 --rollouts 20
 
 For each configuration of ``train/hyperparams/ppo.yml`` that trains a unilateral task from scratch (``CONFIGS``),
-SB3 PPO is built exactly as ``python -m train.ppo`` builds it (the same ``resolve_config``, the same
-``leg_env.sb3`` adapter with ``per_env_info=False``, ``VecNormalize`` as configured) and learns for ``--rollouts``
+PPO is built exactly as ``python -m train.ppo`` builds it (``train.chunked_ppo.ChunkedPPO``, the same
+``resolve_config``, the same ``leg_env.sb3`` adapter with ``per_env_info=False``, ``VecNormalize`` as configured)
+and learns for ``--rollouts``
 rollouts after one untimed warm-up rollout, without evaluations or checkpoints (``train.ppo`` adds one
 evaluation of 32-64 episodes per 3M steps: under 1% of the time). A callback splits the wall-clock into:
 
@@ -14,8 +15,9 @@ evaluation of 32-64 episodes per 3M steps: under 1% of the time). A callback spl
 * **env**: the part of the rollout spent in the adapter's ``step`` (the compiled physics and its Python);
 * **update**: PPO's gradient steps (``n_epochs x n_envs x n_steps / batch_size`` of them per rollout).
 
-Each configuration runs with torch on 1 thread and on every core, each measurement in a fresh process. The reference in the same run: the native
-batch ``gym.make_vec(env_id, n_envs)`` under pre-sampled random actions, the env alone. The env-steps/s end
+Each configuration runs with torch on 1 thread and on every core, each measurement in a fresh process. The references in the
+same run: SB3's own ``PPO`` (its ``train`` without chunks) on every core, and the native batch
+``gym.make_vec(env_id, n_envs)`` under pre-sampled random actions, the env alone. The env-steps/s end
 to end is ``n_envs x n_steps x rollouts / wall time``. The table goes to stdout and to
 ``benchmarks/results/train_speed.md``, headed by the machine, the versions and the date.
 """
@@ -62,14 +64,16 @@ def env_rate(env_id: str, n_envs: int, env_kwargs: dict, calls: int = 200) -> fl
     return rate
 
 
-def train_rate(env_id: str, rollouts: int, threads: int) -> dict:
-    """PPO as ``train.ppo`` builds it for ``env_id``, timed over ``rollouts`` rollouts after a warm-up one."""
+def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") -> dict:
+    """PPO as ``train.ppo`` builds it for ``env_id`` (``algo="sb3"``: SB3's ``PPO`` instead of ``ChunkedPPO``), timed
+    over ``rollouts`` rollouts after a warm-up one."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
     from leg_env.sb3 import make_sb3_vec_env
+    from train.chunked_ppo import ChunkedPPO
     from train.ppo import TrainArgs, _ppo_kwargs, resolve_config
 
     torch.set_num_threads(threads)
@@ -89,7 +93,7 @@ def train_rate(env_id: str, rollouts: int, threads: int) -> dict:
     inner.step_wait = timed_step_wait
     if config["normalize"] is not False:
         venv = VecNormalize(venv, **config["normalize"])
-    model = PPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, **_ppo_kwargs(config))
+    model = {"chunked": ChunkedPPO, "sb3": PPO}[algo](config["policy"], venv, seed=SEED, device="cpu", verbose=0, **_ppo_kwargs(config))
     rollout_steps = n_envs * model.n_steps
 
     class Phases(BaseCallback):
@@ -126,6 +130,7 @@ def train_rate(env_id: str, rollouts: int, threads: int) -> dict:
         "epochs": ppo["n_epochs"],
         "net": ppo.get("policy_kwargs", {}).get("net_arch"),
         "threads": threads,
+        "algo": algo,
         "rate": rollout_steps * rollouts / wall,
         "rollout": spent["rollout"] / wall,
         "env": env_spent / wall,
@@ -135,10 +140,10 @@ def train_rate(env_id: str, rollouts: int, threads: int) -> dict:
     }
 
 
-def _in_fresh_process(env_id: str, rollouts: int, threads: int) -> dict:
+def _in_fresh_process(env_id: str, rollouts: int, threads: int, algo: str = "chunked") -> dict:
     """``train_rate`` in a new interpreter: torch's thread pools and the previous run's memory do not carry over
     (timed in one process, a configuration timed after another ran up to a quarter slower)."""
-    command = [sys.executable, str(Path(__file__).resolve()), "--one", env_id, str(threads), "--rollouts", str(rollouts)]
+    command = [sys.executable, str(Path(__file__).resolve()), "--one", env_id, str(threads), algo, "--rollouts", str(rollouts)]
     done = subprocess.run(command, capture_output=True, text=True, check=False)
     lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
     if done.returncode != 0 or not lines:
@@ -151,24 +156,27 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--env-id", action="append", help=f"a configuration to time (default: {', '.join(CONFIGS)})")
     parser.add_argument("--rollouts", type=int, default=30, help="timed rollouts per configuration and thread count")
     parser.add_argument("--no-write", action="store_true", help=f"print only, do not write {RESULTS.relative_to(ROOT)}")
-    parser.add_argument("--one", nargs=2, metavar=("ENV_ID", "THREADS"), help=argparse.SUPPRESS)
+    parser.add_argument("--one", nargs=3, metavar=("ENV_ID", "THREADS", "ALGO"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.rollouts < 2:
         parser.error("--rollouts must be at least 2")
+    from train.chunked_ppo import UPDATE_CHUNK
     from train.machine import describe
 
     if args.one:  # one measurement, in this fresh process: its result as a JSON line
-        print("RESULT " + json.dumps(train_rate(args.one[0], args.rollouts, int(args.one[1]))))
+        print("RESULT " + json.dumps(train_rate(args.one[0], args.rollouts, int(args.one[1]), args.one[2])))
         return
     env_ids = args.env_id or list(CONFIGS)
     threads = sorted({1, os.cpu_count() or 1})
     rows, checks = [], []
     for env_id in env_ids:
         results = [_in_fresh_process(env_id, args.rollouts, k) for k in threads]
+        sb3 = _in_fresh_process(env_id, args.rollouts, threads[-1], "sb3")
         reference = env_rate(env_id, results[0]["n_envs"], results[0]["env_kwargs"])
-        for r in results:
+        for r in (*results, sb3):
+            trainer = "ChunkedPPO" if r["algo"] == "chunked" else "SB3 PPO (reference)"
             rows.append(
-                f"| {env_id} | {r['n_envs']} | {r['batch']:,} | {r['epochs']} | {r['gradient_steps']} | {r['net']} | {r['threads']} "
+                f"| {env_id} | {trainer} | {r['n_envs']} | {r['batch']:,} | {r['epochs']} | {r['gradient_steps']} | {r['net']} | {r['threads']} "
                 f"| {r['rate']:,.0f} | {r['rollout']:.0%} | {r['env']:.0%} | {r['update']:.0%} | {reference:,.0f} |"
             )
         best = max(results, key=lambda r: r["rate"])
@@ -183,13 +191,15 @@ def main(argv: list[str] | None = None) -> None:
         "",
         f"Machine: {describe()}",
         "",
-        f"Each row: {args.rollouts} rollouts of PPO as `python -m train.ppo` builds it (after one untimed), without evaluations. "
+        f"Each row: {args.rollouts} rollouts of PPO as `python -m train.ppo` builds it (after one untimed), without evaluations: "
+        f"`ChunkedPPO` (SB3's PPO with each minibatch's gradient summed over chunks of {UPDATE_CHUNK:,} samples, the same update), and "
+        "SB3's `PPO` itself as the reference. "
         "Shares of the wall-clock: the rollout (policy forward pass, env step, rollout buffer), of which the env step "
         "(the `leg_env.sb3` adapter), and the update (the gradient steps). The last column: the native batch alone "
         "under random actions, in the same run.",
         "",
-        "| configuration | envs | batch | epochs | gradient steps per rollout | net | torch threads | env-steps/s | rollout | of which env | update | env alone, env-steps/s |",
-        "|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|",
+        "| configuration | trainer | envs | batch | epochs | gradient steps per rollout | net | torch threads | env-steps/s | rollout | of which env | update | env alone, env-steps/s |",
+        "|---|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|",
         *rows,
         "",
         "Targets:",

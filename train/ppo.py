@@ -6,7 +6,9 @@
 
 The env is natively batched and reaches SB3 through ``leg_env.sb3``'s VecEnv adapter, wrapped in
 ``VecNormalize`` as the file's ``normalize`` says (the default normalises returns only). Hyperparameters come from ``train/hyperparams/ppo.yml``
-(RL Baselines3 Zoo's format, so the Zoo can train the env with the same file).
+(RL Baselines3 Zoo's format, so the Zoo can train the env with the same file). The trainer is SB3's PPO with each
+minibatch's gradient summed over cache-sized chunks (``train.chunked_ppo.ChunkedPPO``): the same update, faster on
+large minibatches; its models load with SB3's ``PPO.load``.
 
 A run writes one folder::
 
@@ -283,12 +285,12 @@ def train(args: TrainArgs, command: str | None = None) -> Path:
 
 
 def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Path:
-    from stable_baselines3 import PPO
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
 
     from leg_env.sb3 import make_sb3_vec_env
     from train.callbacks import FrozenActor, PeriodicCheckpoint, PeriodicEvaluation, RewardTermsLogger, evaluate_now
+    from train.chunked_ppo import ChunkedPPO
     from train.plots import plot_learning_curve
 
     checkpoint = None
@@ -296,6 +298,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
         checkpoint = load_checkpoint(
             out / "checkpoints",
             normalize=config["normalize"] is not False,
+            algo=ChunkedPPO,
             tensorboard_log=str(out / "tb"),
             verbose=max(0, args.verbose - 1),
         )
@@ -316,7 +319,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
     if checkpoint is None:
         if config["normalize"] is not False:
             venv = VecNormalize(venv, **config["normalize"])
-        model = PPO(
+        model = ChunkedPPO(
             config["policy"],
             venv,
             seed=seed,

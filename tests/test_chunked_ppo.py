@@ -1,0 +1,85 @@
+"""``train.chunked_ppo.ChunkedPPO`` makes SB3's PPO update, whatever the chunk size."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from stable_baselines3 import PPO
+
+from leg_env.sb3 import make_sb3_vec_env
+from train.chunked_ppo import ChunkedPPO
+
+N_ENVS, N_STEPS = 16, 32  # one rollout of 512 samples
+LOGGED = ("train/policy_gradient_loss", "train/value_loss", "train/entropy_loss", "train/approx_kl", "train/clip_fraction", "train/loss")
+
+
+def _one_update(algo, **kwargs):
+    """A model of ``algo`` after one rollout of the hop task and one update (everything seeded alike)."""
+    venv = make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v2", per_env_info=False)
+    settings = dict(n_steps=N_STEPS, batch_size=256, n_epochs=3, learning_rate=3e-3, seed=0, device="cpu",
+                    policy_kwargs={"net_arch": [32, 32]})
+    settings.update(kwargs)
+    model = algo("MlpPolicy", venv, **settings)
+    model.learn(N_ENVS * N_STEPS)
+    venv.close()
+    return model
+
+
+def _parameters(model) -> dict:
+    return {name: value.detach().clone() for name, value in model.policy.state_dict().items()}
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {},
+        {"ent_coef": 0.01, "clip_range_vf": 0.1, "normalize_advantage": False},
+        {"target_kl": 1e-4},  # stops early, on the whole minibatch's KL, before the step that would exceed it
+        # Adam's steps do not depend on the gradient's scale: plain SGD, unclipped, checks the gradient itself
+        {"max_grad_norm": 1e9, "learning_rate": 1e-4, "policy_kwargs": {"net_arch": [32, 32], "optimizer_class": torch.optim.SGD}},
+    ],
+    ids=["default", "entropy-vf-clip", "target-kl", "sgd"],
+)
+@pytest.mark.parametrize("chunk", [1, 48, 128])
+def test_chunked_update_is_ppo_update(settings, chunk):
+    torch.set_num_threads(1)
+    reference = _one_update(PPO, **settings)
+    chunked = _one_update(ChunkedPPO, update_chunk=chunk, **settings)
+    before = _parameters(PPO("MlpPolicy", make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v2"), seed=0,
+                             device="cpu", policy_kwargs=settings.get("policy_kwargs", {"net_arch": [32, 32]})))
+    after_ref, after = _parameters(reference), _parameters(chunked)
+    moved = max((after_ref[k] - before[k]).abs().max().item() for k in before)
+    assert moved > 1e-3  # the update did something (and the two models began alike: same seed)
+    for name in after_ref:
+        # round-off: float32's resolution of the parameter, and of the update
+        np.testing.assert_allclose(after[name].numpy(), after_ref[name].numpy(), rtol=1e-6, atol=1e-5 * moved, err_msg=name)
+    for key in LOGGED:
+        got, want = chunked.logger.name_to_value[key], reference.logger.name_to_value[key]
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7, err_msg=key)
+    assert chunked._n_updates == reference._n_updates
+
+
+def test_minibatch_within_one_chunk_is_sb3_bit_for_bit():
+    torch.set_num_threads(1)
+    reference, chunked = _one_update(PPO), _one_update(ChunkedPPO, update_chunk=256)
+    after_ref, after = _parameters(reference), _parameters(chunked)
+    for name in after_ref:
+        assert torch.equal(after[name], after_ref[name]), name
+
+
+def test_saved_model_loads_as_either_class(tmp_path):
+    model = _one_update(ChunkedPPO, update_chunk=64)
+    model.save(tmp_path / "model.zip")
+    again = ChunkedPPO.load(tmp_path / "model.zip", device="cpu")
+    assert again.update_chunk == 64
+    plain = PPO.load(tmp_path / "model.zip", device="cpu")
+    obs = np.zeros((1, *model.observation_space.shape), dtype=np.float32)
+    np.testing.assert_array_equal(plain.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
+
+
+@pytest.mark.parametrize("chunk, error", [(0, ValueError), (-5, ValueError), (2.5, TypeError), (True, TypeError), ("64", TypeError)])
+def test_bad_update_chunk(chunk, error):
+    venv = make_sb3_vec_env(2, seed=0)
+    with pytest.raises(error, match="update_chunk"):
+        ChunkedPPO("MlpPolicy", venv, update_chunk=chunk, n_steps=8, batch_size=16, device="cpu")

@@ -40,12 +40,14 @@ CASES = {  # name: (env id, keyword arguments)
     "hop": ("leg_env/PlanarLegHop-v0", {}),
     "hop v1": ("leg_env/PlanarLegHop-v1", {}),
     "hop v2": ("leg_env/PlanarLegHop-v2", {}),
+    "hop v3": ("leg_env/PlanarLegHop-v3", {}),
     "stance pinned randomised": (leg_env.ENV_ID, {"contact": "pinned", "randomize": True}),
     "stance unilateral randomised": (leg_env.ENV_ID, {"contact": "unilateral", "randomize": True}),
     "push randomised": ("leg_env/PlanarLegPush-v0", {"randomize": True}),
     "hop randomised": ("leg_env/PlanarLegHop-v0", {"randomize": True}),
     "hop v1 randomised": ("leg_env/PlanarLegHop-v1", {"randomize": True}),
     "hop v2 randomised": ("leg_env/PlanarLegHop-v2", {"randomize": True}),
+    "hop v3 randomised": ("leg_env/PlanarLegHop-v3", {"randomize": True}),
 }
 ACTIONS = ("random", "bang_bang")
 TORQUE_LIMIT = 500.0  # ten times the default 50 N m

@@ -3,8 +3,8 @@
 Importing the package registers every task id of ``leg_env.tasks.REGISTRY`` (``gymnasium.make`` and
 ``gymnasium.make_vec``): ``leg_env/PlanarLegStance-v0`` (balance on a pinned foot, the lesson's model),
 ``leg_env/PlanarLegBalance-v0`` (balance on the unilateral ground), ``leg_env/PlanarLegPush-v0`` and
-``leg_env/PlanarLegHop-v2`` (and its ``-v0`` and ``-v1``, whose height terms can be collected without hopping:
-Gymnasium warns that they are out of date); and, for one release, the deprecated ``leg_env/PlanarLegStance-v1`` (the old id
+``leg_env/PlanarLegHop-v3`` (and its ``-v0`` to ``-v2``, whose height terms can be collected without hopping to the
+command: Gymnasium warns that they are out of date); and, for one release, the deprecated ``leg_env/PlanarLegStance-v1`` (the old id
 of ``PlanarLegBalance-v0``, which it makes with a ``DeprecationWarning``). It stays cheap: the environments load on first use,
 and pygame only when a frame is drawn. The physics and the tasks run in the compiled core (``leg_env/_core``,
 C, built at install): nothing is compiled at run time.

@@ -1,4 +1,4 @@
-"""A model-based hopping controller for ``leg_env/PlanarLegHop-v2`` (and v0, v1): Raibert's three-part decomposition.
+"""A model-based hopping controller for ``leg_env/PlanarLegHop-v3`` (and v0-v2): Raibert's three-part decomposition.
 
 Raibert (1986) splits running into three decoupled servos. On this articulated leg (hip and knee, point
 foot, no spring, 50 N m per joint) each becomes a law on the observation, with the stance torques solved
@@ -136,9 +136,10 @@ class HopperController(BatchedController):
         self.T_s, self.k_v, self.k_x = stance_time, speed_gain, position_gain
         self.attitude_gains, self.friction_margin, self.swing_gains = attitude_gains, friction_margin, swing_gains
 
-    # PlanarLegHop's 19 entries (v0) or 21 (v1, v2, whose last two, the COM's drift and the ground time, the
-    # controller does not read: it keeps its own dead reckoning and hops all the time)
-    widths, task, dtype = (19, 21), "PlanarLegHop: 19 entries (v0) or 21 (v1, v2)", np.float64
+    # PlanarLegHop's 19 entries (v0), 21 (v1, v2) or 22 (v3), whose entries after the command (the COM's drift, the
+    # ground time, the last hop's apex) the controller does not read: it keeps its own dead reckoning and apex
+    # estimate and hops all the time
+    widths, task, dtype = (19, 21, 22), "PlanarLegHop: 19 entries (v0), 21 (v1, v2) or 22 (v3)", np.float64
 
     def _allocate(self, n: int) -> None:
         self._x0, self._bias, self._apex = np.zeros(n), np.zeros(n), np.zeros(n)

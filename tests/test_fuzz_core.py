@@ -629,9 +629,14 @@ def _values_of(base):
     return (0, 1, 2, 255)  # bool: raw bytes
 
 
-def _obs_dim(task, unilateral, observe_progress):
-    """The observation's width the C core requires: the hop's 19, or 21 observing its progress (v1); else the ground's."""
-    return (21 if observe_progress else 19) if task == 2 else (18 if unilateral else 12)
+def _obs_dim(task, unilateral, observe_progress, observe_apex=False):
+    """The observation's width the C core requires: the hop's 19, 21 observing its progress (v1), 22 observing the last
+    apex too (v3; None, refused, without the progress); else the ground's."""
+    if task != 2:
+        return 18 if unilateral else 12
+    if observe_apex:
+        return 22 if observe_progress else None
+    return 21 if observe_progress else 19
 
 
 def field_rule(array, field, value, task, obs_cols, modes, takes_obs):
@@ -647,10 +652,13 @@ def field_rule(array, field, value, task, obs_cols, modes, takes_obs):
               "substeps": lambda v: 1 <= v <= 4096}.get(field)
         if ok is not None:
             return (A if ok(value) else R), ("settings",)
+        progress, apex = obs_cols in (21, 22), obs_cols == 22  # the hop's flags that gave obs its width
         if field == "unilateral" and takes_obs:
-            return (A if _obs_dim(task, bool(value), obs_cols == 21) == obs_cols else R), ("obs", "settings")
+            return (A if _obs_dim(task, bool(value), progress, apex) == obs_cols else R), ("obs", "settings")
         if field == "observe_progress" and takes_obs:  # the hop's (its own settings only)
-            return (A if _obs_dim(task, False, bool(value)) == obs_cols else R), ("obs", "settings")
+            return (A if _obs_dim(task, False, bool(value), apex) == obs_cols else R), ("obs", "settings")
+        if field == "observe_apex" and takes_obs:
+            return (A if _obs_dim(task, False, progress, bool(value)) == obs_cols else R), ("obs", "settings")
     if array == "state" and field in ("mode", "prev_mode") and modes:
         return (A if value in (0, 1, 2, 3) else R), ("state",)
     return A, (array,)

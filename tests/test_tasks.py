@@ -17,8 +17,8 @@ from leg_env import dynamics as dyn
 from leg_env.tasks import REGISTRY
 
 NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1",
-           "leg_env/PlanarLegHop-v2")
-OUT_OF_DATE = ("leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1")  # a higher version of its name is registered
+           "leg_env/PlanarLegHop-v2", "leg_env/PlanarLegHop-v3")
+OUT_OF_DATE = ("leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1", "leg_env/PlanarLegHop-v2")  # a higher version of its name is registered
 ALL_IDS = tuple(REGISTRY)
 NUM_ENVS = 4
 SEED = 5
@@ -33,6 +33,7 @@ KWARGS = {
     "leg_env/PlanarLegHop-v0": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
     "leg_env/PlanarLegHop-v1": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
     "leg_env/PlanarLegHop-v2": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
+    "leg_env/PlanarLegHop-v3": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
 }
 
 
@@ -239,7 +240,8 @@ def test_sb3_adapter_contract(env_id):
                 assert info["terminal_observation"].shape == venv.observation_space.shape
     assert done_seen >= 4
     bad = {"ctrl_cost_weight": -1.0, "com_weight": "1", "command_range": (0.2, 0.1)}
-    field = {NEW_IDS[0]: "ctrl_cost_weight", PUSH: "com_weight", HOP: "command_range", HOP1: "command_range", HOP2: "command_range"}[env_id]
+    field = {NEW_IDS[0]: "ctrl_cost_weight", PUSH: "com_weight", HOP: "command_range", HOP1: "command_range", HOP2: "command_range",
+             HOP3: "command_range"}[env_id]
     with pytest.raises(ValueError, match=field):  # ArgumentTypeError is a ValueError too
         make_sb3_vec_env(2, env_id=env_id, **{field: bad[field]})
 
@@ -351,6 +353,24 @@ def test_hop_reward_peaks_at_the_commanded_apex_on_scripted_flights():
     assert abs(rises[np.argmax(rewards[:-1])] - command) <= 0.0025
 
 
+def _throw(env) -> dict:
+    """Reset options that throw the robot up at 1 m/s from its nominal posture."""
+    q, qd = env.nominal.q.copy(), np.zeros(5)
+    q[1] += 0.001
+    qd[1] = 1.0
+    return {"qpos": q, "qvel": qd}
+
+
+def _probe_action(seed: int, k: int, random_action, obs, hopper, hold, thrown) -> np.ndarray:
+    """The action at step ``k`` of the hop reward tests' episode ``seed``: the hopper's on seed 7; the posture held
+    after the throw and for the first 1.5 s of odd seeds; else random torques with, now and then, a kick of the knee."""
+    if seed == 7:
+        return hopper.predict(obs)[0].astype(np.float32)
+    if thrown is not None or seed % 2 and k < 150:
+        return hold
+    return random_action if k % 60 < 30 else np.float32([0.0, -1.0]) if k % 60 < 36 else np.float32([0.0, 1.0])
+
+
 @pytest.mark.parametrize("version", [1, 2])
 def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping(version):
     """The same seeds and actions on v0 and v1 (or v2) give the same motion (only the reward and two observation
@@ -362,7 +382,7 @@ def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping
     alive bonus is v0's while the ground time (since the end of the last flight of at least ``min_flight``, or the
     start, recomputed here from the contact modes and flight times) is at most ``max_ground_time``; entries 19 and
     20 are the COM's x from its start and the ground time. The episodes: random torques with knee kicks, standing
-    first or not; a throw and a landing held; the model-based hopper's hops."""
+    first or not; a throw (its landing is not held: it falls within 0.1 s); the model-based hopper's hops."""
     from leg_env.tasks.stance import Obs
     from policies.hopper import HopperController
 
@@ -376,23 +396,15 @@ def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping
     y_stand = dyn.com_position(v1.nominal.q, v1.params)[1]
     hopper = HopperController(v1.params, v1.config)
     flights = grounded = unpaid = landings = short_landings = withheld = 0
-    q_up, qd_up = v1.nominal.q.copy(), np.zeros(5)
-    q_up[1] += 0.001
-    qd_up[1] = 1.0  # thrown up at 1 m/s: a flight of about 0.2 s, landed holding the posture
     for seed in range(8):
-        thrown = {"qpos": q_up, "qvel": qd_up} if seed == 6 else None
+        thrown = _throw(v1) if seed == 6 else None
         o0, i0 = v0.reset(seed=seed, options=thrown)
         o1, i1 = v1.reset(seed=seed, options=thrown)
         hopper.reset()
         x0, run, ground, banked, pending = i1["com_position"][0], 0.0, 0.0, 0.0, 0.0
         assert np.array_equal(o0, o1[:19]) and o1[Obs.com_drift] == 0.0 and o1[Obs.ground_time] == 0.0
         for k, a in enumerate(actions(300, 1, seed=seed)[:, 0]):
-            if seed == 7:  # hopping
-                a = hopper.predict(o1)[0].astype(np.float32)
-            elif thrown is not None or seed % 2 and k < 150:  # standing for 1.5 s first (or after the throw)
-                a = hold
-            else:  # random torques and, now and then, a kick of the knee
-                a = a if k % 60 < 30 else np.float32([0.0, -1.0]) if k % 60 < 36 else np.float32([0.0, 1.0])
+            a = _probe_action(seed, k, a, o1, hopper, hold, thrown)
             o0, r0, t0, _, i0 = v0.step(a)
             o1, r1, t1, _, i1 = v1.step(a)
             assert np.array_equal(o0, o1[:19]) and t0 == t1
@@ -433,6 +445,93 @@ def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping
         withheld += pending > 0.0  # v2: a landed hop with no hop after it (the throw) is never paid
     assert flights > 10 and grounded > 10 and unpaid > 0 and landings > 2
     assert (short_landings > 0) == (version == 2) and (withheld > 0) == (version == 2)
+
+
+def test_hop_v3_pays_the_last_landed_hops_apex_at_every_step_while_hopping():
+    """The same seeds and actions on v0 and v3 give the same motion. v3's observation entry 21 is the apex rise above
+    standing of the last hop the robot landed (0 before the first). v3's height term at a step is its weight times
+    the sum of the two Gaussian kernels (5 cm, 1 cm) of the apex error of the last hop the robot landed (a flight of
+    at least ``min_flight``; the apex of its arc, ``y + y'^2 / 2g`` in flight), paid while the ground time is at
+    most ``max_ground_time``, and never on a step that falls; before the first landed hop it is 0. Flights shorter
+    than a hop change nothing. Modelled here step by step from the contact modes, flight times and the COM, over
+    random torques with knee kicks, standing, a throw, and the model-based hopper (``_probe_action``)."""
+    from leg_env.tasks.stance import Obs
+    from policies.hopper import HopperController
+
+    registered = gym.make("leg_env/PlanarLegHop-v3").unwrapped.config
+    assert registered.hold_height and not registered.flight_height and not registered.pay_on_landing and registered.observe_progress
+    assert registered.max_ground_time == 1.0 and registered.min_flight == 0.05 and registered.height_scale_fine == 0.01
+    assert registered.observe_apex and gym.make("leg_env/PlanarLegHop-v3").observation_space.shape == (22,)
+    # a ground time of 0.3 s at most, shorter than the hopper's stance: the term stops and starts again within an episode
+    v0, v3 = (gym.make(f"leg_env/PlanarLegHop-v{k}", reset_noise_scale=0.002, max_ground_time=0.3).unwrapped for k in (0, 3))
+    hold = (v3.nominal.tau / np.asarray(v3.config.torque_limit)).astype(np.float32)
+    cfg = v3.config
+    y_stand = dyn.com_position(v3.nominal.q, v3.params)[1]
+    hopper = HopperController(v3.params, v3.config)
+    paid = stopped = short_flights = hops = 0
+    for seed in range(8):
+        thrown = _throw(v3) if seed == 6 else None
+        o0, _ = v0.reset(seed=seed, options=thrown)
+        o3, _ = v3.reset(seed=seed, options=thrown)
+        hopper.reset()
+        run, ground, arc, held, arc_rise, rise = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        assert o3[Obs.last_apex] == 0.0
+        for k, a in enumerate(actions(300, 1, seed=seed)[:, 0]):
+            a = _probe_action(seed, k, a, o3, hopper, hold, thrown)
+            o0, _, t0, _, i0 = v0.step(a)
+            o3, _, t3, _, i3 = v3.step(a)
+            assert np.array_equal(o0, o3[:19]) and t0 == t3
+            flight = i3["contact_mode"] == "flight"
+            landed = not flight and run > 0.0
+            length = run + i3["flight_time"]
+            if flight:
+                (y, vy), command = (i3["com_position"][1], i3["com_velocity"][1]), i3["command"]
+                err = y + vy * vy / (2.0 * v3.params.g) - (y_stand + command)
+                arc = np.exp(-((err / cfg.height_scale) ** 2)) + np.exp(-((err / cfg.height_scale_fine) ** 2))
+                arc_rise = err + command  # the arc's apex above standing
+            if landed and length >= cfg.min_flight:
+                held, rise, hops = arc, arc_rise, hops + 1
+            assert o3[Obs.last_apex] == pytest.approx(np.float32(rise), rel=1e-6, abs=1e-7)
+            short_flights += bool(landed and length < cfg.min_flight)
+            run = run + i3["flight_time"] if flight else 0.0
+            ground = 0.0 if run >= cfg.min_flight else ground + v3.dt
+            assert i3["ground_time"] == ground and o3[Obs.ground_time] == np.float32(ground)
+            expected = 0.0 if t3 or ground > cfg.max_ground_time else cfg.height_weight * held
+            assert i3["reward_height"] == pytest.approx(expected, rel=1e-9, abs=1e-12), (seed, k)
+            assert i3["reward_alive"] == (i0["reward_alive"] if ground <= cfg.max_ground_time else 0.0)
+            paid += expected > 0.0
+            stopped += held > 0.0 and ground > cfg.max_ground_time and not t3
+            others = [key for key in i0 if key.startswith("reward_") and key not in ("reward_height", "reward_alive")]
+            assert all(i0[key] == i3[key] for key in others)
+            if t0:
+                break
+    assert hops >= 4 and paid > 100 and stopped > 0 and short_flights > 0
+
+
+def test_hop_v3_prefers_hopping_to_the_command_to_bouncing():
+    """On the same episodes the model-based hopper (hops to the command) earns v3's height term several times over
+    what a fixed bounce of low hops earns: the bounce's flights, however many, are paid no more than its apex."""
+    results = {}
+    for name in ("hopper", "bounce"):
+        env = gym.make(HOP3).unwrapped
+        from policies.hopper import HopperController
+
+        hopper = HopperController(env.params, env.config)
+        total = 0.0
+        for seed in range(3):
+            obs, _ = env.reset(seed=seed, options=None)
+            hopper.reset()
+            for k in range(400):
+                if name == "hopper":
+                    a = hopper.predict(obs)[0]
+                else:  # the knee kicked out and back every 80 ms: short, low hops
+                    a = np.float32([0.0, 1.0]) if k % 8 < 3 else np.float32([0.0, -0.6])
+                obs, _, terminated, _, info = env.step(a)
+                total += info["reward_height"]
+                if terminated:
+                    break
+        results[name] = total
+    assert results["hopper"] > 3.0 * results["bounce"], results
 
 
 def test_hop_v2_with_min_flight_zero_pays_each_landed_flight_at_the_next_lift_off():
@@ -499,6 +598,7 @@ def test_push_reward_charges_the_com_leaving_the_start():
 
 
 PUSH, HOP, HOP1, HOP2 = "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1", "leg_env/PlanarLegHop-v2"
+HOP3 = "leg_env/PlanarLegHop-v3"
 BAD_CONFIGS = [
     (PUSH, {"push_force": (50.0, 20.0)}, ValueError, "push_force"),
     (PUSH, {"push_force": (-1.0, 20.0)}, ValueError, "push_force"),
@@ -531,6 +631,12 @@ BAD_CONFIGS = [
     (HOP, {"pay_hops_only": True}, ValueError, "pay_hops_only"),
     (HOP, {"pay_on_next_hop": True}, ValueError, "pay_on_next_hop"),
     (HOP2, {"pay_on_next_hop": 2}, TypeError, "pay_on_next_hop"),
+    (HOP3, {"hold_height": 1}, TypeError, "hold_height"),
+    (HOP3, {"flight_height": True}, ValueError, "hold_height"),
+    (HOP3, {"pay_on_landing": True}, ValueError, "hold_height"),
+    (HOP3, {"max_ground_time": float("inf")}, ValueError, "hold_height"),
+    (HOP3, {"observe_apex": 0}, TypeError, "observe_apex"),
+    (HOP3, {"observe_progress": False}, ValueError, "observe_apex"),
 ]
 
 

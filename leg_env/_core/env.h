@@ -34,6 +34,10 @@ typedef struct {
     double ground_time; /* time since the last flight of at least min_flight ended, or since the start [s] */
     double banked;      /* the height term of the current flight, paid at its landing (pay_on_landing) */
     double pending;     /* a landed hop's banked term, paid when the next hop lasts min_flight (pay_on_next_hop) */
+    double arc_kernel;  /* the height kernel of the current (or last) flight's apex (hold_height) */
+    double held;        /* the height kernel of the last landed hop's apex, paid at every step while hopping (hold_height) */
+    double arc_apex;    /* the current (or last) flight's apex rise above standing [m] */
+    double apex;        /* the last landed hop's apex rise above standing [m] (0 before the first) */
 } hop_state;
 
 /* One robot's state. */
@@ -92,6 +96,8 @@ typedef struct {
             uint8_t pay_on_landing;   /* a flight's height term is paid at its landing, if the robot stays up */
             uint8_t pay_hops_only;    /* ... and only if the flight was a hop (at least min_flight long) */
             uint8_t pay_on_next_hop;  /* ... and not at its landing but when the next hop has lasted min_flight */
+            uint8_t hold_height;      /* the last landed hop's apex kernel is paid at every step while hopping */
+            uint8_t observe_apex;     /* the last landed hop's apex rise is an observation entry (after observe_progress's) */
         } hop;
     } task;
 } env_settings;
@@ -129,6 +135,8 @@ typedef enum {
     OBS_HOP_DIM,
     OBS_COM_DRIFT = OBS_HOP_DIM, /* with the hop's observe_progress */
     OBS_GROUND_TIME,
+    OBS_PROGRESS_DIM,
+    OBS_LAST_APEX = OBS_PROGRESS_DIM, /* with the hop's observe_apex */
     OBS_MAX_DIM
 } obs_index;
 

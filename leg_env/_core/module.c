@@ -798,6 +798,8 @@ static const field STATE_HOP_FIELDS[] = {
     TASK(env_state, task.hop.command, "command", "f8", 1), TASK(env_state, task.hop.x_com0, "x_com0", "f8", 1),
     TASK(env_state, task.hop.flight_run, "flight_run", "f8", 1), TASK(env_state, task.hop.ground_time, "ground_time", "f8", 1),
     TASK(env_state, task.hop.banked, "banked", "f8", 1), TASK(env_state, task.hop.pending, "pending", "f8", 1),
+    TASK(env_state, task.hop.arc_kernel, "arc_kernel", "f8", 1), TASK(env_state, task.hop.held, "held", "f8", 1),
+    TASK(env_state, task.hop.arc_apex, "arc_apex", "f8", 1), TASK(env_state, task.hop.apex, "apex", "f8", 1),
     {NULL, 0, NULL, 0}};
 
 static const field ROBOT_FIELDS[] = {
@@ -827,6 +829,8 @@ static const field SETTINGS_HOP_FIELDS[] = {
     TASK(env_settings, task.hop.pay_on_landing, "pay_on_landing", "?", 1),
     TASK(env_settings, task.hop.pay_hops_only, "pay_hops_only", "?", 1),
     TASK(env_settings, task.hop.pay_on_next_hop, "pay_on_next_hop", "?", 1),
+    TASK(env_settings, task.hop.hold_height, "hold_height", "?", 1),
+    TASK(env_settings, task.hop.observe_apex, "observe_apex", "?", 1),
     {NULL, 0, NULL, 0}};
 
 static const field OUT_FIELDS[] = {
@@ -899,11 +903,12 @@ static PyObject *py_layouts(PyObject *self, PyObject *unused)
 static PyObject *py_observation(PyObject *self, PyObject *unused)
 {
     return Py_BuildValue(
-        "{sisisisisisisisisisisisisisisisisisisisisisisisisi}", "base_x", OBS_BASE_X, "base_y", OBS_BASE_Y, "th_b", OBS_TH_B, "q1",
+        "{sisisisisisisisisisisisisisisisisisisisisisisisisisisi}", "base_x", OBS_BASE_X, "base_y", OBS_BASE_Y, "th_b", OBS_TH_B, "q1",
         OBS_Q1, "q2", OBS_Q2, "vx_b", OBS_VX_B, "vy_b", OBS_VY_B, "w_b", OBS_W_B, "w_q1", OBS_W_Q1, "w_q2", OBS_W_Q2, "lam_x",
         OBS_LAM_X, "lam_y", OBS_LAM_Y, "foot_height", OBS_FOOT_HEIGHT, "foot_vx", OBS_FOOT_VX, "foot_vy", OBS_FOOT_VY, "contact",
         OBS_CONTACT, "slip", OBS_SLIP, "impulse_y", OBS_IMPULSE_Y, "command", OBS_COMMAND, "pinned_dim", OBS_PINNED_DIM,
-        "unilateral_dim", OBS_UNILATERAL_DIM, "hop_dim", OBS_HOP_DIM, "com_drift", OBS_COM_DRIFT, "ground_time", OBS_GROUND_TIME, "hop_progress_dim", OBS_MAX_DIM);
+        "unilateral_dim", OBS_UNILATERAL_DIM, "hop_dim", OBS_HOP_DIM, "com_drift", OBS_COM_DRIFT, "ground_time", OBS_GROUND_TIME, "hop_progress_dim", OBS_PROGRESS_DIM,
+        "last_apex", OBS_LAST_APEX, "hop_apex_dim", OBS_MAX_DIM);
 }
 
 /* ------------------------------------------------------------------------------------------------ */

@@ -71,9 +71,13 @@ static int obs_fits(int task, const env_batch *b)
 {
     if (b->obs == NULL)
         return 1;
+    if (task == TASK_HOP && b->settings->task.hop.observe_apex && !b->settings->task.hop.observe_progress) {
+        PyErr_SetString(PyExc_ValueError, "obs cannot fit this task and its settings: observe_apex needs observe_progress (the apex is the entry after the ground time)");
+        return 0;
+    }
     const Py_ssize_t need = task_obs_dim(task, b->settings);
     if (b->obs_cols != need) {
-        PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and its settings (unilateral, observe_progress), got (%zd, %zd)",
+        PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and its settings (unilateral, observe_progress, observe_apex), got (%zd, %zd)",
                      b->n, need, b->n, b->obs_cols);
         return 0;
     }

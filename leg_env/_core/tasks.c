@@ -244,8 +244,24 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     terms[0] = stance_terms[0]; /* alive: the balance task's health predicate */
     if (t->ground_time > c->task.hop.max_ground_time) /* and hopping */
         terms[0] = 0.0;
+    if (s->mode == LEG_FLIGHT) /* in flight E_v / (m g) is the arc's apex height above the ground */
+        t->arc_apex = e_v / (m * g) - y_stand;
+    if (landed && flight_length >= c->task.hop.min_flight)
+        t->apex = t->arc_apex;
     terms[1] = 0.0;
-    if (!c->task.hop.flight_height || s->mode == LEG_FLIGHT) { /* (the kernels are not evaluated when unpaid) */
+    if (c->task.hop.hold_height) { /* the kernel of the last landed hop's apex, paid at every step while hopping */
+        if (s->mode == LEG_FLIGHT) { /* in flight E_v is m g times the arc's apex height */
+            t->arc_kernel = exp(-err * err);
+            if (c->task.hop.height_scale_fine > 0.0) {
+                const double fine = (e_v - e_star) / (weight * c->task.hop.height_scale_fine);
+                t->arc_kernel += exp(-fine * fine);
+            }
+        }
+        if (landed && flight_length >= c->task.hop.min_flight) /* a hop landed: its apex is the one paid from now on */
+            t->held = t->arc_kernel;
+        if (t->ground_time <= c->task.hop.max_ground_time)
+            terms[1] = w_height * t->held;
+    } else if (!c->task.hop.flight_height || s->mode == LEG_FLIGHT) { /* (the kernels are not evaluated when unpaid) */
         terms[1] = w_height * exp(-err * err);
         if (c->task.hop.height_scale_fine > 0.0) { /* a coarse kernel to find the apex, a fine one to hit it */
             const double fine = (e_v - e_star) / (weight * c->task.hop.height_scale_fine);
@@ -274,6 +290,8 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
         b->obs[i * b->obs_cols + OBS_COM_DRIFT] = (float)dx;
         b->obs[i * b->obs_cols + OBS_GROUND_TIME] = (float)t->ground_time;
     }
+    if (c->task.hop.observe_apex)
+        b->obs[i * b->obs_cols + OBS_LAST_APEX] = (float)t->apex;
     terms[2] = -b->settings->task.hop.w_drift * dx * dx;
     terms[3] = -b->settings->task.hop.w_tilt * s->q[2] * s->q[2];
     terms[4] = -b->settings->task.hop.w_impact * (px * px + py * py) / (m * m);
@@ -296,10 +314,16 @@ static void hop_start(const env_batch *b, Py_ssize_t i)
     s->task.hop.ground_time = 0.0;
     s->task.hop.banked = 0.0;
     s->task.hop.pending = 0.0;
+    s->task.hop.arc_kernel = 0.0;
+    s->task.hop.held = 0.0;
+    s->task.hop.arc_apex = 0.0;
+    s->task.hop.apex = 0.0;
     if (b->settings->task.hop.observe_progress) {
         b->obs[i * b->obs_cols + OBS_COM_DRIFT] = 0.0f;
         b->obs[i * b->obs_cols + OBS_GROUND_TIME] = 0.0f;
     }
+    if (b->settings->task.hop.observe_apex)
+        b->obs[i * b->obs_cols + OBS_LAST_APEX] = 0.0f;
     s->task.hop.x_com0 = o->com[0];
 }
 
@@ -312,7 +336,7 @@ static int task_terms(int task) { return task == TASK_STANCE ? STANCE_TERMS : (t
 static Py_ssize_t task_obs_dim(int task, const env_settings *c)
 {
     if (task == TASK_HOP)
-        return c->task.hop.observe_progress ? OBS_MAX_DIM : OBS_HOP_DIM;
+        return c->task.hop.observe_apex ? OBS_MAX_DIM : (c->task.hop.observe_progress ? OBS_PROGRESS_DIM : OBS_HOP_DIM);
     return c->unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM;
 }
 

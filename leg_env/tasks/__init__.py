@@ -21,6 +21,8 @@ REGISTRY = {
                                  "pay_on_landing": True}),
     "leg_env/PlanarLegHop-v2": ("hop", {"flight_height": True, "max_ground_time": 1.0, "observe_progress": True, "height_scale_fine": 0.01,
                                  "pay_on_landing": True, "pay_hops_only": True, "pay_on_next_hop": True}),
+    "leg_env/PlanarLegHop-v3": ("hop", {"max_ground_time": 1.0, "observe_progress": True, "height_scale_fine": 0.01, "hold_height": True,
+                                 "observe_apex": True}),
 }
 """Every current id: ``(task module, kwargs)``; the balance task's ids keep its own entry points."""
 

@@ -15,8 +15,9 @@ evaluation of 32-64 episodes per 3M steps: under 1% of the time). A callback spl
 * **env**: the part of the rollout spent in the adapter's ``step`` (the compiled physics and its Python);
 * **update**: PPO's gradient steps (``n_epochs x n_envs x n_steps / batch_size`` of them per rollout).
 
-Each configuration runs with torch on 1 thread and on every core, each measurement in a fresh process. The references in the
-same run: SB3's own ``PPO`` (its ``train`` without chunks) on every core, and the native batch
+Each configuration runs with torch on 1 thread and on every core, each measurement in a fresh process, ``--repeats`` times
+interleaved (the table shows the median run). The references in the
+same run: SB3's own ``PPO`` (its ``train`` without chunks) on the same threads, and the native batch
 ``gym.make_vec(env_id, n_envs)`` under pre-sampled random actions, the env alone. The env-steps/s end
 to end is ``n_envs x n_steps x rollouts / wall time``. The table goes to stdout and to
 ``benchmarks/results/train_speed.md``, headed by the machine, the versions and the date.
@@ -39,7 +40,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-CONFIGS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegHop-v2")
+CONFIGS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegHop-v3")
 """The from-scratch configurations of ``train/hyperparams/ppo.yml`` on the unilateral ground."""
 TARGET = 100_000.0  # env-steps/s end to end, at least on the balance and hop configurations
 SEED = 0
@@ -140,6 +141,11 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
     }
 
 
+def _median(runs: list[dict]) -> dict:
+    """The run of median rate among ``runs`` (its shares with it)."""
+    return sorted(runs, key=lambda r: r["rate"])[len(runs) // 2]
+
+
 def _in_fresh_process(env_id: str, rollouts: int, threads: int, algo: str = "chunked") -> dict:
     """``train_rate`` in a new interpreter: torch's thread pools and the previous run's memory do not carry over
     (timed in one process, a configuration timed after another ran up to a quarter slower)."""
@@ -155,11 +161,14 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env-id", action="append", help=f"a configuration to time (default: {', '.join(CONFIGS)})")
     parser.add_argument("--rollouts", type=int, default=30, help="timed rollouts per configuration and thread count")
+    parser.add_argument("--repeats", type=int, default=3, help="runs of each case (interleaved); the table shows their median")
     parser.add_argument("--no-write", action="store_true", help=f"print only, do not write {RESULTS.relative_to(ROOT)}")
     parser.add_argument("--one", nargs=3, metavar=("ENV_ID", "THREADS", "ALGO"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.rollouts < 2:
         parser.error("--rollouts must be at least 2")
+    if args.repeats < 1:
+        parser.error("--repeats must be at least 1")
     from train.chunked_ppo import UPDATE_CHUNK
     from train.machine import describe
 
@@ -168,12 +177,20 @@ def main(argv: list[str] | None = None) -> None:
         return
     env_ids = args.env_id or list(CONFIGS)
     threads = sorted({1, os.cpu_count() or 1})
-    rows, checks = [], []
+    rows, checks, ratios = [], [], []
     for env_id in env_ids:
-        results = [_in_fresh_process(env_id, args.rollouts, k) for k in threads]
-        sb3 = _in_fresh_process(env_id, args.rollouts, threads[-1], "sb3")
+        cases = [(k, algo) for k in threads for algo in ("chunked", "sb3")]
+        runs = {case: [] for case in cases}
+        for _ in range(args.repeats):  # interleaved, so that a noisy spell of the machine hits every case alike
+            for case in cases:
+                runs[case].append(_in_fresh_process(env_id, args.rollouts, *case))
+        medians = {case: _median(runs[case]) for case in cases}
+        results = [medians[(k, "chunked")] for k in threads]
         reference = env_rate(env_id, results[0]["n_envs"], results[0]["env_kwargs"])
-        for r in (*results, sb3):
+        for k in threads:
+            ratios.append(f"  {env_id}, torch on {k} thread{'s' * (k > 1)}: ChunkedPPO / SB3 PPO, medians of {args.repeats} runs: "
+                          f"{medians[(k, 'chunked')]['rate'] / medians[(k, 'sb3')]['rate']:.2f}x")
+        for r in medians.values():
             trainer = "ChunkedPPO" if r["algo"] == "chunked" else "SB3 PPO (reference)"
             rows.append(
                 f"| {env_id} | {trainer} | {r['n_envs']} | {r['batch']:,} | {r['epochs']} | {r['gradient_steps']} | {r['net']} | {r['threads']} "
@@ -187,12 +204,12 @@ def main(argv: list[str] | None = None) -> None:
     lines = [
         "# Training speed: SB3 PPO on the shipped from-scratch configurations",
         "",
-        f"Written by `python benchmarks/bench_train.py --rollouts {args.rollouts}` on {datetime.date.today().isoformat()}.",
+        f"Written by `python benchmarks/bench_train.py --rollouts {args.rollouts} --repeats {args.repeats}` on {datetime.date.today().isoformat()}.",
         "",
         f"Machine: {describe()}",
         "",
-        f"Each row: {args.rollouts} rollouts of PPO as `python -m train.ppo` builds it (after one untimed), without evaluations: "
-        f"`ChunkedPPO` (SB3's PPO with each minibatch's gradient summed over chunks of {UPDATE_CHUNK:,} samples, the same update), and "
+        f"Each row: the median of {args.repeats} runs (interleaved, each in a fresh process) of {args.rollouts} rollouts of PPO as `python -m train.ppo` builds it (after one untimed), without evaluations: "
+        f"`ChunkedPPO` (SB3's PPO with each minibatch's gradient summed over chunks of {UPDATE_CHUNK:,} samples per torch thread, the same update), and "
         "SB3's `PPO` itself as the reference. "
         "Shares of the wall-clock: the rollout (policy forward pass, env step, rollout buffer), of which the env step "
         "(the `leg_env.sb3` adapter), and the update (the gradient steps). The last column: the native batch alone "
@@ -204,6 +221,9 @@ def main(argv: list[str] | None = None) -> None:
         "",
         "Targets:",
         *checks,
+        "",
+        "Speed-up of the chunked update, end to end:",
+        *ratios,
     ]
     text = "\n".join(lines) + "\n"
     print(text)

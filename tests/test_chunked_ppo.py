@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -16,7 +21,7 @@ LOGGED = ("train/policy_gradient_loss", "train/value_loss", "train/entropy_loss"
 
 def _one_update(algo, **kwargs):
     """A model of ``algo`` after one rollout of the hop task and one update (everything seeded alike)."""
-    venv = make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v2", per_env_info=False)
+    venv = make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v3", per_env_info=False)
     settings = dict(n_steps=N_STEPS, batch_size=256, n_epochs=3, learning_rate=3e-3, seed=0, device="cpu",
                     policy_kwargs={"net_arch": [32, 32]})
     settings.update(kwargs)
@@ -46,14 +51,14 @@ def test_chunked_update_is_ppo_update(settings, chunk):
     torch.set_num_threads(1)
     reference = _one_update(PPO, **settings)
     chunked = _one_update(ChunkedPPO, update_chunk=chunk, **settings)
-    before = _parameters(PPO("MlpPolicy", make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v2"), seed=0,
+    before = _parameters(PPO("MlpPolicy", make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v3"), seed=0,
                              device="cpu", policy_kwargs=settings.get("policy_kwargs", {"net_arch": [32, 32]})))
     after_ref, after = _parameters(reference), _parameters(chunked)
     moved = max((after_ref[k] - before[k]).abs().max().item() for k in before)
     assert moved > 1e-3  # the update did something (and the two models began alike: same seed)
     for name in after_ref:
-        # round-off: float32's resolution of the parameter, and of the update
-        np.testing.assert_allclose(after[name].numpy(), after_ref[name].numpy(), rtol=1e-6, atol=1e-5 * moved, err_msg=name)
+        # round-off: float32's resolution of the parameter, and of the update (which Adam amplifies for gradients near its eps)
+        np.testing.assert_allclose(after[name].numpy(), after_ref[name].numpy(), rtol=1e-6, atol=1e-4 * moved, err_msg=name)
     for key in LOGGED:
         got, want = chunked.logger.name_to_value[key], reference.logger.name_to_value[key]
         np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7, err_msg=key)
@@ -83,3 +88,29 @@ def test_bad_update_chunk(chunk, error):
     venv = make_sb3_vec_env(2, seed=0)
     with pytest.raises(error, match="update_chunk"):
         ChunkedPPO("MlpPolicy", venv, update_chunk=chunk, n_steps=8, batch_size=16, device="cpu")
+
+
+def test_training_speed_benchmark_runs_one_case():
+    """``benchmarks/bench_train.py`` measures one case in a fresh process and reports its shares (tiny budget)."""
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_train.py"
+    for algo in ("chunked", "sb3"):
+        done = subprocess.run([sys.executable, str(script), "--one", "leg_env/PlanarLegHop-v3", "1", algo, "--rollouts", "2"],
+                              capture_output=True, text=True, timeout=300, check=False)
+        assert done.returncode == 0, done.stderr[-2000:]
+        result = json.loads([line for line in done.stdout.splitlines() if line.startswith("RESULT ")][-1][len("RESULT "):])
+        assert result["algo"] == algo and result["rate"] > 0 and result["gradient_steps"] == 6
+        assert abs(result["rollout"] + result["update"] - 1.0) < 0.05 and 0.0 < result["env"] < result["rollout"]
+
+
+def test_default_chunk_is_per_torch_thread():
+    from train.chunked_ppo import UPDATE_CHUNK
+
+    model = ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), n_steps=8, batch_size=16, device="cpu")
+    threads = torch.get_num_threads()
+    try:
+        for k in (1, 2):
+            torch.set_num_threads(k)
+            assert model.update_chunk is None and model.chunk == k * UPDATE_CHUNK
+    finally:
+        torch.set_num_threads(threads)
+    assert ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), update_chunk=100, n_steps=8, batch_size=16, device="cpu").chunk == 100

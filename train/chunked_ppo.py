@@ -1,8 +1,7 @@
 """SB3's PPO with each minibatch's gradient summed over cache-sized chunks: the same update, faster on a CPU.
 
 ``ChunkedPPO`` is ``stable_baselines3.PPO`` in every respect (arguments, saving, loading, logging) but one: in
-``train``, a minibatch larger than ``update_chunk`` samples goes through the networks ``update_chunk`` samples at
-a time, each chunk's share of the loss back-propagated before the next chunk's forward pass, and the optimiser
+``train``, a minibatch larger than a chunk goes through the networks a chunk at a time, each chunk's share of the loss back-propagated before the next chunk's forward pass, and the optimiser
 steps once on the sum. The loss is a mean over the minibatch, so the summed gradient is the minibatch's gradient
 (up to the order of floating-point sums), and so are the update, the advantage normalisation (over the whole
 minibatch, as SB3's), the gradient clipping, the early stop on ``target_kl`` (checked on the whole minibatch
@@ -10,9 +9,11 @@ before it steps) and the logged statistics.
 
 Why: with 1024 envs and minibatches of 16,384 samples, each activation of a [128, 128] network is an 8 MB
 array, far larger than a core's cache, and PPO's update is bound by memory traffic (``tanh`` and its backward
-pass took 30% of the update). Chunks of 4,096 samples (2 MB) keep them in cache: the update runs about a quarter
-faster on this project's 2-core machine (``benchmarks/bench_train.py`` measures it against SB3's own update in
-the same run). Minibatches no larger than a chunk take SB3's ``train`` unchanged, bit for bit.
+pass took 30% of the update). Chunks of 4,096 samples per torch thread (2 MB per core) keep them in cache: on
+this project's 2-core machine the update alone runs about a fifth faster on one torch thread. End to end, with the
+rollouts, ``benchmarks/bench_train.py`` measured 1.02-1.14x SB3's own PPO on one thread and 0.98-1.08x on two, in
+the same run (``benchmarks/results/train_speed.md``). Minibatches no larger than a chunk take SB3's ``train``
+unchanged, bit for bit.
 """
 
 from __future__ import annotations
@@ -26,32 +27,41 @@ from stable_baselines3.common.utils import explained_variance
 __all__ = ["ChunkedPPO", "UPDATE_CHUNK"]
 
 UPDATE_CHUNK = 4096
-"""Samples per chunk by default: the fastest of 1,024-16,384 on 1 and 2 torch threads here, within a few percent."""
+"""Samples per chunk and torch thread by default: on one thread the fastest of 1,024-16,384 here; on two, 8,192 was."""
 
 
 class ChunkedPPO(PPO):
     """``stable_baselines3.PPO`` whose minibatch gradients are summed over chunks of at most ``update_chunk`` samples.
 
     Args:
-        update_chunk: the most samples that go through the networks at once in an update (a positive int).
-            It changes the speed, not the update. Every other argument is PPO's.
+        update_chunk: the most samples that go through the networks at once in an update (a positive int), or
+            None: ``UPDATE_CHUNK`` per torch thread (``torch.get_num_threads()`` when the update runs). It changes
+            the speed, not the update. Every other argument is PPO's.
 
     Raises:
         TypeError: ``update_chunk`` is not an int.
         ValueError: ``update_chunk`` is not positive.
     """
 
-    def __init__(self, *args, update_chunk: int = UPDATE_CHUNK, **kwargs):
-        if isinstance(update_chunk, bool) or not isinstance(update_chunk, (int, np.integer)):
-            raise TypeError(f"update_chunk must be an int, got {type(update_chunk).__name__}")
-        if update_chunk < 1:
-            raise ValueError(f"update_chunk must be positive, got {update_chunk}")
-        self.update_chunk = int(update_chunk)
+    def __init__(self, *args, update_chunk: int | None = None, **kwargs):
+        if update_chunk is not None:
+            if isinstance(update_chunk, bool) or not isinstance(update_chunk, (int, np.integer)):
+                raise TypeError(f"update_chunk must be an int or None, got {type(update_chunk).__name__}")
+            if update_chunk < 1:
+                raise ValueError(f"update_chunk must be positive, got {update_chunk}")
+            update_chunk = int(update_chunk)
+        self.update_chunk = update_chunk
         super().__init__(*args, **kwargs)
+
+    @property
+    def chunk(self) -> int:
+        """The samples per chunk of the next update: ``update_chunk``, or ``UPDATE_CHUNK`` per torch thread."""
+        return self.update_chunk if self.update_chunk is not None else UPDATE_CHUNK * th.get_num_threads()
 
     def train(self) -> None:
         """One PPO update on the rollout buffer (``PPO.train``), each minibatch's gradient summed over chunks."""
-        if self.batch_size <= self.update_chunk:
+        chunk_size = self.chunk
+        if self.batch_size <= chunk_size:
             return super().train()
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
@@ -73,8 +83,8 @@ class ChunkedPPO(PPO):
                     advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
                 self.policy.optimizer.zero_grad()
                 sums = np.zeros(5)  # policy loss, value loss, entropy loss, clipped samples, KL estimate: sums over the minibatch
-                for start in range(0, batch, self.update_chunk):
-                    chunk = slice(start, start + self.update_chunk)
+                for start in range(0, batch, chunk_size):
+                    chunk = slice(start, start + chunk_size)
                     sums += self._chunk_backward(rollout_data, advantages, chunk, batch, clip_range, clip_range_vf)
                 policy_loss, value_loss, entropy_loss, clipped, kl = sums / batch
                 pg_losses.append(policy_loss)

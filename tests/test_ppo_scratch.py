@@ -1,4 +1,4 @@
-"""The shipped plain-PPO policies (``policies/ppo_balance``, ``ppo_hop_v1``, ``ppo_hop_v2``): a network alone, and
+"""The shipped plain-PPO policies (``policies/ppo_balance``, ``ppo_hop_v1``, ``ppo_hop_v2``, ``ppo_hop_v3``): a network alone, and
 their cards' episodes as they score them."""
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ SHIPPED = {  # policy folder: the task it was trained and is evaluated on
     "ppo_balance": "leg_env/PlanarLegBalance-v0",
     "ppo_hop_v1": "leg_env/PlanarLegHop-v1",
     "ppo_hop_v2": "leg_env/PlanarLegHop-v2",
+    "ppo_hop_v3": "leg_env/PlanarLegHop-v3",
 }
 
 

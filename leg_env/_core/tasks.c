@@ -210,6 +210,18 @@ static void push_start(const env_batch *b, Py_ssize_t i)
 
 /* ---------------------------------------------------------------- hopping (leg_env.tasks.hop) */
 
+/* The hop's height kernel of an apex energy error de = E_v - E*: a Gaussian of scale `scale` [m], plus one of scale
+ * `fine` if it is positive (a coarse kernel to find the apex, a fine one to hit it). */
+static double height_kernel(double de, double weight, double scale, double fine)
+{
+    const double err = de / (weight * scale);
+    if (fine > 0.0) {
+        const double err_fine = de / (weight * fine);
+        return exp(-err * err) + exp(-err_fine * err_fine);
+    }
+    return exp(-err * err);
+}
+
 static void hop_assess(const env_batch *b, Py_ssize_t i)
 {
     const env_robot *r = robot_row(b, i);
@@ -230,7 +242,6 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     const double x_com = o->com[0], y_com = o->com[1], vy_com = o->com_velocity[1];
     const double e_v = 0.5 * m * vy_com * vy_com + m * g * (y_com - s->anchor[1]);
     const double e_star = m * g * (y_stand + t->command);
-    const double err = (e_v - e_star) / (weight * height_scale);
     const double dx = x_com - t->x_com0;
     const double px = o->kick[0], py = o->kick[1];
     const env_settings *c = b->settings;
@@ -250,23 +261,14 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
         t->apex = t->arc_apex;
     terms[1] = 0.0;
     if (c->task.hop.hold_height) { /* the kernel of the last landed hop's apex, paid at every step while hopping */
-        if (s->mode == LEG_FLIGHT) { /* in flight E_v is m g times the arc's apex height */
-            t->arc_kernel = exp(-err * err);
-            if (c->task.hop.height_scale_fine > 0.0) {
-                const double fine = (e_v - e_star) / (weight * c->task.hop.height_scale_fine);
-                t->arc_kernel += exp(-fine * fine);
-            }
-        }
+        if (s->mode == LEG_FLIGHT) /* in flight E_v is m g times the arc's apex height */
+            t->arc_kernel = height_kernel(e_v - e_star, weight, height_scale, c->task.hop.height_scale_fine);
         if (landed && flight_length >= c->task.hop.min_flight) /* a hop landed: its apex is the one paid from now on */
             t->held = t->arc_kernel;
         if (t->ground_time <= c->task.hop.max_ground_time)
             terms[1] = w_height * t->held;
     } else if (!c->task.hop.flight_height || s->mode == LEG_FLIGHT) { /* (the kernels are not evaluated when unpaid) */
-        terms[1] = w_height * exp(-err * err);
-        if (c->task.hop.height_scale_fine > 0.0) { /* a coarse kernel to find the apex, a fine one to hit it */
-            const double fine = (e_v - e_star) / (weight * c->task.hop.height_scale_fine);
-            terms[1] = w_height * (exp(-err * err) + exp(-fine * fine));
-        }
+        terms[1] = w_height * height_kernel(e_v - e_star, weight, height_scale, c->task.hop.height_scale_fine);
         if (c->task.hop.flight_height) /* in flight E_v is m g times the arc's apex height: paid for the step's flight */
             terms[1] = terms[1] * (o->flight_time / c->dt);
     }

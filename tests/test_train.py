@@ -294,3 +294,91 @@ def test_each_evaluation_line_prints_the_training_rate(tmp_path, capsys):
     for line in lines:
         rate = line.split(" min, ", 1)[1].split(" steps/s]", 1)[0]
         assert float(rate.replace(",", "")) > 0.0, line
+
+
+CURRICULUM = "callback:[{train.callbacks.ConfigSchedule: {schedule: {command_range: [[64, [0.02, 0.03]], [192, [0.1, 0.15]]]}}}]"
+
+
+def test_config_schedule_holds_its_ends_and_is_linear_between():
+    from train.callbacks import ConfigSchedule
+
+    schedule = ConfigSchedule({"command_range": [[100, [0.02, 0.06]], [300, [0.05, 0.15]]], "alive_bonus": [[0, 3.0], [1000, 1.0]]})
+    assert schedule.values_at(0) == {"command_range": (0.02, 0.06), "alive_bonus": 3.0}
+    assert schedule.values_at(200)["command_range"] == pytest.approx((0.035, 0.105))
+    assert schedule.values_at(500) == {"command_range": (0.05, 0.15), "alive_bonus": 2.0}
+    assert schedule.values_at(10**9) == {"command_range": (0.05, 0.15), "alive_bonus": 1.0}
+
+
+@pytest.mark.parametrize(
+    "schedule",
+    [{}, None, {"alive_bonus": []}, {"alive_bonus": [[10, 1.0], [5, 2.0]]}, {"alive_bonus": [[0, float("nan")]]},
+     {"alive_bonus": [[-1, 1.0]]}, {"command_range": [[0, [0.1, 0.2]], [5, 0.3]]}, {"alive_bonus": [3.0]}, {"alive_bonus": 3.0}],
+)  # fmt: skip
+def test_bad_schedules_are_value_errors(schedule):
+    from train.callbacks import ConfigSchedule
+
+    with pytest.raises(ValueError, match="ConfigSchedule"):
+        ConfigSchedule(schedule)
+
+
+def test_zoo_callback_entries():
+    from train.callbacks import ConfigSchedule, FrozenActor, zoo_callbacks
+
+    assert zoo_callbacks(None) == []
+    (one,) = zoo_callbacks({"train.callbacks.ConfigSchedule": {"schedule": {"alive_bonus": [[0, 2.0]]}}})
+    assert isinstance(one, ConfigSchedule) and one.values_at(5) == {"alive_bonus": 2.0}
+    two = zoo_callbacks([{"train.callbacks.FrozenActor": {"until": 10}}, {"train.callbacks.ConfigSchedule": {"schedule": {"mu": [[0, 0.5]]}}}])
+    assert [type(c) for c in two] == [FrozenActor, ConfigSchedule]
+    for bad, match in [("no_such_module.Thing", "cannot import"), ("train.callbacks.zoo_callbacks", "not an SB3 callback"),
+                       ("json.JSONDecoder", "not an SB3 callback"), ([{"a": 1, "b": 2}], "each entry"), (5, "each entry")]:  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            zoo_callbacks(bad)
+
+
+def test_a_curriculum_moves_the_commands_of_the_training_episodes():
+    """ConfigSchedule under SB3's PPO: every episode starts under the schedule's value of the moment, from the
+    first reset on (train.ppo sets it before learn), and the evaluation env is left as built."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from leg_env.sb3 import make_sb3_vec_env
+    from leg_env.tasks.stance import Obs
+    from train.callbacks import ConfigSchedule
+
+    venv = make_sb3_vec_env(16, seed=0, env_id="leg_env/PlanarLegHop-v3", per_env_info=False, command_range=[0.02, 0.15])
+    other = make_sb3_vec_env(4, seed=0, env_id="leg_env/PlanarLegHop-v3", command_range=[0.02, 0.15])
+    schedule = ConfigSchedule({"command_range": [[1000, [0.02, 0.03]], [3000, [0.10, 0.15]]]})
+    seen = []
+
+    class Watch(BaseCallback):
+        def _on_step(self) -> bool:
+            started = self.locals["dones"]
+            seen.extend((self.num_timesteps, c) for c in self.locals["new_obs"][started, Obs.command])
+            return True
+
+    schedule.set_on(venv, 0)
+    model = PPO("MlpPolicy", venv, n_steps=64, batch_size=256, n_epochs=1, device="cpu", seed=0)
+    model.learn(5000, callback=[schedule, Watch()])
+    first = model.env.reset()
+    assert len(seen) > 20
+    rollout = 64 * 16
+    for steps, command in seen:  # the value set at the start of the rollout that holds the step
+        lo, hi = schedule.values_at((steps - 1) // rollout * rollout)["command_range"]
+        assert lo - 1e-7 <= command <= hi + 1e-7, (steps, command)
+    assert any(c > 0.1 for s, c in seen) and any(c < 0.03 for s, c in seen)
+    assert first[:, Obs.command].min() >= 0.1 - 1e-7  # a reset after training draws under the last value
+    assert other.env.config.command_range == (0.02, 0.15)
+
+
+def test_train_runs_a_curriculum_from_the_hyperparameters(tmp_path):
+    out = train(tiny_args(tmp_path / "run", env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0,
+                          params=TINY + ["env_kwargs:{command_range: [0.02, 0.15]}", CURRICULUM]))  # fmt: skip
+    config = yaml.safe_load((out / "config.yaml").read_text())
+    assert config["callback"][0]["train.callbacks.ConfigSchedule"]["schedule"]["command_range"][1] == [192, [0.1, 0.15]]
+    # a schedule the training env has no room for fails at the first set_config, naming the field
+    with pytest.raises(ValueError, match="set_config\\(command_range\\)"):
+        train(tiny_args(tmp_path / "narrow", env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, params=TINY + [CURRICULUM]))
+    # a bad entry is refused before the run folder is made
+    with pytest.raises(ValueError, match="ConfigSchedule"):
+        train(tiny_args(tmp_path / "bad", params=TINY + ["callback:[{train.callbacks.ConfigSchedule: {schedule: {}}}]"]))
+    assert not (tmp_path / "bad").exists()

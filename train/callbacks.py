@@ -1,4 +1,5 @@
-"""Training callbacks: reward-term and contact-violation logging, periodic evaluation, checkpoints."""
+"""Training callbacks: reward-term and contact-violation logging, periodic evaluation, checkpoints, and a schedule
+of task settings (a curriculum)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,17 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-__all__ = ["RewardTermsLogger", "leg_adapter", "PeriodicEvaluation", "PeriodicCheckpoint", "FrozenActor", "run_vec_episodes", "evaluate_now"]
+__all__ = [
+    "RewardTermsLogger",
+    "leg_adapter",
+    "PeriodicEvaluation",
+    "PeriodicCheckpoint",
+    "FrozenActor",
+    "ConfigSchedule",
+    "zoo_callbacks",
+    "run_vec_episodes",
+    "evaluate_now",
+]
 
 VIOLATION_KEYS = ("unilateral_violation", "friction_violation")
 
@@ -248,3 +259,114 @@ class FrozenActor(BaseCallback):
     def _set(self, trainable: bool) -> None:
         for parameter in self._actor():
             parameter.requires_grad_(trainable)
+
+
+class ConfigSchedule(BaseCallback):
+    """A curriculum: the training env's task settings as functions of the env steps done.
+
+    ``schedule`` maps a config field to its points ``[[steps, value], ...]`` (steps increasing): the value is the
+    first point's before it, the last point's after it, and linear in between, entry by entry for a pair such as
+    ``command_range``. At the start of training (a resumed run too) and of every rollout, the fields whose value
+    has moved are set on every training env by ``env_method("set_config", ...)`` (``LegEnv.set_config``: starts
+    drawn after that use them; the env must be built with room for them, e.g. a ``command_range`` that holds
+    every scheduled one). The evaluation env is not touched. In ``train/hyperparams/ppo.yml``, as the Zoo writes
+    callbacks::
+
+        callback:
+          - train.callbacks.ConfigSchedule:
+              schedule:
+                command_range: [[6000000, [0.02, 0.06]], [36000000, [0.05, 0.15]]]
+
+    TensorBoard keys: ``curriculum/<field>`` (``curriculum/<field>_<i>`` for each entry of a pair).
+    """
+
+    def __init__(self, schedule: dict, verbose: int = 0):
+        super().__init__(verbose)
+        if not isinstance(schedule, dict) or not schedule:
+            raise ValueError(f"ConfigSchedule: schedule must be a non-empty mapping of field to points, got {schedule!r}")
+        self.schedule = {str(field): _schedule_points(field, points) for field, points in schedule.items()}
+        self._applied: dict = {}
+
+    def values_at(self, steps: int) -> dict:
+        """Each scheduled field's value after ``steps`` env steps (a float, or a tuple of floats for a pair)."""
+        out = {}
+        for field, (at, values, scalar) in self.schedule.items():
+            column = tuple(float(np.interp(steps, at, values[:, j])) for j in range(values.shape[1]))
+            out[field] = column[0] if scalar else column
+        return out
+
+    def _on_training_start(self) -> None:
+        self._apply()
+
+    def _on_rollout_start(self) -> None:
+        self._apply()
+
+    def _on_step(self) -> bool:
+        return True
+
+    def set_on(self, venv: VecEnv, steps: int) -> dict:
+        """Set the values after ``steps`` env steps on ``venv`` (those that moved since the last call); returns
+        them all. ``train.ppo`` calls it before ``learn``, so that the first episodes start under the schedule."""
+        values = self.values_at(steps)
+        moved = {field: value for field, value in values.items() if self._applied.get(field) != value}
+        if moved:
+            venv.env_method("set_config", **moved)
+            self._applied.update(moved)
+        return values
+
+    def _apply(self) -> None:
+        values = self.set_on(self.training_env, self.model.num_timesteps)
+        for field, value in values.items():
+            if isinstance(value, tuple):
+                for j, v in enumerate(value):
+                    self.logger.record(f"curriculum/{field}_{j}", v)
+            else:
+                self.logger.record(f"curriculum/{field}", value)
+
+
+def _schedule_points(field, points) -> tuple[np.ndarray, np.ndarray, bool]:
+    """A schedule's ``[[steps, value], ...]`` as ``(steps (k,), values (k, width), whether scalar)``; ValueError
+    naming the field."""
+    try:
+        pairs = [(point[0], point[1]) for point in points]
+        at = np.array([float(steps) for steps, _ in pairs])
+        raw = [np.asarray(value, dtype=np.float64) for _, value in pairs]
+        values = [np.atleast_1d(v) for v in raw]
+    except (TypeError, ValueError, IndexError) as e:
+        raise ValueError(f"ConfigSchedule: {field} must be a list of [steps, value] points, got {points!r}") from e
+    if not pairs or any(v.ndim != 1 or v.shape != values[0].shape for v in values):
+        raise ValueError(f"ConfigSchedule: {field} needs at least one point, all values of one shape, got {points!r}")
+    stacked = np.stack(values)
+    if not (np.all(np.isfinite(at)) and np.all(at >= 0) and np.all(np.diff(at) > 0) and np.all(np.isfinite(stacked))):
+        raise ValueError(f"ConfigSchedule: {field}'s steps must be finite, >= 0 and increasing and its values finite, got {points!r}")
+    return at, stacked, raw[0].ndim == 0
+
+
+def zoo_callbacks(spec) -> list[BaseCallback]:
+    """The callbacks of a Zoo ``callback`` entry: a class path, or a list of class paths and ``{class path:
+    keyword arguments}`` mappings (``rl_zoo3``'s format). None gives none."""
+    import importlib
+
+    if spec is None:
+        return []
+    items = spec if isinstance(spec, list) else [spec]
+    callbacks = []
+    for item in items:
+        if isinstance(item, str):
+            path, kwargs = item, {}
+        elif isinstance(item, dict) and len(item) == 1:
+            (path, kwargs), = item.items()
+            kwargs = kwargs or {}
+        else:
+            raise ValueError(f"callback: each entry must be a class path or {{class path: arguments}}, got {item!r}")
+        module, _, name = str(path).rpartition(".")
+        try:
+            cls = getattr(importlib.import_module(module), name) if module else None
+        except ImportError as e:
+            raise ValueError(f"callback: cannot import {path!r} ({e})") from e
+        if not (isinstance(cls, type) and issubclass(cls, BaseCallback)):
+            raise ValueError(f"callback: {path!r} is not an SB3 callback class")
+        if not isinstance(kwargs, dict):
+            raise ValueError(f"callback: the arguments of {path!r} must be a mapping, got {kwargs!r}")
+        callbacks.append(cls(**kwargs))
+    return callbacks

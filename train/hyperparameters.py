@@ -13,7 +13,7 @@ __all__ = ["DEFAULT_HYPERPARAMS", "ZOO_KEYS", "PPO_KEYS", "parse_override", "loa
 DEFAULT_HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
 
 # keys of a Zoo entry that are not PPO constructor arguments
-ZOO_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_kwargs")
+ZOO_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_kwargs", "callback")
 PPO_KEYS = (
     "learning_rate",
     "n_steps",

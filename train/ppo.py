@@ -166,9 +166,13 @@ def resolve_config(args: TrainArgs) -> dict:
     hp.pop("n_timesteps", None)
     if total is None or int(total) < 1:
         raise ValueError("total_timesteps must be given (or n_timesteps in the hyperparameter file) and be >= 1")
+    from train.callbacks import zoo_callbacks
+
+    zoo_callbacks(hp.get("callback"))  # checked before the run folder is touched
     return {
         "env_id": args.env_id,
         "env_kwargs": hp.pop("env_kwargs", None) or {},
+        "callback": hp.pop("callback", None),
         "eval_env_kwargs": dict(parse_override(item) for item in args.eval_env_kwargs),
         "seed": int(args.seed),
         "residual": None if args.residual is None else {"controller": args.residual.lower(), "scale": float(args.residual_scale)},
@@ -289,7 +293,15 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
     from stable_baselines3.common.vec_env import VecNormalize
 
     from leg_env.sb3 import make_sb3_vec_env
-    from train.callbacks import FrozenActor, PeriodicCheckpoint, PeriodicEvaluation, RewardTermsLogger, evaluate_now
+    from train.callbacks import (
+        ConfigSchedule,
+        FrozenActor,
+        PeriodicCheckpoint,
+        PeriodicEvaluation,
+        RewardTermsLogger,
+        evaluate_now,
+        zoo_callbacks,
+    )
     from train.chunked_ppo import ChunkedPPO
     from train.plots import plot_learning_curve
 
@@ -311,6 +323,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
         f.write(command + "\n")
 
     n_envs, seed = config["n_envs"], config["seed"]
+    scheduled = zoo_callbacks(config.get("callback"))  # the Zoo entry's own callbacks (a curriculum)
     set_random_seed(seed)
     # each (re)start draws fresh episodes from its own block of small seeds
     # the training env's per-env info dicts hold only what SB3 reads; RewardTermsLogger logs from its step_info columns
@@ -374,12 +387,16 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
     eval_venv = _with_residual(make_sb3_vec_env(eval_cfg["episodes"], seed=eval_cfg["seed"], env_id=config["env_id"], **config["eval_env_kwargs"]), config)
     checkpointer = PeriodicCheckpoint(config["checkpoint_freq"], save)
     callbacks = [
+        *scheduled,
         RewardTermsLogger(eval_venv.unwrapped.env.reward_keys),
         PeriodicEvaluation(eval_venv, vec_normalize, eval_cfg["freq"], eval_cfg["seed"], history, report, clock),
         checkpointer,
     ]
     if config.get("critic_warmup"):
         callbacks.append(FrozenActor(config["critic_warmup"]))
+    for callback in scheduled:  # the first episodes start under a curriculum's settings (learn resets the env)
+        if isinstance(callback, ConfigSchedule):
+            callback.set_on(venv, model.num_timesteps)
     remaining = config["total_timesteps"] - model.num_timesteps
     try:
         if remaining > 0:

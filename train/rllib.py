@@ -157,7 +157,7 @@ _MAPPED = {
     "vf_coef": "vf_loss_coeff",
     "max_grad_norm": "grad_clip",
 }
-_REFUSED = ("target_kl", "use_sde", "sde_sample_freq")
+_REFUSED = ("target_kl", "use_sde", "sde_sample_freq", "callback")
 
 
 def resolve_config(args: RLlibArgs) -> dict:

@@ -16,7 +16,7 @@ from ..hybrid import GROUND_TOL
 from .. import tasks
 from .._core import kernels
 from ..info import InfoBuilder
-from ..randomize import Robots, params_of_row
+from ..randomize import Robots, params_of_row, posture_limits
 from ..tasks.stance import StanceConfig, nominal_state, robot_row
 
 __all__ = ["LegEnv"]
@@ -173,6 +173,21 @@ class LegEnv(gym.Env):
             self._viewer.close()
             self._viewer = None
 
+    def set_config(self, **changes: Any) -> None:
+        """Change task settings of the running env: a curriculum's handle.
+
+        ``changes`` are config fields (``alive_bonus=3.0``, ``command_range=(0.02, 0.06)``), checked as at
+        construction. Reward weights, termination limits and the step rule hold from the next ``step``; what a
+        start draws (the reset noise, a command, pushes) from the next ``reset``. The robot, its nominal posture
+        and the posture limits it is drawn under, the contact model, the control period and the observation
+        space stay as built: a change that would move any of them raises ``ValueError`` naming the fields and
+        changes nothing (an observation space may narrow, e.g. a command range within the built one, and
+        stays the built one). An unknown field raises ``TypeError``.
+        """
+        self.config, settings = checked_config_change(self, self.observation_space, changes)
+        self._settings[...] = settings  # in place: the compiled core holds this array
+        self._task_draws = self.task.draws(self.config)
+
     # ---------------------------------------------------------- accessors
 
     @property
@@ -244,6 +259,40 @@ class LegEnv(gym.Env):
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._bind()
+
+
+def checked_config_change(env, observation_space: spaces.Box, changes: dict):
+    """``env``'s config with ``changes`` and its settings row, for ``set_config`` of the single and the vector env.
+
+    Every check of a new env runs on the changed config (a scratch ``LegEnv`` is built from it); then what must
+    stay as built is compared: the robot row, the posture limits of drawn robots, the contact model, the control
+    period, and the observation space (which may narrow). Raises ``TypeError`` for an unknown field and
+    ``ValueError`` naming the changed fields otherwise; nothing is changed by this function.
+    """
+    config = env.config
+    new = type(config).from_kwargs(config, **changes)
+    changed = [name for name in changes if getattr(new, name) != getattr(config, name)]
+    named = ", ".join(changed) or "nothing"
+    scratch = LegEnv(params=env.params, config=new, task=env.task_name)  # the checks of a new env
+    moved = []
+    if new.contact != config.contact:
+        moved.append("the contact model")
+    if new.dt != config.dt:
+        moved.append("the control period")
+    if robot_row(env.params, new, scratch.nominal).tobytes() != robot_row(env.params, config, env.nominal).tobytes():
+        moved.append("the robot (its friction, torque limits or nominal posture)")
+    if not np.array_equal(posture_limits(new), posture_limits(config)):
+        moved.append("the posture limits robots are drawn under")
+    space = env.task.observation_space(env.robots.longest(env.params), new)
+    if space.shape != observation_space.shape:
+        moved.append(f"the observation's shape ({observation_space.shape} to {space.shape})")
+    else:
+        wider = np.flatnonzero((space.low < observation_space.low) | (space.high > observation_space.high))
+        if wider.size:
+            moved.append(f"the observation space: entries {wider.tolist()} would widen beyond the built bounds (they may only narrow)")
+    if moved:
+        raise ValueError(f"set_config({named}) would change {'; '.join(moved)}: make a new env for that")
+    return new, scratch._settings
 
 
 def robot_of_row(row) -> tuple[LegParams, float]:

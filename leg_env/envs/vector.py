@@ -35,7 +35,7 @@ from ..layout import put_rows, take_rows
 from ..randomize import FIELD_COLUMNS, FIELDS
 from ..step import BitGeneratorRows
 from ..tasks.stance import REWARD_TERMS, StanceConfig
-from .single import LegEnv, explicit_start, render_marks, robot_of_row, start_anchor
+from .single import LegEnv, checked_config_change, explicit_start, render_marks, robot_of_row, start_anchor
 
 __all__ = ["LegVectorEnv", "PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
 
@@ -290,6 +290,13 @@ class LegVectorEnv(VectorEnv):
                 render.draw(self._q[i], self._anchor[i], self._out["lam"][i], params, violated, self.width, self.height, mu, mode, impulse, push)
             )  # fmt: skip
         return tuple(frames)
+
+    def set_config(self, **changes: Any) -> None:
+        """Change task settings of every sub-env: a curriculum's handle (``LegEnv.set_config`` says what may
+        change and when it takes effect). Episodes under way keep their starts; later resets, autoresets
+        included, draw under the new settings. The SB3 adapter reaches it by ``env_method("set_config", ...)``."""
+        self.config, settings = checked_config_change(self, self.single_observation_space, changes)
+        self._settings[...] = settings
 
     # ---------------------------------------------------------- accessors
 

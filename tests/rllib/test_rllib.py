@@ -123,6 +123,8 @@ def test_another_configuration_is_refused(run, capsys):
 def test_unmapped_keys_are_errors_or_recorded(tmp_path):
     with pytest.raises(ValueError, match="target_kl"):
         resolve_config(RLlibArgs(out=tmp_path, params=["target_kl:0.01"]))
+    with pytest.raises(ValueError, match="callback"):  # SB3 callbacks (a curriculum) have no counterpart either
+        resolve_config(RLlibArgs(out=tmp_path, params=["callback:train.callbacks.ConfigSchedule"]))
     with pytest.raises(ValueError, match="norm_obs"):
         resolve_config(RLlibArgs(out=tmp_path, params=["normalize:{norm_obs: true}"]))
     config = resolve_config(RLlibArgs(out=tmp_path, num_env_runners=3))

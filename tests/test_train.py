@@ -377,7 +377,8 @@ def test_train_runs_a_curriculum_from_the_hyperparameters(tmp_path):
     assert config["callback"][0]["train.callbacks.ConfigSchedule"]["schedule"]["command_range"][1] == [192, [0.1, 0.15]]
     # a schedule the training env has no room for fails at the first set_config, naming the field
     with pytest.raises(ValueError, match="set_config\\(command_range\\)"):
-        train(tiny_args(tmp_path / "narrow", env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, params=TINY + [CURRICULUM]))
+        train(tiny_args(tmp_path / "narrow", env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0,
+                        params=TINY + ["env_kwargs:{}", CURRICULUM]))  # fmt: skip
     # a bad entry is refused before the run folder is made
     with pytest.raises(ValueError, match="ConfigSchedule"):
         train(tiny_args(tmp_path / "bad", params=TINY + ["callback:[{train.callbacks.ConfigSchedule: {schedule: {}}}]"]))

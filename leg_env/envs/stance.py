@@ -245,13 +245,37 @@ class PlanarLegStanceEnv(LegEnv):
     which the reward charges 10 per step of flight, 120-170 in all. At a discount of 0.99 to 0.995 that is
     more than the alive bonus the hop keeps (at most 100 to 200, discounted), so the discounted objective
     prefers the fall, while the episode's return, which the evaluation counts, prefers the hop. Nothing in the
-    reward pays without the task being done, so the task keeps its version. The training
-    configuration (``train/hyperparams/ppo.yml``) shapes the training env only: flight charged 0.5, starts
-    twice as wide, ten times the weight on the base offset, a discount of 0.998, and a small entropy bonus
-    (0.005). Without the entropy bonus, four of five seeds stopped at the same 56 of the 64 evaluation starts
-    from 30M steps on; the fifth reached 97% on held-out starts by leaning its torso about 30 degrees (a
-    return of 620). With it, one of those four seeds survived all 64. Changes to it, each from scratch on
-    seed 2 (93%, a return of 763 on 100 held-out starts; the gated controller 96%, 908):
+    reward pays without the task being done, so the task keeps its version. The training configuration
+    (``train/hyperparams/ppo.yml``) shapes the training env only: ten times the weight on the base offset, a
+    discount of 0.998, a small entropy bonus (0.005), and a curriculum (``train.callbacks.ConfigSchedule``) of two
+    settings. Flight is free for the first 9M steps, charged 0.5 per step by 24M and 3 by 40M; the reset noise is
+    0.05 for the first 6M steps and widens to 0.15 by 30M. While flight is free the policy hops all the time (a
+    return of about -3,000 on the task's reward) and learns to survive nearly every start; the rising charge
+    then teaches it to stand where it can. Over five seeds (45M steps, 12-13 minutes per seed on one core) every
+    seed survives at least 97% of the 100 held-out starts and four survive all of them (IQM 100% [98%, 100%]);
+    the returns are 401-829 (IQM 734 [494, 816]), below the gated controller's 908 (96% survival) and the LQR's
+    851 (89%): the policies still hop where the controllers stand (the shipped seed 2, 100% and 829, is charged 80
+    per episode for flight), and the shipped one leans its torso 16 degrees (RMS). So the survival bar of Solved is
+    met, on four seeds of five, and the return bar on none.
+
+    Before the curriculum the configuration charged flight 0.5 and drew starts of noise 0.1 throughout. Two seeds
+    of five then never learnt the step back: seeds 2 and 3 survived 93% of the held-out starts (the same seven
+    falls), seeds 0, 1 and 4 survived 99-100% with returns of 907, 875 and 346 (IQM 97% [93%, 100%], return 815
+    [485, 886]). Without the entropy bonus, four of five seeds stopped at the same 56 of the 64 evaluation starts
+    from 30M steps on; the fifth reached 97% on held-out starts by leaning its torso about 30 degrees (a return of
+    620). The curriculum came from probes on the two seeds that did not learn the step, each from scratch and
+    scored on the 100 held-out starts:
+
+    - the reset noise widened from 0.05 to 0.15 (6M to 30M steps), flight 0.5 throughout: seed 2 stopped at the
+      same 56 of 64 training-evaluation starts (93%, 818); seed 3 survived every start, by hopping in most
+      episodes (return 584: flight charged 399 per episode);
+    - flight free for 9M steps, then charged 0.5 by 24M (noise 0.1): seed 2 found the step at once (100% of the
+      training-evaluation starts from 15M steps on) and survived 98%, but hopped and leaned its torso 30 degrees
+      (return 601);
+    - the widening noise, and flight 0.5 raised to 3 from 30M to 40M: seed 3 survived every start, return 811.
+
+    The shipped configuration combines the last two. Probes before it, each from scratch on seed 2 (93%, a return
+    of 763 under the configuration of the time):
 
     - the torso angle's weight at 3: the policy's 20-degree lean goes (the drift term charges 30 per episode
       instead of 153), 93%, 888: the same seven falls on the starts that need a step back. On seeds 0 and 1
@@ -259,9 +283,8 @@ class PlanarLegStanceEnv(LegEnv):
     - that and an entropy bonus of 0.01: 95%, 844 (at 0.02 the training collapsed after 30M steps);
     - that and flight charged 2: 97%, 927. It recovers from four of the seven hard starts without leaving
       the ground: its foot slides (the friction term charges 14 per episode). On seeds 0 and 1 the same
-      settings stopped at 77% and 89% of the 64 training-evaluation starts, where the configuration above
-      reached 100% on both: a gain on one seed was within the spread between seeds, so none of these is the
-      shipped configuration.
+      settings stopped at 77% and 89% of the 64 training-evaluation starts, where the configuration of the time
+      reached 100% on both.
 
     Neither a decaying learning rate (86% in training evaluations) nor, with the angle weight at 3, starts
     three times as wide (84%) helped seed 2. Three epochs per rollout instead of four, which trains at 65k

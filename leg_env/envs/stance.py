@@ -248,15 +248,23 @@ class PlanarLegStanceEnv(LegEnv):
     reward pays without the task being done, so the task keeps its version. The training configuration
     (``train/hyperparams/ppo.yml``) shapes the training env only: ten times the weight on the base offset, a
     discount of 0.998, a small entropy bonus (0.005), and a curriculum (``train.callbacks.ConfigSchedule``) of two
-    settings. Flight is free for the first 9M steps, charged 0.5 per step by 24M and 3 by 40M; the reset noise is
-    0.05 for the first 6M steps and widens to 0.15 by 30M. While flight is free the policy hops all the time (a
-    return of about -3,000 on the task's reward) and learns to survive nearly every start; the rising charge
-    then teaches it to stand where it can. Over five seeds (45M steps, 12-13 minutes per seed on one core) every
-    seed survives at least 97% of the 100 held-out starts and four survive all of them (IQM 100% [98%, 100%]);
-    the returns are 401-829 (IQM 734 [494, 816]), below the gated controller's 908 (96% survival) and the LQR's
-    851 (89%): the policies still hop where the controllers stand (the shipped seed 2, 100% and 829, is charged 80
-    per episode for flight), and the shipped one leans its torso 16 degrees (RMS). So the survival bar of Solved is
-    met, on four seeds of five, and the return bar on none.
+    settings. Flight is free for the first 9M steps, charged 0.5 per step by 24M, held there to 30M and raised to
+    the task's own 10 by 42M; the reset noise is 0.05 for the first 6M steps and widens to 0.15 by 30M. While flight
+    is free the policy hops all the time (a return of about -3,000 on the task's reward) and learns to survive
+    nearly every start; the rising charge then teaches it to stand where it can. Over five seeds (45M steps, 12-13
+    minutes per seed on one core) four seeds survive all of the 100 held-out starts and one 93% (IQM 100% [95%,
+    100%]), with returns of 412-947 (IQM 816 [520, 932]). The shipped seed 2, named before training, survives every
+    start with a return of 947, above the gated controller's 908 (96% survival) and the LQR's 851 (89%): it hops
+    only where it must (flight charged 43 per episode, the gated controller 28) and holds its torso within 4
+    degrees of level (RMS). Seed 0 (100%, 902) passes the LQR's return and not the gated controller's; seeds 1 and
+    4 survive every start at 811 and 412; seed 3 falls from 7 starts (93%, 736). So the shipped seed and seed 0 meet
+    Solved, and the shipped seed also outscores the gated controller; four seeds of five survive at least 98%. In its first 42M steps, while the charge rises,
+    a seed's training evaluations can drop for a few million steps (seed 2's to 0% at 39M) before they recover.
+
+    With the late charge ending at 3 (at 40M steps) instead of 10, an earlier configuration,
+    every seed survived at least 97% of the held-out starts (IQM 100% [98%, 100%]) with returns of 401-829 (IQM
+    734 [494, 816]), all below the gated controller's: the policies hopped more than they must (seed 2 was charged
+    80 per episode for flight, 100%, 829) and leant their torsos (seed 2, 16 degrees RMS).
 
     Before the curriculum the configuration charged flight 0.5 and drew starts of noise 0.1 throughout. Two seeds
     of five then never learnt the step back: seeds 2 and 3 survived 93% of the held-out starts (the same seven
@@ -274,12 +282,10 @@ class PlanarLegStanceEnv(LegEnv):
       (return 601);
     - the widening noise, and flight 0.5 raised to 3 from 30M to 40M: seed 3 survived every start, return 811.
 
-    The shipped configuration combines the last two. Two probes after it, on seed 2 (45M steps):
+    The configuration with the charge ending at 3 combined the last two. Two probes after it, on seed 2 (45M steps):
 
     - its late charge raised to the task's own 10 per step of flight (from 0.5 at 30M steps to 10 at 42M): 100% of
-      the held-out starts with a return of 947, above the gated controller's 908 and the LQR's 851, flight charged
-      43 per episode and the torso within 4 degrees of level (RMS). Its training evaluations fell to 0% at 39M
-      steps and recovered by 42M. One seed: not yet over five, so not the shipped configuration;
+      the held-out starts with a return of 947; over five seeds, the shipped configuration above;
     - the torso angle's weight at 3 as well: 100%, but a return of 28, the policy still hopping through most
       episodes (flight charged 928 per episode on the task).
 

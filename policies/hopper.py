@@ -276,14 +276,16 @@ class HopperController(BatchedController):
         return s * t1 - t0
 
     def act_on(self, observation: np.ndarray, command: float, starts: np.ndarray, rows: np.ndarray, action: np.ndarray) -> None:
-        """Write the hopper's actions into ``action[rows]``, for balance-task observations ``(N, 18)`` and an apex command.
+        """Write the hopper's actions into ``action[rows]``, for balance-task observations ``(N, 18)`` (or more: a
+        task's own entries after the 18 are not read) and an apex command.
 
         The recovery hop of another controller (``policies.gated``, ``policies.stepping``): the hopper runs on the
         whole batch, its state being per robot, with ``command`` [m] as the observation's last entry; the robots
         in ``starts`` start afresh (a hop's first step).
         """
         n = observation.shape[0]
-        hop_obs = np.concatenate([observation.astype(np.float32), np.full((n, 1), command, dtype=np.float32)], axis=1)
+        ground = observation[:, : Obs.command].astype(np.float32)  # the unilateral ground's 18 entries
+        hop_obs = np.concatenate([ground, np.full((n, 1), command, dtype=np.float32)], axis=1)
         hop_action, _ = self.predict(hop_obs, episode_start=starts)
         action[rows] = hop_action[rows]
 

@@ -163,7 +163,7 @@ class LQRController:
         return np.linalg.eigvals(self.Ad - self.Bd @ self.K)
 
     def torque(self, obs: np.ndarray) -> np.ndarray:
-        """Unclipped joint torques ``tau_eq - K x`` [N m] for observations ``(..., 12)`` or ``(..., 18)``."""
+        """Unclipped joint torques ``tau_eq - K x`` [N m] for observations ``(..., 12)``, ``(..., 18)`` or ``(..., 19)``."""
         obs = np.asarray(obs, dtype=np.float64)
         x = obs[..., STATE_INDEX] - self.x_eq
         return self.tau_eq - x @ self.K.T
@@ -171,14 +171,16 @@ class LQRController:
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         """SB3-style ``predict``: actions in [-1, 1] for one observation (12,) or a batch (N, 12).
 
-        On the unilateral ground (18 entries: ``PlanarLegBalance-v0``, ``PlanarLegPush-v0``) the same
-        entries 2-4 and 7-9 are read; the gain is the stance model's whatever the contact mode.
+        On the unilateral ground (18 entries: ``PlanarLegBalance-v0``, ``PlanarLegPush-v0``; 19 on
+        ``PlanarLegPush-v1``) the same entries 2-4 and 7-9 are read; the gain is the stance model's whatever the
+        contact mode.
 
         Returns:
             ``(action, None)`` with ``action`` float32 of shape (2,) or (N, 2).
         """
         obs = np.asarray(observation)
-        if obs.shape[-1:] not in ((12,), (18,)) or obs.ndim not in (1, 2):
-            raise ValueError(f"observation must have shape (12,) or (N, 12) (pinned), (18,) or (N, 18) (unilateral), got {obs.shape}")
+        if obs.shape[-1:] not in ((12,), (18,), (19,)) or obs.ndim not in (1, 2):
+            raise ValueError(f"observation must have shape (12,) or (N, 12) (pinned), (18,) or (N, 18) (unilateral), "
+                             f"(19,) or (N, 19) (PlanarLegPush-v1), got {obs.shape}")
         action = np.clip(self.torque(obs) / self.torque_limit, -1.0, 1.0).astype(np.float32)
         return action, None

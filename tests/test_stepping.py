@@ -159,3 +159,19 @@ def test_recovery_controllers_load_by_name_for_their_task(name, cls, env_id, kwa
     for bad in (np.zeros(12), np.zeros((2, 3, 18))):
         with pytest.raises(ValueError, match="observation"):
             ctl.predict(bad)
+
+
+@pytest.mark.parametrize("make", [SteppingController, LQRController])
+def test_controllers_act_on_push_v1_as_on_v0(make):
+    """``PlanarLegPush-v1`` adds the COM's entry after v0's 18: the model-based controllers do not read it, so on
+    the same seeds they act, and survive, as on v0 (the push curve's references are the same on both)."""
+    params, config = _robot()
+    controllers = [make(params, config) if make is SteppingController else make(params) for _ in range(2)]
+    envs = [gym.make_vec(i, num_envs=8, push_force=(45.0, 45.0)) for i in (ENV_ID, "leg_env/PlanarLegPush-v1")]
+    obs = [e.reset(seed=3)[0] for e in envs]
+    assert obs[1].shape == (8, 19) and np.array_equal(obs[0], obs[1][:, :18])
+    for _ in range(300):
+        acts = [c.predict(o, deterministic=True)[0] for c, o in zip(controllers, obs)]
+        assert np.array_equal(acts[0], acts[1])
+        obs = [e.step(a)[0] for e, a in zip(envs, acts)]
+        assert np.array_equal(obs[0], obs[1][:, :18])

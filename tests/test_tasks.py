@@ -16,9 +16,9 @@ import leg_env
 from leg_env import dynamics as dyn
 from leg_env.tasks import REGISTRY
 
-NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1",
+NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegPush-v1", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1",
            "leg_env/PlanarLegHop-v2", "leg_env/PlanarLegHop-v3")
-OUT_OF_DATE = ("leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1", "leg_env/PlanarLegHop-v2")  # a higher version of its name is registered
+OUT_OF_DATE = ("leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1", "leg_env/PlanarLegHop-v2")  # a higher version of its name is registered
 ALL_IDS = tuple(REGISTRY)
 NUM_ENVS = 4
 SEED = 5
@@ -30,6 +30,7 @@ KWARGS = {
     "leg_env/PlanarLegStance-v0": dict(reset_noise_scale=0.05, ctrl_cost_weight=0.02),
     "leg_env/PlanarLegBalance-v0": dict(ctrl_cost_weight=0.02, params={"m_b": 9.0}),
     "leg_env/PlanarLegPush-v0": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
+    "leg_env/PlanarLegPush-v1": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
     "leg_env/PlanarLegHop-v0": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
     "leg_env/PlanarLegHop-v1": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
     "leg_env/PlanarLegHop-v2": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
@@ -240,7 +241,7 @@ def test_sb3_adapter_contract(env_id):
                 assert info["terminal_observation"].shape == venv.observation_space.shape
     assert done_seen >= 4
     bad = {"ctrl_cost_weight": -1.0, "com_weight": "1", "command_range": (0.2, 0.1)}
-    field = {NEW_IDS[0]: "ctrl_cost_weight", PUSH: "com_weight", HOP: "command_range", HOP1: "command_range", HOP2: "command_range",
+    field = {NEW_IDS[0]: "ctrl_cost_weight", PUSH: "com_weight", PUSH1: "com_weight", HOP: "command_range", HOP1: "command_range", HOP2: "command_range",
              HOP3: "command_range"}[env_id]
     with pytest.raises(ValueError, match=field):  # ArgumentTypeError is a ValueError too
         make_sb3_vec_env(2, env_id=env_id, **{field: bad[field]})
@@ -597,8 +598,45 @@ def test_push_reward_charges_the_com_leaving_the_start():
     assert r == pytest.approx(sum(info[k] for k in env.task.reward_keys), abs=0.0)
 
 
+def test_push_v1_observes_the_com_from_its_start_and_is_v0_otherwise():
+    """v1's entry 18 is the whole-body COM's x from the episode's start, what its COM term charges (v0 does not
+    observe it): 0 at the start, ``info["com_position"][0] - x0`` after every step, single and batched, through
+    pushes and hops; the other 18 entries, the rewards and the infos are v0's bit for bit."""
+    from leg_env.tasks.push import OBS_COM_DRIFT
+
+    assert OBS_COM_DRIFT == 18
+    kw = dict(FAST_PUSHES, reset_noise_scale=0.05)
+    old, new = gym.make("leg_env/PlanarLegPush-v0", **kw), gym.make("leg_env/PlanarLegPush-v1", **kw)
+    assert new.observation_space.shape == (19,) and old.observation_space.shape == (18,)
+    assert new.observation_space.low[18] == -np.inf and new.observation_space.high[18] == np.inf
+    acts = actions(STEPS, 1, seed=3)
+    for seed in (0, 7):
+        (o0, i0), (o1, i1) = old.reset(seed=seed), new.reset(seed=seed)
+        x0 = i1["com_position"][0]
+        assert np.array_equal(o0, o1[:18]) and o1[OBS_COM_DRIFT] == 0.0
+        moved = 0.0
+        for a in acts[:, 0]:
+            o0, r0, t0, tr0, i0 = old.step(a)
+            o1, r1, t1, tr1, i1 = new.step(a)
+            assert np.array_equal(o0, o1[:18]) and r0 == r1 and (t0, tr0) == (t1, tr1)
+            assert data_equivalence(i0, i1, exact=True)
+            assert o1[OBS_COM_DRIFT] == np.float32(i1["com_position"][0] - x0)
+            moved = max(moved, abs(float(o1[OBS_COM_DRIFT])))
+            if t1 or tr1:
+                break
+        assert moved > 0.01  # the pushes moved it
+    vec = gym.make_vec("leg_env/PlanarLegPush-v1", num_envs=3, vectorization_mode="vector_entry_point", **kw)
+    obs, info = vec.reset(seed=2)
+    x0 = info["com_position"][:, 0].copy()
+    assert np.all(obs[:, OBS_COM_DRIFT] == 0.0)
+    for a in actions(20, 3, seed=4):
+        obs, _, term, trunc, info = vec.step(a)
+        assert not np.any(term | trunc)
+        assert np.array_equal(obs[:, OBS_COM_DRIFT], (info["com_position"][:, 0] - x0).astype(np.float32))
+
+
 PUSH, HOP, HOP1, HOP2 = "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1", "leg_env/PlanarLegHop-v2"
-HOP3 = "leg_env/PlanarLegHop-v3"
+HOP3, PUSH1 = "leg_env/PlanarLegHop-v3", "leg_env/PlanarLegPush-v1"
 BAD_CONFIGS = [
     (PUSH, {"push_force": (50.0, 20.0)}, ValueError, "push_force"),
     (PUSH, {"push_force": (-1.0, 20.0)}, ValueError, "push_force"),
@@ -612,6 +650,9 @@ BAD_CONFIGS = [
     (PUSH, {"com_weight": True}, TypeError, "com_weight"),
     (PUSH, {"com_weight": 10**400}, ValueError, "com_weight"),
     (PUSH, {"unilateral_weight": "0.5"}, TypeError, "unilateral_weight"),
+    (PUSH, {"observe_com": "yes"}, TypeError, "observe_com"),
+    (PUSH, {"observe_com": True, "contact": "pinned"}, ValueError, "observe_com"),
+    (PUSH1, {"observe_com": 1}, TypeError, "observe_com"),
     (HOP, {"contact": "pinned"}, ValueError, "contact"),
     (HOP, {"command_range": (0.2, 0.1)}, ValueError, "command_range"),
     (HOP, {"command_range": (-0.1, 0.1)}, ValueError, "command_range"),

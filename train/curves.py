@@ -57,7 +57,6 @@ TEST_SEED = 10_000  # the held-out episodes: train.evaluate's default
 KEYS = ("push_impulse_90", "survival_rate", "mean_return", "mean_length", "hops_per_episode", "mean_abs_apex_error", "mean_drift_10s")
 """The held-out scores on the page (the push curve's headline for the push task; the hop metrics for the hop
 task: ``train.task_metrics.HopTracker``)."""
-PUSH_TASK = "leg_env/PlanarLegPush-v0"
 
 
 @dataclass
@@ -246,12 +245,13 @@ def _held_out(policy, args: CurvesArgs, env_kwargs: dict) -> dict:
     """A policy's scores on the held-out episodes (``train.evaluate.run_episodes``); on the push task also the
     push curve's 90% impulse (``train.task_metrics.push_survival``, every push of an episode at one magnitude)."""
     from train.evaluate import PUSH_FORCES, run_episodes
-    from train.task_metrics import largest_survived_impulse, push_survival
+    from train.task_metrics import is_push_task, largest_survived_impulse, push_survival
 
     seeds = [TEST_SEED + i for i in range(args.episodes)]
     summary, _ = run_episodes(policy, seeds, env_kwargs, env_id=args.env_id)
-    if args.env_id == PUSH_TASK:
-        summary["push_impulse_90"] = largest_survived_impulse(push_survival(policy, PUSH_FORCES, args.episodes, TEST_SEED, env_kwargs))
+    if is_push_task(args.env_id):
+        curve = push_survival(policy, PUSH_FORCES, args.episodes, TEST_SEED, env_kwargs, args.env_id)
+        summary["push_impulse_90"] = largest_survived_impulse(curve)
     return {k: summary[k] for k in KEYS if k in summary}
 
 

@@ -534,11 +534,11 @@ where the controllers' limits lie), then to 200 N (20 N s) in steps of 10 N."""
 
 def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs, out: Path) -> dict:
     """Survival against the push impulse for every controller (``train.task_metrics.push_survival``)."""
-    from train.task_metrics import largest_survived_impulse, push_survival
+    from train.task_metrics import is_push_task, largest_survived_impulse, push_survival
 
-    if env_id != "leg_env/PlanarLegPush-v0":
-        raise ValueError(f"--push-curve needs the push task leg_env/PlanarLegPush-v0, not {env_id}")
-    curves = {label: push_survival(c, PUSH_FORCES, args.episodes, args.seed, env_kwargs) for label, c in controllers.items()}
+    if not is_push_task(env_id):
+        raise ValueError(f"--push-curve needs a push task (leg_env/PlanarLegPush-v0 or -v1), not {env_id}")
+    curves = {label: push_survival(c, PUSH_FORCES, args.episodes, args.seed, env_kwargs, env_id) for label, c in controllers.items()}
     best = {label: largest_survived_impulse(rows) for label, rows in curves.items()}
     (out / "push_curve.json").write_text(json.dumps({"seeds": [args.seed, args.seed + args.episodes - 1], "curves": curves, "impulse_90": best}, indent=2) + "\n")
     names = list(curves)

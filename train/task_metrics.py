@@ -20,7 +20,7 @@ import numpy as np
 
 from leg_env.tasks.stance import Obs
 
-__all__ = ["HopTracker", "push_survival", "largest_survived_impulse", "LONG_FLIGHT"]
+__all__ = ["HopTracker", "is_push_task", "push_survival", "largest_survived_impulse", "LONG_FLIGHT"]
 
 LONG_FLIGHT = 0.05
 """A flight of at least this long [s] is a hop in ``hops_per_episode`` (shorter ones are stumbles)."""
@@ -102,8 +102,16 @@ class HopTracker:
         }
 
 
-def push_survival(controller, forces, episodes: int, seed: int, env_kwargs: dict | None = None) -> list[dict]:
-    """Survival rate of ``controller`` on ``PlanarLegPush-v0`` with every push of magnitude ``F``, for each ``F``.
+def is_push_task(env_id: str) -> bool:
+    """Whether ``env_id`` is a registered version of the push-recovery task (``PlanarLegPush-v0``, ``-v1``)."""
+    from leg_env.tasks import REGISTRY
+
+    return REGISTRY.get(env_id, (None, {}))[0] == "push"
+
+
+def push_survival(controller, forces, episodes: int, seed: int, env_kwargs: dict | None = None,
+                  env_id: str = "leg_env/PlanarLegPush-v0") -> list[dict]:
+    """Survival rate of ``controller`` on the push task ``env_id`` with every push of magnitude ``F``, for each ``F``.
 
     ``episodes`` episodes per magnitude, episode ``i`` seeded ``seed + i`` (the same seeds, so the same
     push times and signs, at every magnitude and for every controller). Returns one dict per force:
@@ -114,7 +122,7 @@ def push_survival(controller, forces, episodes: int, seed: int, env_kwargs: dict
     rows = []
     for force in forces:
         kwargs = {**(env_kwargs or {}), "push_force": (float(force), float(force))}
-        envs = gym.make_vec("leg_env/PlanarLegPush-v0", num_envs=episodes, **kwargs)
+        envs = gym.make_vec(env_id, num_envs=episodes, **kwargs)
         duration = envs.config.push_steps * envs.config.dt
         obs, _ = envs.reset(seed=seed)
         alive = np.ones(episodes, dtype=bool)

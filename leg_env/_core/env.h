@@ -85,6 +85,7 @@ typedef struct {
         struct {
             double w_com;        /* per m^2 of the COM's displacement along x */
             int32_t push_steps;  /* control steps of one push */
+            uint8_t observe_com; /* the COM's x from its start is the observation's last entry (v1) */
         } push;
         struct {
             double w_height, height_scale, w_drift, w_tilt, w_impact, w_slip;
@@ -139,6 +140,10 @@ typedef enum {
     OBS_LAST_APEX = OBS_PROGRESS_DIM, /* with the hop's observe_apex */
     OBS_MAX_DIM
 } obs_index;
+
+/* The push task's entry (with its observe_com, on the unilateral ground): the COM's x from its start. */
+#define OBS_PUSH_COM_DRIFT OBS_UNILATERAL_DIM
+#define OBS_PUSH_DIM (OBS_UNILATERAL_DIM + 1)
 
 /* A batch: the arrays of one call, checked (module_env.c). */
 typedef struct {

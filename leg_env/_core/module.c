@@ -816,6 +816,7 @@ static const field SETTINGS_FIELDS[] = {
     {NULL, 0, NULL, 0}};
 static const field SETTINGS_PUSH_FIELDS[] = {
     TASK(env_settings, task.push.w_com, "w_com", "f8", 1), TASK(env_settings, task.push.push_steps, "push_steps", "i4", 1),
+    TASK(env_settings, task.push.observe_com, "observe_com", "?", 1),
     {NULL, 0, NULL, 0}};
 static const field SETTINGS_HOP_FIELDS[] = {
     TASK(env_settings, task.hop.w_height, "w_height", "f8", 1), TASK(env_settings, task.hop.height_scale, "height_scale", "f8", 1),
@@ -903,12 +904,12 @@ static PyObject *py_layouts(PyObject *self, PyObject *unused)
 static PyObject *py_observation(PyObject *self, PyObject *unused)
 {
     return Py_BuildValue(
-        "{sisisisisisisisisisisisisisisisisisisisisisisisisisisi}", "base_x", OBS_BASE_X, "base_y", OBS_BASE_Y, "th_b", OBS_TH_B, "q1",
+        "{sisisisisisisisisisisisisisisisisisisisisisisisisisisisisi}", "base_x", OBS_BASE_X, "base_y", OBS_BASE_Y, "th_b", OBS_TH_B, "q1",
         OBS_Q1, "q2", OBS_Q2, "vx_b", OBS_VX_B, "vy_b", OBS_VY_B, "w_b", OBS_W_B, "w_q1", OBS_W_Q1, "w_q2", OBS_W_Q2, "lam_x",
         OBS_LAM_X, "lam_y", OBS_LAM_Y, "foot_height", OBS_FOOT_HEIGHT, "foot_vx", OBS_FOOT_VX, "foot_vy", OBS_FOOT_VY, "contact",
         OBS_CONTACT, "slip", OBS_SLIP, "impulse_y", OBS_IMPULSE_Y, "command", OBS_COMMAND, "pinned_dim", OBS_PINNED_DIM,
         "unilateral_dim", OBS_UNILATERAL_DIM, "hop_dim", OBS_HOP_DIM, "com_drift", OBS_COM_DRIFT, "ground_time", OBS_GROUND_TIME, "hop_progress_dim", OBS_PROGRESS_DIM,
-        "last_apex", OBS_LAST_APEX, "hop_apex_dim", OBS_MAX_DIM);
+        "last_apex", OBS_LAST_APEX, "hop_apex_dim", OBS_MAX_DIM, "push_com_drift", OBS_PUSH_COM_DRIFT, "push_com_dim", OBS_PUSH_DIM);
 }
 
 /* ------------------------------------------------------------------------------------------------ */

@@ -77,7 +77,7 @@ static int obs_fits(int task, const env_batch *b)
     }
     const Py_ssize_t need = task_obs_dim(task, b->settings);
     if (b->obs_cols != need) {
-        PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and its settings (unilateral, observe_progress, observe_apex), got (%zd, %zd)",
+        PyErr_Format(PyExc_ValueError, "obs must have shape (%zd, %zd) for this task and its settings (unilateral, observe_progress, observe_apex, observe_com), got (%zd, %zd)",
                      b->n, need, b->n, b->obs_cols);
         return 0;
     }

@@ -186,6 +186,8 @@ static void push_assess(const env_batch *b, Py_ssize_t i)
     if (evaluate(b, i, o->terms, PUSH_TERMS)) {
         const double dx = o->com[0] - t->x_com0;
         o->terms[PUSH_TERMS - 1] = -b->settings->task.push.w_com * dx * dx;
+        if (b->settings->task.push.observe_com) /* the last column (the width is checked against the settings) */
+            b->obs[(i + 1) * b->obs_cols - 1] = (float)dx;
     }
     o->task.push.push_force = force;
     o->task.push.work_push = force * (s->q[0] - s->prev_q[0]); /* exact: F constant over the step (0 if undone) */
@@ -205,6 +207,8 @@ static void push_start(const env_batch *b, Py_ssize_t i)
     o->task.push.work_push = 0.0;
     t->steps = 0;
     t->x_com0 = o->com[0];
+    if (b->settings->task.push.observe_com)
+        b->obs[(i + 1) * b->obs_cols - 1] = 0.0f;
     s->load = push_load_at(t, 0, b->settings->task.push.push_steps);
 }
 
@@ -339,7 +343,8 @@ static Py_ssize_t task_obs_dim(int task, const env_settings *c)
 {
     if (task == TASK_HOP)
         return c->task.hop.observe_apex ? OBS_MAX_DIM : (c->task.hop.observe_progress ? OBS_PROGRESS_DIM : OBS_HOP_DIM);
-    return c->unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM;
+    const Py_ssize_t dim = c->unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM;
+    return task == TASK_PUSH && c->task.push.observe_com ? dim + 1 : dim;
 }
 
 /* The task after a control step of robots lo .. hi - 1. */

@@ -16,6 +16,7 @@ REGISTRY = {
     "leg_env/PlanarLegStance-v0": ("stance", {}),
     "leg_env/PlanarLegBalance-v0": ("stance", {"contact": "unilateral", "reset_noise_scale": 0.05}),
     "leg_env/PlanarLegPush-v0": ("push", {}),
+    "leg_env/PlanarLegPush-v1": ("push", {"observe_com": True}),
     "leg_env/PlanarLegHop-v0": ("hop", {}),
     "leg_env/PlanarLegHop-v1": ("hop", {"flight_height": True, "max_ground_time": 1.0, "observe_progress": True, "height_scale_fine": 0.01,
                                  "pay_on_landing": True}),

@@ -1,4 +1,4 @@
-r"""``leg_env/PlanarLegPush-v0``: recover from horizontal pushes on the torso, on the unilateral ground.
+r"""``leg_env/PlanarLegPush-v0``, ``-v1``: recover from horizontal pushes on the torso, on the unilateral ground.
 
 ## Description
 The robot, the physics and the balance task of ``PlanarLegStance`` (``leg_env.envs.stance``), on the exact
@@ -30,7 +30,11 @@ is the force held over the step, ``info["work_push"]`` its work.
 
 ## Action and Observation Spaces
 Those of ``PlanarLegStance`` (``Box(-1, 1, (2,))`` torques; 18 observations on the unilateral ground,
-12 with ``contact="pinned"``).
+12 with ``contact="pinned"``). ``PlanarLegPush-v1`` (``observe_com=True``, the unilateral ground only) adds
+entry 18 (``leg_env.tasks.push.OBS_COM_DRIFT``): the whole-body COM's ``x`` from where the episode started,
+``x_com - x_com,0`` [m], unbounded. That is what ``reward_com`` charges; v0 does not observe it (its base entry
+is measured from the foot's contact point, which moves with every step), so a v0 policy cannot tell how far
+it has wandered.
 
 ## Rewards
 ``reward = reward_alive + reward_drift + reward_unilateral + reward_friction + reward_ctrl + reward_com``:
@@ -51,6 +55,7 @@ terminate; 1000 steps). Every ``PushConfig`` field is a keyword argument, checke
 | `first_push`     | (0.8, 1.2)    | range of the first push's start [s]                            |
 | `push_interval`  | (2.0, 3.0)    | range of the time between push starts [s]                      |
 | `com_weight`     | 1.0           | per m^2 of whole-body COM displacement along x                 |
+| `observe_com`    | False (v1: True) | the COM's x from its start as observation entry 18          |
 | `unilateral_weight` | 0.5        | per unit of flight time / dt                                   |
 | `contact`        | "unilateral"  | also `"pinned"` (the bilateral pin, for comparison)            |
 
@@ -96,6 +101,9 @@ at small pushes, so the configuration is not a solution. The shipped push policy
 stepping controller (``policies/ppo_push``).
 
 ## Version History
+* v1: the whole-body COM's ``x`` from its start is observation entry 18 (``observe_com=True``): the COM term of
+  the reward depends on it, and v0's observation does not carry it. Dynamics, pushes and rewards are v0's;
+  the other 18 entries are v0's bit for bit.
 * v0: Initial release.
 """
 
@@ -105,13 +113,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import checks
+from .. import checks, layout
 from .._core import kernels
 from .base import Task
-from .stance import REWARD_TERMS as _STANCE_TERMS, StanceConfig, observation_space
+from .stance import REWARD_TERMS as _STANCE_TERMS, StanceConfig, observation_space as _stance_space
 
-__all__ = ["PushConfig", "TASK", "MAX_PUSHES", "REWARD_TERMS", "INFO_NAMES"]
+__all__ = ["PushConfig", "TASK", "MAX_PUSHES", "REWARD_TERMS", "INFO_NAMES", "OBS_COM_DRIFT"]
 
+OBS_COM_DRIFT = layout.OBS["push_com_drift"]  # 18: the COM's x from its start, with observe_com (v1)
 MAX_PUSHES = kernels.PUSH_MAX  # pushes scheduled per episode (8): at least 0.8 + 7 x 2 s = 14.8 s of them
 REWARD_TERMS = _STANCE_TERMS + ("com",)
 N_TERMS = len(REWARD_TERMS)
@@ -145,6 +154,7 @@ class PushConfig(StanceConfig):
     first_push: tuple = (0.8, 1.2)  # range of the first push's start [s]
     push_interval: tuple = (2.0, 3.0)  # range of the time between push starts [s]
     com_weight: float = 1.0  # per m^2 of whole-body COM displacement along x
+    observe_com: bool = False  # the COM's x from its start as observation entry 18 (v1; the unilateral ground only)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -158,6 +168,9 @@ class PushConfig(StanceConfig):
             lo, hi, unit = PUSH_RANGES[name]
             value = checks.real(f"PushConfig.{name}", getattr(self, name), lo, hi, lo_open=name == "push_duration", unit=unit)
             object.__setattr__(self, name, value)
+        object.__setattr__(self, "observe_com", checks.boolean("PushConfig.observe_com", self.observe_com))
+        if self.observe_com and self.contact != "unilateral":
+            raise ValueError(f"PushConfig.observe_com needs contact='unilateral' (its entry follows the unilateral ground's 18), got {self.contact!r}")
 
     @property
     def push_steps(self) -> int:
@@ -165,8 +178,19 @@ class PushConfig(StanceConfig):
         return max(1, int(round(self.push_duration / self.dt)))
 
     def task_settings(self, row: np.ndarray) -> None:
-        """The push's length in control steps and the COM weight in its ``settings`` row."""
-        row["push_steps"], row["w_com"] = self.push_steps, self.com_weight
+        """The push's length in control steps, the COM weight and whether the COM is observed, in its ``settings`` row."""
+        row["push_steps"], row["w_com"], row["observe_com"] = self.push_steps, self.com_weight, self.observe_com
+
+
+def observation_space(params, config: PushConfig):
+    """``PlanarLegStance``'s (12 entries pinned, 18 on the unilateral ground), then (``observe_com``) the
+    whole-body COM's x from its start [m], unbounded."""
+    from gymnasium import spaces
+
+    base = _stance_space(params, config)
+    if not config.observe_com:
+        return base
+    return spaces.Box(np.append(base.low, np.float32(-np.inf)), np.append(base.high, np.float32(np.inf)), dtype=np.float32)
 
 
 def _draws(config: PushConfig) -> int:

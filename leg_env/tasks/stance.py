@@ -69,9 +69,10 @@ __all__ = [
 
 OBS_DIM = layout.OBS["pinned_dim"]  # 12
 OBS_DIM_UNILATERAL = layout.OBS["unilateral_dim"]  # 18: the foot's height, velocity, contact, slip and impulse after them
-Obs = IntEnum("Obs", {name: i for name, i in layout.OBS.items() if not name.endswith("_dim")})
+Obs = IntEnum("Obs", {name: i for name, i in layout.OBS.items() if not name.endswith("_dim") and not name.startswith("push_")})
 """The observation's columns by name (``obs[:, Obs.contact]``), as the compiled core writes them: the 12 of the
-pinned foot, the 6 of the unilateral ground, and the hop task's ``command`` last."""
+pinned foot, the 6 of the unilateral ground, and the hop task's own after them (the push task's own entry, in the
+column of the hop's ``command``, is ``leg_env.tasks.push.OBS_COM_DRIFT``)."""
 CONTACT_MODELS = ("pinned", "unilateral")
 DEFAULT_MU = {"pinned": 0.8, "unilateral": 0.5}
 """Default friction coefficient per contact model. Pinned: the cone of the violation check (as in v0).

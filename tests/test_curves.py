@@ -75,15 +75,16 @@ def test_a_sweep_of_five_seeds_on_a_tiny_budget(tmp_path):
     assert {p: p.stat().st_mtime_ns for p in runs.glob("seed_*/model.zip")} == stamps
 
 
-def test_a_push_sweep_scores_the_push_curve_on_its_evaluation_env(tmp_path):
-    """On the push task the page ranks the seeds by the push curve's 90% impulse, each computed as
+@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegPush-v0", "leg_env/PlanarLegPush-v1"])
+def test_a_push_sweep_scores_the_push_curve_on_its_evaluation_env(tmp_path, env_id):
+    """On the push task (either version) the page ranks the seeds by the push curve's 90% impulse, each computed as
     ``train.evaluate --push-curve`` computes it, and the in-training, held-out and baseline episodes all run
     the evaluation env of ``--eval-env-kwargs``."""
     from train.evaluate import PUSH_FORCES, load_policy
     from train.task_metrics import largest_survived_impulse, push_survival
 
     runs, out = tmp_path / "runs", tmp_path / "page"
-    argv = ["--env-id", "leg_env/PlanarLegPush-v0", "--seeds", "2", "--shipped-seed", "1", "--total-timesteps", "256",
+    argv = ["--env-id", env_id, "--seeds", "2", "--shipped-seed", "1", "--total-timesteps", "256",
             "--eval-freq", "256", "--eval-episodes", "2", "--episodes", "2", "--baseline", "stepping",
             "--eval-env-kwargs", "push_force:[45.0, 45.0]", "--runs", str(runs), "--out", str(out), "--params", *TINY]
     main(argv)
@@ -94,15 +95,17 @@ def test_a_push_sweep_scores_the_push_curve_on_its_evaluation_env(tmp_path):
         assert "--eval-env-kwargs 'push_force:[45.0, 45.0]'" in (folder / "command.txt").read_text()
         policy = load_policy(folder)
         assert policy.env_kwargs == {"push_force": [45.0, 45.0]}
-        expected = largest_survived_impulse(push_survival(policy, PUSH_FORCES, 2, 10_000, policy.env_kwargs))
+        assert policy.env_id == env_id
+        expected = largest_survived_impulse(push_survival(policy, PUSH_FORCES, 2, 10_000, policy.env_kwargs, env_id))
         assert final["per_seed"][str(seed)]["push_impulse_90"] == expected
     impulses = {s: final["per_seed"][str(s)]["push_impulse_90"] for s in (0, 1)}
     best = max(impulses, key=lambda s: impulses[s])
     if impulses[0] != impulses[1]:
         assert final["rank"][str(best)] == 1
     # the baseline's push curve on the same held-out episodes (on 100 of them the stepping controller reaches 4.5 N s)
-    stepping = load_policy("stepping", {"push_force": [45.0, 45.0]}, env_id="leg_env/PlanarLegPush-v0")
-    assert scores["baseline"]["push_impulse_90"] == largest_survived_impulse(push_survival(stepping, PUSH_FORCES, 2, 10_000, {"push_force": [45.0, 45.0]}))
+    stepping = load_policy("stepping", {"push_force": [45.0, 45.0]}, env_id=env_id)
+    curve = push_survival(stepping, PUSH_FORCES, 2, 10_000, {"push_force": [45.0, 45.0]}, env_id)
+    assert scores["baseline"]["push_impulse_90"] == largest_survived_impulse(curve)
     assert scores["baseline"]["push_impulse_90"] >= 2.0
     page = (out / "README.md").read_text()
     assert "90% survival up to [N s]" in page and "push_force=[45.0, 45.0]" in page and "stepping (controller)" in page

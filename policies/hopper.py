@@ -66,7 +66,7 @@ from __future__ import annotations
 import numpy as np
 
 from leg_env.params import LegParams
-from leg_env.tasks.stance import Obs
+from leg_env.tasks.stance import OBS_DIM_UNILATERAL, Obs
 from policies.base import BatchedController
 
 __all__ = ["HopperController"]
@@ -284,7 +284,7 @@ class HopperController(BatchedController):
         in ``starts`` start afresh (a hop's first step).
         """
         n = observation.shape[0]
-        ground = observation[:, : Obs.command].astype(np.float32)  # the unilateral ground's 18 entries
+        ground = observation[:, :OBS_DIM_UNILATERAL].astype(np.float32)  # the unilateral ground's 18 entries
         hop_obs = np.concatenate([ground, np.full((n, 1), command, dtype=np.float32)], axis=1)
         hop_action, _ = self.predict(hop_obs, episode_start=starts)
         action[rows] = hop_action[rows]

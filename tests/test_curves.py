@@ -38,6 +38,17 @@ def test_bad_arguments_name_the_field(kwargs, field):
         CurvesArgs(**kwargs)
 
 
+def test_a_sweep_on_randomised_robots_has_its_own_folders_and_title():
+    """Evaluated on randomised robots, a sweep is not the task's nominal one: its default folders and its title say so."""
+    from train.curves import _task
+
+    args = CurvesArgs(env_id="leg_env/PlanarLegPush-v1", eval_env_kwargs=["push_force:[34.0, 34.0]", "randomize:true"])
+    assert args.out.name == "PlanarLegPush-v1-randomized" and args.runs.name == "PlanarLegPush-v1-randomized"
+    assert _task(args) == "leg_env/PlanarLegPush-v1, randomised robots"
+    nominal = CurvesArgs(env_id="leg_env/PlanarLegPush-v1", eval_env_kwargs=["push_force:[34.0, 34.0]"])
+    assert nominal.out.name == "PlanarLegPush-v1" and _task(nominal) == "leg_env/PlanarLegPush-v1"
+
+
 def test_a_sweep_of_five_seeds_on_a_tiny_budget(tmp_path):
     runs, out = tmp_path / "runs", tmp_path / "page"
     argv = ["--env-id", "leg_env/PlanarLegBalance-v0", "--seeds", "5", "--shipped-seed", "2", "--total-timesteps", "512",

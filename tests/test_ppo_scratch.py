@@ -1,5 +1,5 @@
-"""The shipped plain-PPO policies (``policies/ppo_balance``, ``ppo_push_v1``, ``ppo_hop_v1``, ``ppo_hop_v2``, ``ppo_hop_v3``): a
-network alone, and their cards' episodes as they score them."""
+"""The shipped plain-PPO policies (``policies/ppo_balance``, ``ppo_push_v1``, ``ppo_push_randomized``, ``ppo_hop_v1``,
+``ppo_hop_v2``, ``ppo_hop_v3``): a network alone, and their cards' episodes as they score them."""
 
 from __future__ import annotations
 
@@ -15,13 +15,16 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = {  # policy folder: the task it was trained and is evaluated on
     "ppo_balance": "leg_env/PlanarLegBalance-v0",
     "ppo_push_v1": "leg_env/PlanarLegPush-v1",
+    "ppo_push_randomized": "leg_env/PlanarLegPush-v1",
     "ppo_hop_v1": "leg_env/PlanarLegHop-v1",
     "ppo_hop_v2": "leg_env/PlanarLegHop-v2",
     "ppo_hop_v3": "leg_env/PlanarLegHop-v3",
 }
 EVAL_KWARGS = {  # the evaluation env of a policy selected on other than the task as registered (its table.md's)
     "ppo_push_v1": {"push_force": [50.0, 50.0]},  # selected at 50 N pushes; scored on the push curve
+    "ppo_push_randomized": {"push_force": [34.0, 34.0], "randomize": True},  # randomised robots, 34 N pushes
 }
+CARD = {"ppo_push_randomized": "eval_robots"}  # a card's held-out evaluation folder, when not eval/
 
 
 @pytest.mark.parametrize("name", sorted(SHIPPED))
@@ -43,7 +46,7 @@ def test_shipped_scratch_policy_reproduces_its_card_on_held_out_seeds(name):
     on an Intel Xeon, replays on an AMD EPYC with nine returns within 2% and one episode that fell there surviving
     here: a mean 4.5% higher. The balance policy's episodes replay to the bit.)"""
     folder, env_id = ROOT / "policies" / name, SHIPPED[name]
-    card = json.loads((folder / "eval" / "policy.json").read_text())
+    card = json.loads((folder / CARD.get(name, "eval") / "policy.json").read_text())
     recorded = card["per_episode"][:10]
     summary, _ = run_episodes(load_policy(folder), [e["seed"] for e in recorded], EVAL_KWARGS.get(name), env_id=env_id)
     mine = summary["per_episode"]
@@ -52,17 +55,57 @@ def test_shipped_scratch_policy_reproduces_its_card_on_held_out_seeds(name):
     assert sum(e["return"] for e in mine) == pytest.approx(sum(e["return"] for e in recorded), rel=0.1)
 
 
-def test_shipped_push_policy_reproduces_its_push_curve_at_its_90_percent_impulse():
-    """``ppo_push_v1``'s card: the push curve's survival at its 90% impulse and at the next magnitude, replayed on the
-    same 100 held-out episodes (every push of an episode at that magnitude), the same to the episode."""
+@pytest.mark.parametrize("name", ["ppo_push_v1", "ppo_push_randomized"])
+def test_shipped_push_policy_reproduces_its_push_curve_at_its_90_percent_impulse(name):
+    """A push policy's card: the push curve's survival at its 90% impulse and at the next magnitude, replayed on the
+    same 100 held-out episodes (every push of an episode at that magnitude; for ``ppo_push_randomized`` each
+    episode's robot drawn by its seed), the same to the episode."""
     from train.task_metrics import push_survival
 
-    folder = ROOT / "policies" / "ppo_push_v1"
-    card = json.loads((folder / "eval" / "push_curve.json").read_text())
-    best = card["impulse_90"]["ppo_push_v1"]
-    rows = card["curves"]["ppo_push_v1"]
+    folder = ROOT / "policies" / name
+    card = json.loads((folder / CARD.get(name, "eval") / "push_curve.json").read_text())
+    best = card["impulse_90"][name]
+    rows = card["curves"][name]
     k = next(i for i, row in enumerate(rows) if row["impulse"] == pytest.approx(best))
     forces = [rows[k]["force"], rows[k + 1]["force"]]
-    replayed = push_survival(load_policy(folder), forces, 100, card["seeds"][0], EVAL_KWARGS["ppo_push_v1"], "leg_env/PlanarLegPush-v1")
+    replayed = push_survival(load_policy(folder), forces, 100, card["seeds"][0], EVAL_KWARGS[name], SHIPPED[name])
     assert [r["survival_rate"] for r in replayed] == [rows[k]["survival_rate"], rows[k + 1]["survival_rate"]]
     assert replayed[0]["survival_rate"] >= 0.9 > replayed[1]["survival_rate"]
+
+
+def test_randomized_push_policy_meets_its_bar_on_held_out_robots():
+    """``ppo_push_randomized``: 90% survival or more on 100 held-out randomised robots (seeds 10000..10099) with every
+    push at 3.4 N s, as its card says, the same episodes surviving; the stepping controller, built for the nominal
+    robot, survives far fewer of the same robots."""
+    folder = ROOT / "policies" / "ppo_push_randomized"
+    card = json.loads((folder / "eval_robots" / "policy.json").read_text())
+    seeds = [e["seed"] for e in card["per_episode"]]
+    assert seeds == list(range(10_000, 10_100))
+    kwargs = EVAL_KWARGS["ppo_push_randomized"]
+    summary, _ = run_episodes(load_policy(folder), seeds, kwargs, env_id="leg_env/PlanarLegPush-v1")
+    assert summary["survival_rate"] >= 0.9
+    assert [e["survived"] for e in summary["per_episode"]] == [e["survived"] for e in card["per_episode"]]
+    stepping, _ = run_episodes(load_policy("stepping", kwargs, env_id="leg_env/PlanarLegPush-v1"), seeds, kwargs, env_id="leg_env/PlanarLegPush-v1")
+    assert stepping["survival_rate"] < summary["survival_rate"] - 0.3
+
+
+def test_randomized_push_policy_is_the_randomised_entry_of_its_hyperparameter_file():
+    """``ppo_push_randomized`` was trained as ppo.yml's ``PlanarLegPush-v1`` entry with ``randomize: true`` in its
+    training env; ``train/hyperparams/ppo_randomized.yml`` holds that configuration, and resolves to the card's run
+    exactly."""
+    import yaml
+
+    from train.hyperparameters import load_hyperparams
+    from train.ppo import TrainArgs, resolve_config
+
+    env_id = "leg_env/PlanarLegPush-v1"
+    nominal = load_hyperparams(ROOT / "train" / "hyperparams" / "ppo.yml", env_id)
+    randomized = load_hyperparams(ROOT / "train" / "hyperparams" / "ppo_randomized.yml", env_id)
+    assert randomized["env_kwargs"] == {**nominal["env_kwargs"], "randomize": True}
+    assert {k: v for k, v in randomized.items() if k != "env_kwargs"} == {k: v for k, v in nominal.items() if k != "env_kwargs"}
+    shipped = yaml.safe_load((ROOT / "policies" / "ppo_push_randomized" / "config.yaml").read_text())
+    args = TrainArgs(out=Path("unused"), env_id=env_id, hyperparams=ROOT / "train" / "hyperparams" / "ppo_randomized.yml", seed=6,
+                     eval_freq=3_000_000, eval_episodes=32, eval_env_kwargs=["push_force:[34.0, 34.0]", "randomize:true"])
+    resolved = resolve_config(args)
+    for key in ("env_id", "env_kwargs", "callback", "eval_env_kwargs", "seed", "n_envs", "total_timesteps", "policy", "normalize", "ppo"):
+        assert resolved[key] == shipped[key], key

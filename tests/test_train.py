@@ -96,6 +96,38 @@ def test_evaluate_command_writes_the_comparison(run, tmp_path, capsys):
     assert "| survival rate |" in capsys.readouterr().out
 
 
+def test_evaluate_takes_several_baselines(run, tmp_path):
+    """--baseline takes several controllers, each evaluated on the same seeds and written to its own file: a
+    model-based controller by its name, a folder as baseline.json (the policy itself here, so its scores must
+    equal the policy's)."""
+    from train.cli import parse_args
+
+    args = parse_args(EvalArgs, [str(run), "--baseline", "lqr", str(run), "--episodes", "2", "--out", str(tmp_path / "eval")], positional=("policy",))
+    assert args.baseline == ["lqr", str(run)]
+    args.plot = False
+    out = evaluate(args)
+    policy, lqr, again = (json.loads((out / f"{name}.json").read_text()) for name in ("policy", "lqr", "baseline"))
+    assert lqr["controller"] == "lqr" and again["controller"] == str(run)
+    assert [e["return"] for e in again["per_episode"]] == [e["return"] for e in policy["per_episode"]]
+    header = (out / "table.md").read_text().splitlines()[2]
+    assert header.count("|") == 5, header  # metric + three controllers
+    assert EvalArgs(baseline="lqr").baseline == ["lqr"] and EvalArgs().baseline == []
+
+
+def test_evaluate_env_kwargs_replace_the_runs_own(tmp_path):
+    """--env-kwargs sets the evaluation env in place of the run's eval_env_kwargs (a push policy trained on
+    randomised robots evaluated on the nominal one, say); a malformed item is a ValueError naming the field."""
+    from train.cli import parse_args
+
+    args = parse_args(EvalArgs, ["lqr", "--env-id", "leg_env/PlanarLegPush-v1", "--env-kwargs", "push_force:[34.0, 34.0]", "reset_noise_scale:0.0",
+                                 "--episodes", "2", "--no-plot", "--out", str(tmp_path / "eval")], positional=("policy",))
+    out = evaluate(args)
+    lqr = json.loads((out / "lqr.json").read_text())
+    assert lqr["env_kwargs"] == {"push_force": [34.0, 34.0], "reset_noise_scale": 0.0}
+    with pytest.raises(ValueError, match="env_kwargs"):
+        EvalArgs(env_kwargs=["push_force"])
+
+
 def test_evaluate_on_held_out_robots_lists_every_robot(tmp_path):
     """--randomize: each episode's robot is drawn by its seed (the same robot for every controller), and
     robots.md lists them with each controller's survival and return."""

@@ -88,9 +88,10 @@ class CurvesArgs:
     baseline: str | None = None
     """A model-based controller evaluated on the same held-out episodes ('lqr', 'hopper', 'gated', 'stepping')."""
     runs: Path | None = None
-    """Folder of the seeds' run folders (None: runs/curves/<task name>)."""
+    """Folder of the seeds' run folders (None: runs/curves/<task name>, with -randomized when the evaluation
+    draws randomised robots)."""
     out: Path | None = None
-    """Folder of the results page (None: benchmarks/results/learning/<task name>)."""
+    """Folder of the results page (None: benchmarks/results/learning/<task name>, with -randomized as for runs)."""
     torch_threads: int = 1
     """Threads of torch in each seed's training (train.ppo's --torch-threads)."""
     jobs: int = 1
@@ -118,7 +119,7 @@ class CurvesArgs:
             eval_env_kwargs(self)
         except ValueError as e:
             raise ValueError(f"eval_env_kwargs: {e}") from None
-        name = self.env_id.split("/")[-1]
+        name = self.env_id.split("/")[-1] + ("-randomized" if eval_env_kwargs(self).get("randomize") else "")
         if self.runs is None:
             self.runs = Path("runs/curves") / name
         if self.out is None:
@@ -325,11 +326,16 @@ def _on(args: CurvesArgs) -> str:
     return f" of the task with {', '.join(f'{k}={v!r}' for k, v in kwargs.items())}" if kwargs else ""
 
 
+def _task(args: CurvesArgs) -> str:
+    """The task as the page's title and plots name it: the id, and randomised robots when the evaluation draws them."""
+    return args.env_id + (", randomised robots" if eval_env_kwargs(args).get("randomize") else "")
+
+
 def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: dict | None, command: str) -> str:
     name = args.env_id.split("/")[-1]
     seeds = curves["seeds"]
     lines = [
-        f"# Learning curves: {args.env_id}",
+        f"# Learning curves: {_task(args)}",
         "",
         f"Written by `{command}` on {time.strftime('%Y-%m-%d')}.",
         "",
@@ -415,7 +421,7 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
     kwargs = eval_env_kwargs(args)
     baseline = _held_out(load_policy(args.baseline, kwargs, env_id=args.env_id), args, kwargs) if args.baseline else None
     curves = _curves(histories)
-    title = f"{args.env_id}: plain PPO, {len(seeds)} seeds"
+    title = f"{_task(args)}: plain PPO, {len(seeds)} seeds"
     _plot(curves, args.out / "curves_steps.png", "timesteps", "environment steps", title)
     _plot(curves, args.out / "curves_time.png", "time_s", "wall-clock [min] (median over seeds)", title)
     scores = {**plan, "machine": header, "date": time.strftime("%Y-%m-%d"), "curves": curves, "final": final, "baseline": baseline}

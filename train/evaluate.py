@@ -3,7 +3,7 @@
     python -m train.evaluate runs/ppo_stance --baseline lqr --episodes 20 --gif
     python -m train.evaluate policies/ppo_stance
     python -m train.evaluate lqr --out runs/lqr_eval
-    python -m train.evaluate policies/ppo_push --baseline lqr --episodes 100 --push-curve
+    python -m train.evaluate policies/ppo_push_v1 --baseline stepping lqr --episodes 100 --push-curve
     python -m train.evaluate policies/ppo_hop --baseline hopper --episodes 100 --gif
 
 ``policy`` is a run or policy folder (``model.zip``, ``vecnormalize.pkl``, optionally ``config.yaml``
@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import json
 import pickle
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -413,10 +413,15 @@ class EvalArgs:
     """Run or policy folder (with model.zip and vecnormalize.pkl), a train.rllib run folder or checkpoint, or
     a model-based controller: 'lqr' (balance, push), 'stepping' (push: the LQR, a hop for large pushes), 'hopper' (hop) or 'gated' (the backward hop then the LQR,
     Stance-v1)."""
-    baseline: str | None = None
-    """Also evaluate this controller ('lqr', 'hopper', 'gated', 'stepping' or a folder) on the same seeds and print both side by side."""
+    baseline: list[str] = field(default_factory=list)
+    """Also evaluate these controllers ('lqr', 'hopper', 'gated', 'stepping' or a folder; one or several) on the
+    same seeds and print them side by side with the policy."""
     env_id: str | None = None
     """The task (None: the policy's own from its config.yaml, else leg_env/PlanarLegStance-v0)."""
+    env_kwargs: list[str] | None = None
+    """The evaluation env's arguments as key:value, in place of the run's eval_env_kwargs (as train.ppo's
+    --eval-env-kwargs: 'push_force:[34.0, 34.0]'; none given: the task as registered; None: the run's own,
+    or the task as registered for a controller)."""
     push_curve: bool = False
     """Push task: also measure survival against the push impulse (PUSH_FORCES, --episodes per force) for
     every controller, and the largest impulse each survives 90% of the time."""
@@ -437,10 +442,28 @@ class EvalArgs:
     controller's survival and return."""
 
     def __post_init__(self):
+        if self.baseline is None:
+            self.baseline = []
+        elif isinstance(self.baseline, (str, Path)):
+            self.baseline = [str(self.baseline)]
+        else:
+            self.baseline = [str(b) for b in self.baseline]
         if self.episodes < 1:
             raise ValueError(f"episodes must be >= 1, got {self.episodes}")
+        if self.env_kwargs is not None:
+            try:
+                self.chosen_env_kwargs()
+            except ValueError as e:
+                raise ValueError(f"env_kwargs: {e}") from None
         if self.seed < 0:
             raise ValueError(f"seed must be >= 0 (episode seeds are non-negative), got {self.seed}")
+
+
+    def chosen_env_kwargs(self) -> dict | None:
+        """``env_kwargs`` as a dict (None when not given)."""
+        from train.hyperparameters import parse_override
+
+        return None if self.env_kwargs is None else dict(parse_override(item) for item in self.env_kwargs)
 
 
 def _label(spec: str) -> str:
@@ -455,26 +478,35 @@ def evaluate(args: EvalArgs) -> Path:
     policy = load_policy(args.policy, env_id=args.env_id)
     env_id = args.env_id or (None if is_model else getattr(policy, "env_id", None)) or ENV_ID
     env_kwargs = {} if is_model else policy.env_kwargs
+    if args.env_kwargs is not None:
+        env_kwargs = args.chosen_env_kwargs()
     if args.randomize:
         env_kwargs = {**env_kwargs, "randomize": True}
     controllers = {_label(args.policy): policy}
-    if args.baseline is not None:
-        label = _label(args.baseline)
-        if label in controllers:
+    specs = {_label(args.policy): args.policy}
+    for spec in args.baseline:
+        label = _label(spec)
+        while label in controllers:
             label = f"{label} (baseline)"
-        controllers[label] = load_policy(args.baseline, env_kwargs=env_kwargs, env_id=env_id)
+        controllers[label] = load_policy(spec, env_kwargs=env_kwargs, env_id=env_id)
+        specs[label] = spec
     # only once every controller has loaded: a mistyped policy folder must not be created as <policy>/eval
     out = Path(args.out) if args.out is not None else (Path(f"runs/eval_{args.policy.lower()}") if is_model else policy.path / "eval")
     out.mkdir(parents=True, exist_ok=True)
 
-    results, series = {}, {}
+    results, series, written = {}, {}, set()
     for k, (label, controller) in enumerate(controllers.items()):
         summary, rec = run_episodes(controller, seeds, env_kwargs, record=0, frames=args.gif and k == 0, env_id=env_id)
-        summary = {"controller": args.policy if k == 0 else args.baseline, "env_id": env_id, "env_kwargs": env_kwargs, "seeds": seeds, **summary}
+        summary = {"controller": specs[label], "env_id": env_id, "env_kwargs": env_kwargs, "seeds": seeds, **summary}
         results[label] = summary
         series[label] = rec
         base = label.split(" ")[0]
         name = base if base in BASELINES else ("policy" if k == 0 else "baseline")
+        stem, n = name, 1
+        while name in written:  # a second folder baseline: baseline_2.json, ...
+            n += 1
+            name = f"{stem}_{n}"
+        written.add(name)
         (out / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
         if k == 0 and args.gif and rec["frames"]:
             _write_gif(rec["frames"], out / "episode.gif", 1.0 / (rec["dt"] * GIF_FRAME_SKIP))

@@ -458,7 +458,6 @@ class EvalArgs:
         if self.seed < 0:
             raise ValueError(f"seed must be >= 0 (episode seeds are non-negative), got {self.seed}")
 
-
     def chosen_env_kwargs(self) -> dict | None:
         """``env_kwargs`` as a dict (None when not given)."""
         from train.hyperparameters import parse_override

@@ -101,8 +101,11 @@ the held-out ones choose nothing), the kept policy of each such continuation of 
 | alive bonus 2 and height weight 6, to 75M | 69M | 99% | 1.88 cm | 1.46 cm |
 | alive bonus 4, to 75M | 72M | 99% | 2.01 cm | 1.66 cm |
 
-None reaches the 1.5 cm bar; past 75M the evaluations of the alive-bonus-2 run fell to 78-94%. One seed, probes only:
-the shipped configuration is unchanged.
+None reaches the 1.5 cm bar; past 75M the evaluations of the alive-bonus-2 run fell to 78-94%. The same continuation
+(alive bonus 2, to 75M) of the other four seeds does not carry over: seed 7's evaluations collapsed (0% from 66M)
+and seed 9's fell to 53-69%, so both kept their earlier policies, as did seed 6 (its best evaluation stayed at 45M);
+seed 8, which bounces, kept its 75M policy, with an apex error of 7.72 cm on the fresh seeds (7.89 cm at 60M).
+Probes only: the shipped configuration is unchanged.
 
 With the curricula of commands and of the kernel's width alone (the height weight and the drift charge the task's)
 the five seeds 0-4 survived at least 99% (IQM 100% [99%, 100%]) with 62-81 hops per episode; three kept the COM

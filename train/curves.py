@@ -119,11 +119,16 @@ class CurvesArgs:
             eval_env_kwargs(self)
         except ValueError as e:
             raise ValueError(f"eval_env_kwargs: {e}") from None
-        name = self.env_id.split("/")[-1] + ("-randomized" if eval_env_kwargs(self).get("randomize") else "")
+        name = self.env_id.split("/")[-1] + ("-randomized" if self.randomized else "")
         if self.runs is None:
             self.runs = Path("runs/curves") / name
         if self.out is None:
             self.out = ROOT / "benchmarks" / "results" / "learning" / name
+
+    @property
+    def randomized(self) -> bool:
+        """Whether the evaluation draws randomised robots (``randomize`` in ``eval_env_kwargs``)."""
+        return bool(eval_env_kwargs(self).get("randomize"))
 
 
 def iqm_interval(scores: np.ndarray, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> tuple[float, float, float]:
@@ -328,7 +333,7 @@ def _on(args: CurvesArgs) -> str:
 
 def _task(args: CurvesArgs) -> str:
     """The task as the page's title and plots name it: the id, and randomised robots when the evaluation draws them."""
-    return args.env_id + (", randomised robots" if eval_env_kwargs(args).get("randomize") else "")
+    return args.env_id + (", randomised robots" if args.randomized else "")
 
 
 def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: dict | None, command: str) -> str:

@@ -13,7 +13,7 @@ import torch
 from stable_baselines3 import PPO
 
 from leg_env.sb3 import make_sb3_vec_env
-from train.chunked_ppo import ChunkedPPO
+from train.chunked_ppo import ChunkedPPO, FastTanh
 
 N_ENVS, N_STEPS = 16, 32  # one rollout of 512 samples
 LOGGED = ("train/policy_gradient_loss", "train/value_loss", "train/entropy_loss", "train/approx_kl", "train/clip_fraction", "train/loss")
@@ -67,7 +67,8 @@ def test_chunked_update_is_ppo_update(settings, chunk):
 
 def test_minibatch_within_one_chunk_is_sb3_bit_for_bit():
     torch.set_num_threads(1)
-    reference, chunked = _one_update(PPO), _one_update(ChunkedPPO, update_chunk=256)
+    fast = {"net_arch": [32, 32], "activation_fn": FastTanh}  # SB3's PPO with the activation ChunkedPPO swaps in
+    reference, chunked = _one_update(PPO, policy_kwargs=fast), _one_update(ChunkedPPO, update_chunk=256)
     after_ref, after = _parameters(reference), _parameters(chunked)
     for name in after_ref:
         assert torch.equal(after[name], after_ref[name]), name
@@ -78,9 +79,53 @@ def test_saved_model_loads_as_either_class(tmp_path):
     model.save(tmp_path / "model.zip")
     again = ChunkedPPO.load(tmp_path / "model.zip", device="cpu")
     assert again.update_chunk == 64
+    assert again.update_precision == "float32"
     plain = PPO.load(tmp_path / "model.zip", device="cpu")
-    obs = np.zeros((1, *model.observation_space.shape), dtype=np.float32)
-    np.testing.assert_array_equal(plain.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
+    assert plain.policy_kwargs.get("activation_fn", torch.nn.Tanh) is torch.nn.Tanh  # the saved model is SB3's
+    assert any(type(m) is torch.nn.Tanh for m in plain.policy.modules())
+    assert not any(type(m) is torch.nn.Tanh for m in again.policy.modules())
+    obs = np.random.default_rng(0).normal(size=(64, *model.observation_space.shape)).astype(np.float32)
+    np.testing.assert_allclose(plain.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0], rtol=0, atol=1e-5)
+
+
+def test_fast_tanh_is_tanh():
+    x = torch.cat([torch.linspace(-40.0, 40.0, 200_001), torch.tensor([0.0, -0.0, 1e30, -1e30, float("inf"), -float("inf")])])
+    y = FastTanh()(x)
+    assert y.dtype == torch.float32
+    np.testing.assert_allclose(y.numpy(), torch.tanh(x).numpy(), rtol=0, atol=2.5e-7)
+    assert torch.isnan(FastTanh()(torch.tensor([float("nan")]))).all()
+    x64 = torch.linspace(-3.0, 3.0, 41, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(FastTanh(), (x64,))
+    (grad,) = torch.autograd.grad(FastTanh()(x64).sum(), x64)
+    np.testing.assert_allclose(grad.detach().numpy(), 1.0 - np.tanh(x64.detach().numpy()) ** 2, rtol=1e-12, atol=1e-15)
+    low = torch.linspace(-3.0, 3.0, 101).bfloat16()
+    assert FastTanh()(low).dtype == torch.bfloat16
+    np.testing.assert_allclose(FastTanh()(low).float().numpy(), np.tanh(low.float().numpy()), rtol=0, atol=1e-2)
+
+
+def test_bfloat16_update_is_close_to_float32():
+    """The bfloat16 update moves the parameters as the float32 one does, up to bfloat16's rounding of the hidden
+    layers; its logged statistics agree; and the rollouts are float32 (the same actions before the update)."""
+    torch.set_num_threads(1)
+    before = _parameters(PPO("MlpPolicy", make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v3"), seed=0,
+                             device="cpu", policy_kwargs={"net_arch": [32, 32]}))
+    full = _one_update(ChunkedPPO, update_chunk=128)
+    low = _one_update(ChunkedPPO, update_chunk=128, update_precision="bfloat16")
+    for name in before:
+        step_full, step_low = (full.policy.state_dict()[name] - before[name]), (low.policy.state_dict()[name] - before[name])
+        assert step_full.abs().max() > 0 and step_low.dtype == torch.float32
+        cosine = torch.nn.functional.cosine_similarity(step_full.flatten(), step_low.flatten(), dim=0).item()
+        assert cosine > 0.999, (name, cosine)  # 0.9998 or more when written
+        assert 0.98 < (step_low.norm() / step_full.norm()).item() < 1.02, name
+        assert not torch.equal(step_low, step_full), name  # the bfloat16 arithmetic did run
+    for key in LOGGED:
+        np.testing.assert_allclose(low.logger.name_to_value[key], full.logger.name_to_value[key], rtol=0.05, atol=2e-3, err_msg=key)
+
+
+@pytest.mark.parametrize("precision, error", [("float16", ValueError), ("bf16", ValueError), (16, TypeError), (None, TypeError)])
+def test_bad_update_precision(precision, error):
+    with pytest.raises(error, match="update_precision"):
+        ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), update_precision=precision, n_steps=8, batch_size=16, device="cpu")
 
 
 @pytest.mark.parametrize("chunk, error", [(0, ValueError), (-5, ValueError), (2.5, TypeError), (True, TypeError), ("64", TypeError)])

@@ -141,6 +141,17 @@ def test_seeds_trained_in_parallel_processes_learn_what_one_process_learns(tmp_p
         assert line.startswith("python -m train.ppo --env-id leg_env/PlanarLegBalance-v0 --seed 1 --out ") and "--params n_envs:8" in line
 
 
+def test_a_sweep_passes_its_update_precision_to_each_seed(tmp_path):
+    import yaml
+
+    main(["--env-id", "leg_env/PlanarLegBalance-v0", "--total-timesteps", "256", "--eval-freq", "256", "--eval-episodes", "2",
+          "--episodes", "2", "--seeds", "1", "--update-precision", "float32", "--params", *TINY,
+          "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "page")])
+    folder = tmp_path / "runs" / "seed_0"
+    assert yaml.safe_load((folder / "config.yaml").read_text())["update_precision"] == "float32"
+    assert "--update-precision float32" in (folder / "command.txt").read_text()
+
+
 def _alive(pid: int) -> bool:
     """Whether process ``pid`` runs (a zombie, dead but not yet reaped by its new parent, does not)."""
     try:

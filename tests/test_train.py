@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from train.evaluate import EvalArgs, PolicyLoadError, evaluate, load_policy, run_episodes
-from train.ppo import ENV_ID, TrainArgs, train
+from train.ppo import ENV_ID, TrainArgs, resolve_config, train
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "ppo_stance"
@@ -317,6 +317,31 @@ def test_torch_threads_apply_to_the_run_and_are_restored(tmp_path):
     assert torch.get_num_threads() == before
     with pytest.raises(ValueError, match="torch_threads"):
         tiny_args(tmp_path / "bad", torch_threads=0)
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_update_precision_auto_follows_the_cpu_and_is_recorded(tmp_path, monkeypatch, native):
+    import train.ppo as ppo
+
+    monkeypatch.setattr(ppo, "native_bfloat16", lambda: native)
+    expected = "bfloat16" if native else "float32"
+    assert resolve_config(tiny_args(tmp_path / "a"))["update_precision"] == expected
+    assert resolve_config(tiny_args(tmp_path / "b", update_precision="float32"))["update_precision"] == "float32"
+    assert resolve_config(tiny_args(tmp_path / "c", update_precision="bfloat16"))["update_precision"] == "bfloat16"
+    with pytest.raises(ValueError, match="update_precision"):
+        tiny_args(tmp_path / "bad", update_precision="float16")
+
+
+def test_update_precision_reaches_the_model_and_a_resume_takes_its_own(tmp_path):
+    from train.checkpoints import load_checkpoint
+    from train.chunked_ppo import ChunkedPPO
+
+    out = train(tiny_args(tmp_path / "run", update_precision="bfloat16", eval_freq=0, total_timesteps=128))
+    assert yaml.safe_load((out / "config.yaml").read_text())["update_precision"] == "bfloat16"
+    assert load_checkpoint(out / "checkpoints", normalize=True, algo=ChunkedPPO).model.update_precision == "bfloat16"
+    out = train(tiny_args(tmp_path / "run", update_precision="float32", eval_freq=0, total_timesteps=256))  # resumed
+    assert yaml.safe_load((out / "config.yaml").read_text())["update_precision"] == "float32"
+    assert load_checkpoint(out / "checkpoints", normalize=True, algo=ChunkedPPO).model.update_precision == "float32"
 
 
 def test_each_evaluation_line_prints_the_training_rate(tmp_path, capsys):

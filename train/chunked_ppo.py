@@ -1,19 +1,26 @@
 """SB3's PPO with each minibatch's gradient summed over cache-sized chunks: the same update, faster on a CPU.
 
-``ChunkedPPO`` is ``stable_baselines3.PPO`` in every respect (arguments, saving, loading, logging) but one: in
-``train``, a minibatch larger than a chunk goes through the networks a chunk at a time, each chunk's share of the loss back-propagated before the next chunk's forward pass, and the optimiser
-steps once on the sum. The loss is a mean over the minibatch, so the summed gradient is the minibatch's gradient
-(up to the order of floating-point sums), and so are the update, the advantage normalisation (over the whole
-minibatch, as SB3's), the gradient clipping, the early stop on ``target_kl`` (checked on the whole minibatch
-before it steps) and the logged statistics.
+``ChunkedPPO`` is ``stable_baselines3.PPO`` in every respect (arguments, saving, loading, logging) but three, all
+about speed:
 
-Why: with 1024 envs and minibatches of 16,384 samples, each activation of a [128, 128] network is an 8 MB
-array, far larger than a core's cache, and PPO's update is bound by memory traffic (``tanh`` and its backward
-pass took 30% of the update). Chunks of 4,096 samples per torch thread (2 MB per core) keep them in cache: on
-this project's 2-core machine the update alone runs about a fifth faster on one torch thread. End to end, with the
-rollouts, ``benchmarks/bench_train.py`` measured 1.02-1.14x SB3's own PPO on one thread and 0.98-1.08x on two, in
-the same run (``benchmarks/results/train_speed.md``). Minibatches no larger than a chunk take SB3's ``train``
-unchanged, bit for bit.
+* In ``train``, a minibatch larger than a chunk goes through the networks a chunk at a time, each chunk's share of
+  the loss back-propagated before the next chunk's forward pass, and the optimiser steps once on the sum. The loss
+  is a mean over the minibatch, so the summed gradient is the minibatch's gradient (up to the order of
+  floating-point sums), and so are the update, the advantage normalisation (over the whole minibatch, as SB3's),
+  the gradient clipping, the early stop on ``target_kl`` (checked on the whole minibatch before it steps) and the
+  logged statistics. With 1024 envs and minibatches of 16,384 samples, each activation of a [128, 128] network is
+  an 8 MB array, far larger than a core's cache; chunks of 4,096 samples per torch thread keep them in cache.
+* The policy's ``torch.nn.Tanh`` activations are ``FastTanh``: ``2 sigmoid(2x) - 1``, the same function to
+  float32's rounding, because torch's CPU ``tanh`` kernel is several times slower than its ``sigmoid`` and took a
+  quarter of a large-batch update. A saved model is SB3's (its ``policy_kwargs`` name ``nn.Tanh``) and loads with
+  ``PPO.load``.
+* ``update_precision="bfloat16"`` runs the hidden layers of the update in bfloat16 (``torch.autocast``), the
+  parameters, optimiser, output layers and losses staying float32: on a CPU with bfloat16 arithmetic the matrix
+  products, most of the update, run about three times faster. ``train.ppo`` picks it where the CPU has it.
+
+``benchmarks/bench_train.py`` measures each against SB3's own PPO in the same run
+(``benchmarks/results/train_speed.md``). Minibatches no larger than a chunk, in float32, take SB3's ``train``
+unchanged.
 """
 
 from __future__ import annotations
@@ -24,10 +31,39 @@ from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.utils import explained_variance
 
-__all__ = ["ChunkedPPO", "UPDATE_CHUNK"]
+from train.machine import UPDATE_PRECISIONS
+
+__all__ = ["ChunkedPPO", "FastTanh", "UPDATE_CHUNK"]
 
 UPDATE_CHUNK = 4096
 """Samples per chunk and torch thread by default: on one thread the fastest of 1,024-16,384 here; on two, 8,192 was."""
+
+
+
+
+class _SigmoidTanh(th.autograd.Function):
+    """``tanh(x) = 2 sigmoid(2x) - 1``, with torch's own ``tanh`` backward (``1 - y^2``) on the saved output."""
+
+    @staticmethod
+    def forward(ctx, x: th.Tensor) -> th.Tensor:
+        y = th.sigmoid(x * 2.0).mul_(2.0).sub_(1.0)
+        ctx.save_for_backward(y)
+        return y
+
+    @staticmethod
+    def backward(ctx, grad: th.Tensor) -> th.Tensor:
+        (y,) = ctx.saved_tensors
+        return th.ops.aten.tanh_backward(grad, y)
+
+
+class FastTanh(th.nn.Tanh):
+    """``torch.nn.Tanh`` computed as ``2 sigmoid(2x) - 1``: the same function to float32's rounding (within 2e-7),
+    its gradient torch's own. torch's CPU ``tanh`` kernel is several times slower than its ``sigmoid`` (2.8 ms
+    against 0.44 ms on a 16,384 x 128 float32 array on this project's 2-core machine), and SB3's ``MlpPolicy``
+    spends a quarter of a large-batch update in it."""
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        return _SigmoidTanh.apply(x)
 
 
 class ChunkedPPO(PPO):
@@ -36,22 +72,43 @@ class ChunkedPPO(PPO):
     Args:
         update_chunk: the most samples that go through the networks at once in an update (a positive int), or
             None: ``UPDATE_CHUNK`` per torch thread (``torch.get_num_threads()`` when the update runs). It changes
-            the speed, not the update. Every other argument is PPO's.
+            the speed, not the update.
+        update_precision: ``"float32"`` (SB3's update), or ``"bfloat16"``: in the update, the hidden layers
+            (``policy.mlp_extractor``) run under ``torch.autocast("cpu", torch.bfloat16)``, their matrix products
+            in bfloat16 with float32 accumulation, while the parameters, the optimiser, the output layers, the
+            action distribution and the losses stay float32. On a CPU with bfloat16 arithmetic (AVX512-BF16 or
+            AMX) the products run about three times faster; elsewhere it is emulated and slower. The rollouts
+            are float32 either way. Every other argument is PPO's.
+
+    Every ``torch.nn.Tanh`` of the policy is a ``FastTanh`` (the same function, faster); a saved model is SB3's
+    and loads as ``PPO`` too.
 
     Raises:
-        TypeError: ``update_chunk`` is not an int.
-        ValueError: ``update_chunk`` is not positive.
+        TypeError: ``update_chunk`` is not an int, ``update_precision`` not a str.
+        ValueError: ``update_chunk`` is not positive, ``update_precision`` not one of ``UPDATE_PRECISIONS``.
     """
 
-    def __init__(self, *args, update_chunk: int | None = None, **kwargs):
+    def __init__(self, *args, update_chunk: int | None = None, update_precision: str = "float32", **kwargs):
         if update_chunk is not None:
             if isinstance(update_chunk, bool) or not isinstance(update_chunk, (int, np.integer)):
                 raise TypeError(f"update_chunk must be an int or None, got {type(update_chunk).__name__}")
             if update_chunk < 1:
                 raise ValueError(f"update_chunk must be positive, got {update_chunk}")
             update_chunk = int(update_chunk)
+        if not isinstance(update_precision, str):
+            raise TypeError(f"update_precision must be a str, got {type(update_precision).__name__}")
+        if update_precision not in UPDATE_PRECISIONS:
+            raise ValueError(f"update_precision must be one of {UPDATE_PRECISIONS}, got {update_precision!r}")
         self.update_chunk = update_chunk
+        self.update_precision = update_precision
         super().__init__(*args, **kwargs)
+
+    def _setup_model(self) -> None:
+        super()._setup_model()
+        for parent in self.policy.modules():
+            for name, child in parent.named_children():
+                if type(child) is th.nn.Tanh:
+                    setattr(parent, name, FastTanh())
 
     @property
     def chunk(self) -> int:
@@ -61,7 +118,7 @@ class ChunkedPPO(PPO):
     def train(self) -> None:
         """One PPO update on the rollout buffer (``PPO.train``), each minibatch's gradient summed over chunks."""
         chunk_size = self.chunk
-        if self.batch_size <= chunk_size:
+        if self.batch_size <= chunk_size and self.update_precision == "float32":
             return super().train()
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
@@ -119,6 +176,22 @@ class ChunkedPPO(PPO):
         if clip_range_vf is not None:
             self.logger.record("train/clip_range_vf", clip_range_vf)
 
+    def _evaluate_actions(self, observations: th.Tensor, actions: th.Tensor):
+        """``policy.evaluate_actions``, its hidden layers in ``update_precision``."""
+        if self.update_precision == "float32":
+            return self.policy.evaluate_actions(observations, actions)
+        policy = self.policy
+        features = policy.extract_features(observations)
+        with th.autocast("cpu", dtype=th.bfloat16):
+            if policy.share_features_extractor:
+                latent_pi, latent_vf = policy.mlp_extractor(features)
+            else:
+                latent_pi = policy.mlp_extractor.forward_actor(features[0])
+                latent_vf = policy.mlp_extractor.forward_critic(features[1])
+        distribution = policy._get_action_dist_from_latent(latent_pi.float())
+        values = policy.value_net(latent_vf.float())
+        return values, distribution.log_prob(actions), distribution.entropy()
+
     def _chunk_backward(self, data, advantages: th.Tensor, chunk: slice, batch: int, clip_range: float,
                         clip_range_vf: float | None) -> np.ndarray:
         """Back-propagate one chunk's share of the minibatch loss (its sums divided by the minibatch size ``batch``);
@@ -127,7 +200,7 @@ class ChunkedPPO(PPO):
         actions = data.actions[chunk]
         if isinstance(self.action_space, spaces.Discrete):
             actions = actions.long().flatten()
-        values, log_prob, entropy = self.policy.evaluate_actions(data.observations[chunk], actions)
+        values, log_prob, entropy = self._evaluate_actions(data.observations[chunk], actions)
         values = values.flatten()
         advantages = advantages[chunk]
         log_ratio = log_prob - data.old_log_prob[chunk]

@@ -94,6 +94,8 @@ class CurvesArgs:
     """Folder of the results page (None: benchmarks/results/learning/<task name>, with -randomized as for runs)."""
     torch_threads: int = 1
     """Threads of torch in each seed's training (train.ppo's --torch-threads)."""
+    update_precision: str = "auto"
+    """The arithmetic of the hidden layers in each seed's PPO update (train.ppo's --update-precision)."""
     jobs: int = 1
     """Seeds trained at once, each in a process of its own with torch_threads threads (the wall-clock
     curves then show each seed's own time, on its share of the cores)."""
@@ -164,6 +166,7 @@ def _train_seed(args: CurvesArgs, seed: int) -> Path:
             progress_bar=args.progress_bar,
             verbose=1,
             torch_threads=args.torch_threads,
+            update_precision=args.update_precision,
         ),
         command=seed_command(args, seed),
     )
@@ -231,6 +234,8 @@ def seed_command(args: CurvesArgs, seed: int) -> str:
 
     argv = ["python", "-m", "train.ppo", "--env-id", args.env_id, "--seed", str(seed), "--out", str(args.runs / f"seed_{seed}"),
             "--eval-freq", str(args.eval_freq), "--eval-episodes", str(args.eval_episodes), "--torch-threads", str(args.torch_threads)]
+    if args.update_precision != "auto":
+        argv += ["--update-precision", args.update_precision]
     if args.total_timesteps is not None:
         argv += ["--total-timesteps", str(args.total_timesteps)]
     if args.eval_env_kwargs:

@@ -7,7 +7,10 @@ import platform
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-__all__ = ["cpu_name", "describe"]
+__all__ = ["cpu_name", "describe", "native_bfloat16", "UPDATE_PRECISIONS"]
+
+UPDATE_PRECISIONS = ("float32", "bfloat16")
+"""The arithmetic of the hidden layers in PPO's update (``train.chunked_ppo.ChunkedPPO(update_precision=...)``)."""
 
 
 def cpu_name() -> str:
@@ -19,6 +22,19 @@ def cpu_name() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine()
+
+
+def native_bfloat16() -> bool:
+    """Whether this CPU has bfloat16 arithmetic (the ``avx512_bf16`` or ``amx_bf16`` flag of Linux's
+    ``/proc/cpuinfo``; False where that file is absent). Elsewhere torch emulates bfloat16, more slowly than float32."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("flags"):
+                flags = line.split(":", 1)[1].split()
+                return "avx512_bf16" in flags or "amx_bf16" in flags
+    except OSError:
+        pass
+    return False
 
 
 def describe(packages: tuple[str, ...] = ("leg-env", "numpy", "gymnasium", "stable-baselines3", "torch")) -> str:

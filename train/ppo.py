@@ -64,7 +64,7 @@ from train.checkpoints import (
 )
 from train.cli import interrupt, parse_args
 from train.hyperparameters import DEFAULT_HYPERPARAMS, display_path, load_hyperparams, parse_override
-from train.machine import cpu_name
+from train.machine import UPDATE_PRECISIONS, cpu_name, native_bfloat16
 from train.runfolder import RunFolderError, prepare_run_folder, run_locked, runnable_command
 
 __all__ = ["TrainArgs", "train", "resolve_config", "load_hyperparams", "ENV_ID", "DEFAULT_HYPERPARAMS"]
@@ -128,6 +128,10 @@ class TrainArgs:
     """Threads of torch (the policy's forward passes and the PPO update). The environments step on one thread
     and are idle during the update, so on an otherwise idle machine up to one thread per core speeds training;
     the results then depend on the thread count in their last digits."""
+    update_precision: str = "auto"
+    """Arithmetic of the hidden layers in PPO's update (train.chunked_ppo.ChunkedPPO): 'float32', 'bfloat16'
+    (matrix products in bfloat16 with float32 accumulation; parameters, optimiser, output layers and losses
+    float32), or 'auto': bfloat16 on a CPU with bfloat16 arithmetic (AVX512-BF16 or AMX), else float32."""
 
     def __post_init__(self):
         if self.total_timesteps is not None and self.total_timesteps < 1:
@@ -143,6 +147,8 @@ class TrainArgs:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         if not isinstance(self.torch_threads, int) or self.torch_threads < 1:
             raise ValueError(f"torch_threads must be an integer >= 1, got {self.torch_threads!r}")
+        if self.update_precision not in ("auto", *UPDATE_PRECISIONS):
+            raise ValueError(f"update_precision must be one of {('auto', *UPDATE_PRECISIONS)}, got {self.update_precision!r}")
 
 
 def _controllers() -> tuple:
@@ -185,9 +191,17 @@ def resolve_config(args: TrainArgs) -> dict:
         "ppo": hp,
         "eval": {"freq": int(args.eval_freq), "episodes": int(args.eval_episodes), "seed": EVAL_SEED},
         "checkpoint_freq": int(args.checkpoint_freq),
+        "update_precision": update_precision(args.update_precision),
         "hyperparams_file": display_path(args.hyperparams),
         "overrides": list(args.params),
     }
+
+
+def update_precision(name: str) -> str:
+    """``TrainArgs.update_precision`` resolved: ``"auto"`` is ``"bfloat16"`` where the CPU has bfloat16 arithmetic."""
+    if name == "auto":
+        return "bfloat16" if native_bfloat16() else "float32"
+    return name
 
 
 def _schedule(value):
@@ -339,6 +353,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
             device="cpu",
             tensorboard_log=str(out / "tb"),
             verbose=max(0, args.verbose - 1),
+            update_precision=config["update_precision"],
             **_ppo_kwargs(config),
         )
         if config.get("init_from"):
@@ -348,6 +363,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
             checkpoint.vec_normalize.set_venv(venv)
             venv = checkpoint.vec_normalize
         model = checkpoint.model
+        model.update_precision = config["update_precision"]  # this invocation's (a resume may run on another CPU)
         model.set_env(venv)
         restore_rng(checkpoint.rng)
         if args.verbose:

@@ -4,7 +4,8 @@
     .venv/bin/python benchmarks/bench_train.py --env-id leg_env/PlanarLegBalance-v0 --rollouts 20
 
 For each configuration of ``train/hyperparams/ppo.yml`` that trains a unilateral task from scratch (``CONFIGS``),
-PPO is built exactly as ``python -m train.ppo`` builds it (``train.chunked_ppo.ChunkedPPO``, the same
+PPO is built exactly as ``python -m train.ppo`` builds it (``train.chunked_ppo.ChunkedPPO`` in the update precision
+``train.ppo`` picks, the same
 ``resolve_config``, the same ``leg_env.sb3`` adapter with ``per_env_info=False``, ``VecNormalize`` as configured)
 and learns for ``--rollouts``
 rollouts after one untimed warm-up rollout, without evaluations or checkpoints (``train.ppo`` adds one
@@ -17,7 +18,8 @@ evaluation of 32-64 episodes per 3M steps: under 1% of the time). A callback spl
 
 Each configuration runs with torch on 1 thread and on every core, each measurement in a fresh process, ``--repeats`` times
 interleaved (the table shows the median run). The references in the
-same run: SB3's own ``PPO`` (its ``train`` without chunks) on the same threads, and the native batch
+same run: ``ChunkedPPO`` in float32 (where ``train.ppo`` picks bfloat16), SB3's own ``PPO`` (its ``train`` without
+chunks, torch's ``tanh``, float32) on the same threads, and the native batch
 ``gym.make_vec(env_id, n_envs)`` under pre-sampled random actions, the env alone. The env-steps/s end
 to end is ``n_envs x n_steps x rollouts / wall time``. The table goes to stdout and to
 ``benchmarks/results/train_speed.md``, headed by the machine, the versions and the date.
@@ -65,9 +67,14 @@ def env_rate(env_id: str, n_envs: int, env_kwargs: dict, calls: int = 200) -> fl
     return rate
 
 
+ALGOS = ("chunked", "float32", "sb3")
+"""The trainers timed: ``ChunkedPPO`` as ``train.ppo`` builds it (its update precision ``auto``), ``ChunkedPPO`` in
+float32 (the same where the CPU has no bfloat16 arithmetic, then not timed twice), SB3's ``PPO`` (the reference)."""
+
+
 def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") -> dict:
-    """PPO as ``train.ppo`` builds it for ``env_id`` (``algo="sb3"``: SB3's ``PPO`` instead of ``ChunkedPPO``), timed
-    over ``rollouts`` rollouts after a warm-up one."""
+    """PPO as ``train.ppo`` builds it for ``env_id`` (``algo="float32"``: its update in float32; ``"sb3"``: SB3's
+    ``PPO`` instead of ``ChunkedPPO``), timed over ``rollouts`` rollouts after a warm-up one."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
@@ -94,7 +101,11 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
     inner.step_wait = timed_step_wait
     if config["normalize"] is not False:
         venv = VecNormalize(venv, **config["normalize"])
-    model = {"chunked": ChunkedPPO, "sb3": PPO}[algo](config["policy"], venv, seed=SEED, device="cpu", verbose=0, **_ppo_kwargs(config))
+    precision = {"chunked": config["update_precision"], "float32": "float32", "sb3": "float32"}[algo]
+    if algo == "sb3":
+        model = PPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, **_ppo_kwargs(config))
+    else:
+        model = ChunkedPPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, update_precision=precision, **_ppo_kwargs(config))
     rollout_steps = n_envs * model.n_steps
 
     class Phases(BaseCallback):
@@ -132,6 +143,7 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
         "net": ppo.get("policy_kwargs", {}).get("net_arch"),
         "threads": threads,
         "algo": algo,
+        "precision": precision,
         "rate": rollout_steps * rollouts / wall,
         "rollout": spent["rollout"] / wall,
         "env": env_spent / wall,
@@ -170,7 +182,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.repeats < 1:
         parser.error("--repeats must be at least 1")
     from train.chunked_ppo import UPDATE_CHUNK
-    from train.machine import describe
+    from train.machine import describe, native_bfloat16
 
     if args.one:  # one measurement, in this fresh process: its result as a JSON line
         print("RESULT " + json.dumps(train_rate(args.one[0], args.rollouts, int(args.one[1]), args.one[2])))
@@ -179,7 +191,8 @@ def main(argv: list[str] | None = None) -> None:
     threads = sorted({1, os.cpu_count() or 1})
     rows, checks, ratios = [], [], []
     for env_id in env_ids:
-        cases = [(k, algo) for k in threads for algo in ("chunked", "sb3")]
+        algos = ALGOS if native_bfloat16() else ("chunked", "sb3")  # without bfloat16, "chunked" is float32
+        cases = [(k, algo) for k in threads for algo in algos]
         runs = {case: [] for case in cases}
         for _ in range(args.repeats):  # interleaved, so that a noisy spell of the machine hits every case alike
             for case in cases:
@@ -188,12 +201,13 @@ def main(argv: list[str] | None = None) -> None:
         results = [medians[(k, "chunked")] for k in threads]
         reference = env_rate(env_id, results[0]["n_envs"], results[0]["env_kwargs"])
         for k in threads:
-            ratios.append(f"  {env_id}, torch on {k} thread{'s' * (k > 1)}: ChunkedPPO / SB3 PPO, medians of {args.repeats} runs: "
-                          f"{medians[(k, 'chunked')]['rate'] / medians[(k, 'sb3')]['rate']:.2f}x")
+            for algo in algos[:-1]:
+                ratios.append(f"  {env_id}, torch on {k} thread{'s' * (k > 1)}: ChunkedPPO ({medians[(k, algo)]['precision']}) / SB3 PPO, "
+                              f"medians of {args.repeats} runs: {medians[(k, algo)]['rate'] / medians[(k, 'sb3')]['rate']:.2f}x")
         for r in medians.values():
-            trainer = "ChunkedPPO" if r["algo"] == "chunked" else "SB3 PPO (reference)"
+            trainer = {"chunked": "ChunkedPPO, as train.ppo", "float32": "ChunkedPPO", "sb3": "SB3 PPO (reference)"}[r["algo"]]
             rows.append(
-                f"| {env_id} | {trainer} | {r['n_envs']} | {r['batch']:,} | {r['epochs']} | {r['gradient_steps']} | {r['net']} | {r['threads']} "
+                f"| {env_id} | {trainer} | {r['precision']} | {r['n_envs']} | {r['batch']:,} | {r['epochs']} | {r['gradient_steps']} | {r['net']} | {r['threads']} "
                 f"| {r['rate']:,.0f} | {r['rollout']:.0%} | {r['env']:.0%} | {r['update']:.0%} | {reference:,.0f} |"
             )
         best = max(results, key=lambda r: r["rate"])
@@ -209,20 +223,21 @@ def main(argv: list[str] | None = None) -> None:
         f"Machine: {describe()}",
         "",
         f"Each row: the median of {args.repeats} runs (interleaved, each in a fresh process) of {args.rollouts} rollouts of PPO as `python -m train.ppo` builds it (after one untimed), without evaluations: "
-        f"`ChunkedPPO` (SB3's PPO with each minibatch's gradient summed over chunks of {UPDATE_CHUNK:,} samples per torch thread, the same update), and "
-        "SB3's `PPO` itself as the reference. "
+        f"`ChunkedPPO` (`train.chunked_ppo`: SB3's PPO with each minibatch's gradient summed over chunks of {UPDATE_CHUNK:,} samples per torch thread, "
+        "its tanh computed as 2 sigmoid(2x) - 1, and its hidden layers in the update in the precision `train.ppo` picks: bfloat16 on a CPU with "
+        "bfloat16 arithmetic, else float32), the same `ChunkedPPO` in float32 where the two differ, and SB3's `PPO` itself as the reference. "
         "Shares of the wall-clock: the rollout (policy forward pass, env step, rollout buffer), of which the env step "
         "(the `leg_env.sb3` adapter), and the update (the gradient steps). The last column: the native batch alone "
         "under random actions, in the same run.",
         "",
-        "| configuration | trainer | envs | batch | epochs | gradient steps per rollout | net | torch threads | env-steps/s | rollout | of which env | update | env alone, env-steps/s |",
-        "|---|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|",
+        "| configuration | trainer | update precision | envs | batch | epochs | gradient steps per rollout | net | torch threads | env-steps/s | rollout | of which env | update | env alone, env-steps/s |",
+        "|---|---|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|",
         *rows,
         "",
         "Targets:",
         *checks,
         "",
-        "Speed-up of the chunked update, end to end:",
+        "Speed-up of ChunkedPPO over SB3's PPO, end to end:",
         *ratios,
     ]
     text = "\n".join(lines) + "\n"

@@ -138,12 +138,12 @@ def test_bad_update_chunk(chunk, error):
 def test_training_speed_benchmark_runs_one_case():
     """``benchmarks/bench_train.py`` measures one case in a fresh process and reports its shares (tiny budget)."""
     script = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_train.py"
-    for algo in ("chunked", "sb3"):
+    for algo in ("chunked", "float32", "sb3"):
         done = subprocess.run([sys.executable, str(script), "--one", "leg_env/PlanarLegHop-v3", "1", algo, "--rollouts", "2"],
                               capture_output=True, text=True, timeout=300, check=False)
         assert done.returncode == 0, done.stderr[-2000:]
         result = json.loads([line for line in done.stdout.splitlines() if line.startswith("RESULT ")][-1][len("RESULT "):])
-        assert result["algo"] == algo and result["rate"] > 0 and result["gradient_steps"] == 6
+        assert result["algo"] == algo and result["precision"] in ("float32", "bfloat16") and result["rate"] > 0 and result["gradient_steps"] == 6
         assert abs(result["rollout"] + result["update"] - 1.0) < 0.05 and 0.0 < result["env"] < result["rollout"]
 
 

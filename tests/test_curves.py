@@ -150,6 +150,7 @@ def test_a_sweep_passes_its_update_precision_to_each_seed(tmp_path):
     folder = tmp_path / "runs" / "seed_0"
     assert yaml.safe_load((folder / "config.yaml").read_text())["update_precision"] == "float32"
     assert "--update-precision float32" in (folder / "command.txt").read_text()
+    assert "PPO's update: the hidden layers in float32 (`train.ppo --update-precision`)." in (tmp_path / "page" / "README.md").read_text()
 
 
 def _alive(pid: int) -> bool:

@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from train.cli import interrupt, parse_args
 from train.machine import describe
@@ -341,6 +342,14 @@ def _task(args: CurvesArgs) -> str:
     return args.env_id + (", randomised robots" if args.randomized else "")
 
 
+def _precisions(by_seed: dict) -> str:
+    """The update precision of the seeds' runs, as the page says it (runs from before the option: float32)."""
+    kinds = sorted(set(by_seed.values()))
+    if len(kinds) == 1:
+        return f"the hidden layers in {kinds[0]}" + (" (matrix products in bfloat16, parameters and losses float32)" if kinds[0] == "bfloat16" else "")
+    return "; ".join(f"seed {seed} in {kind}" for seed, kind in by_seed.items())
+
+
 def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: dict | None, command: str) -> str:
     name = args.env_id.split("/")[-1]
     seeds = curves["seeds"]
@@ -353,7 +362,8 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
         "",
         f"Plain PPO from scratch (SB3 `MlpPolicy`, random initialisation, no controller, no demonstrations), the "
         f"`{args.env_id}` entry of `train/hyperparams/ppo.yml`{' with ' + ' '.join(args.params) if args.params else ''}, "
-        f"{len(seeds)} training seeds ({seeds[0]}..{seeds[-1]}). The shipped seed, named before training: {args.shipped_seed}.",
+        f"{len(seeds)} training seeds ({seeds[0]}..{seeds[-1]}). The shipped seed, named before training: {args.shipped_seed}. "
+        f"PPO's update: {_precisions(final.get('precision', {}))} (`train.ppo --update-precision`).",
         "",
         f"Curves: every {args.eval_freq:,} steps each seed's policy runs the same {args.eval_episodes} deterministic "
         f"episodes (seeds 20000+){_on(args)}; the line is the interquartile mean (IQM) across seeds, the band its 95% "
@@ -422,6 +432,8 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
         log = json.loads((folder / "evaluations.json").read_text())
         histories[seed] = log["evaluations"]
         final.setdefault("resumes", {})[str(seed)] = int(log.get("resumes", 0))
+        config = yaml.safe_load((folder / "config.yaml").read_text())
+        final.setdefault("precision", {})[str(seed)] = config.get("update_precision", "float32")
         policy = load_policy(folder)
         final["per_seed"][str(seed)] = _held_out(policy, args, policy.env_kwargs)
     order = sorted(seeds, key=lambda s: _rank_key(final["per_seed"][str(s)]))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections import deque
 import subprocess
 import sys
 from pathlib import Path
@@ -159,3 +160,28 @@ def test_default_chunk_is_per_torch_thread():
     finally:
         torch.set_num_threads(threads)
     assert ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), update_chunk=100, n_steps=8, batch_size=16, device="cpu").chunk == 100
+
+
+def test_episode_buffers_are_filled_as_sb3_fills_them():
+    """``ChunkedPPO._update_info_buffer`` (which visits only the infos holding ``episode`` or ``is_success``) leaves
+    the episode buffers as SB3's does, for any mix of infos and dones."""
+    venv = make_sb3_vec_env(2, seed=0)
+    models = [algo("MlpPolicy", venv, n_steps=8, batch_size=16, device="cpu") for algo in (PPO, ChunkedPPO)]
+    for model in models:  # as learn() sets them up, long enough to keep every entry
+        model.ep_info_buffer, model.ep_success_buffer = deque(maxlen=1000), deque(maxlen=1000)
+    rng = np.random.default_rng(0)
+    for step in range(50):
+        infos = []
+        for i in range(6):
+            info = {"TimeLimit.truncated": bool(rng.integers(2))}
+            if rng.random() < 0.3:
+                info["episode"] = {"r": float(step), "l": i, "t": 0.0}
+            if rng.random() < 0.3:
+                info["is_success"] = bool(rng.integers(2)) if rng.random() < 0.9 else None
+            infos.append(info)
+        dones = rng.random(6) < 0.5 if step % 5 else None
+        for model in models:
+            model._update_info_buffer(infos, dones)
+    reference, chunked = models
+    assert list(chunked.ep_info_buffer) == list(reference.ep_info_buffer) and len(reference.ep_info_buffer) > 10
+    assert list(chunked.ep_success_buffer) == list(reference.ep_success_buffer) and len(reference.ep_success_buffer) > 5

@@ -350,11 +350,16 @@ def _precisions(by_seed: dict) -> str:
     return "; ".join(f"seed {seed} in {kind}" for seed, kind in by_seed.items())
 
 
+def _precision_title(final: dict) -> str:
+    """What a page's title adds when its seeds' updates ran in bfloat16 (float32, SB3's own, adds nothing)."""
+    return ", bfloat16 update" if set(final.get("precision", {}).values()) == {"bfloat16"} else ""
+
+
 def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: dict | None, command: str) -> str:
     name = args.env_id.split("/")[-1]
     seeds = curves["seeds"]
     lines = [
-        f"# Learning curves: {_task(args)}",
+        f"# Learning curves: {_task(args)}{_precision_title(final)}",
         "",
         f"Written by `{command}` on {time.strftime('%Y-%m-%d')}.",
         "",
@@ -443,7 +448,7 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
     kwargs = eval_env_kwargs(args)
     baseline = _held_out(load_policy(args.baseline, kwargs, env_id=args.env_id), args, kwargs) if args.baseline else None
     curves = _curves(histories)
-    title = f"{_task(args)}: plain PPO, {len(seeds)} seeds"
+    title = f"{_task(args)}: plain PPO, {len(seeds)} seeds{_precision_title(final)}"
     _plot(curves, args.out / "curves_steps.png", "timesteps", "environment steps", title)
     _plot(curves, args.out / "curves_time.png", "time_s", "wall-clock [min] (median over seeds)", title)
     scores = {**plan, "machine": header, "date": time.strftime("%Y-%m-%d"), "curves": curves, "final": final, "baseline": baseline}

@@ -11,7 +11,7 @@ TORCH_THREADS ?= 2
 RLLIB_VENV ?= .venv-rllib
 RLLIB_BIN  := $(RLLIB_VENV)/bin
 
-.PHONY: train test test-rllib bench evaluate clean
+.PHONY: train test test-rllib bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)

@@ -145,12 +145,14 @@ def test_a_sweep_passes_its_update_precision_to_each_seed(tmp_path):
     import yaml
 
     main(["--env-id", "leg_env/PlanarLegBalance-v0", "--total-timesteps", "256", "--eval-freq", "256", "--eval-episodes", "2",
-          "--episodes", "2", "--seeds", "1", "--update-precision", "float32", "--params", *TINY,
+          "--episodes", "2", "--seeds", "1", "--update-precision", "bfloat16", "--params", *TINY,
           "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "page")])
     folder = tmp_path / "runs" / "seed_0"
-    assert yaml.safe_load((folder / "config.yaml").read_text())["update_precision"] == "float32"
-    assert "--update-precision float32" in (folder / "command.txt").read_text()
-    assert "PPO's update: the hidden layers in float32 (`train.ppo --update-precision`)." in (tmp_path / "page" / "README.md").read_text()
+    assert yaml.safe_load((folder / "config.yaml").read_text())["update_precision"] == "bfloat16"
+    assert "--update-precision bfloat16" in (folder / "command.txt").read_text()
+    page = (tmp_path / "page" / "README.md").read_text()
+    assert page.startswith("# Learning curves: leg_env/PlanarLegBalance-v0, bfloat16 update\n")
+    assert "PPO's update: the hidden layers in bfloat16 (matrix products in bfloat16, parameters and losses float32)" in page
 
 
 def _alive(pid: int) -> bool:

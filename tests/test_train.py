@@ -320,12 +320,13 @@ def test_torch_threads_apply_to_the_run_and_are_restored(tmp_path):
 
 
 @pytest.mark.parametrize("native", [True, False])
-def test_update_precision_auto_follows_the_cpu_and_is_recorded(tmp_path, monkeypatch, native):
+def test_update_precision_defaults_to_float32_auto_follows_the_cpu_and_it_is_recorded(tmp_path, monkeypatch, native):
     import train.ppo as ppo
 
     monkeypatch.setattr(ppo, "native_bfloat16", lambda: native)
     expected = "bfloat16" if native else "float32"
-    assert resolve_config(tiny_args(tmp_path / "a"))["update_precision"] == expected
+    assert resolve_config(tiny_args(tmp_path / "a"))["update_precision"] == "float32"  # the default, SB3's
+    assert resolve_config(tiny_args(tmp_path / "d", update_precision="auto"))["update_precision"] == expected
     assert resolve_config(tiny_args(tmp_path / "b", update_precision="float32"))["update_precision"] == "float32"
     assert resolve_config(tiny_args(tmp_path / "c", update_precision="bfloat16"))["update_precision"] == "bfloat16"
     with pytest.raises(ValueError, match="update_precision"):

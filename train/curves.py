@@ -95,7 +95,7 @@ class CurvesArgs:
     """Folder of the results page (None: benchmarks/results/learning/<task name>, with -randomized as for runs)."""
     torch_threads: int = 1
     """Threads of torch in each seed's training (train.ppo's --torch-threads)."""
-    update_precision: str = "auto"
+    update_precision: str = "float32"
     """The arithmetic of the hidden layers in each seed's PPO update (train.ppo's --update-precision)."""
     jobs: int = 1
     """Seeds trained at once, each in a process of its own with torch_threads threads (the wall-clock
@@ -235,7 +235,7 @@ def seed_command(args: CurvesArgs, seed: int) -> str:
 
     argv = ["python", "-m", "train.ppo", "--env-id", args.env_id, "--seed", str(seed), "--out", str(args.runs / f"seed_{seed}"),
             "--eval-freq", str(args.eval_freq), "--eval-episodes", str(args.eval_episodes), "--torch-threads", str(args.torch_threads)]
-    if args.update_precision != "auto":
+    if args.update_precision != "float32":
         argv += ["--update-precision", args.update_precision]
     if args.total_timesteps is not None:
         argv += ["--total-timesteps", str(args.total_timesteps)]

@@ -128,10 +128,12 @@ class TrainArgs:
     """Threads of torch (the policy's forward passes and the PPO update). The environments step on one thread
     and are idle during the update, so on an otherwise idle machine up to one thread per core speeds training;
     the results then depend on the thread count in their last digits."""
-    update_precision: str = "auto"
-    """Arithmetic of the hidden layers in PPO's update (train.chunked_ppo.ChunkedPPO): 'float32', 'bfloat16'
+    update_precision: str = "float32"
+    """Arithmetic of the hidden layers in PPO's update (train.chunked_ppo.ChunkedPPO): 'float32' (SB3's), 'bfloat16'
     (matrix products in bfloat16 with float32 accumulation; parameters, optimiser, output layers and losses
-    float32), or 'auto': bfloat16 on a CPU with bfloat16 arithmetic (AVX512-BF16 or AMX), else float32."""
+    float32: on a CPU with bfloat16 arithmetic the update runs about twice as fast), or 'auto': bfloat16 on a CPU
+    with bfloat16 arithmetic (AVX512-BF16 or AMX), else float32. Over five seeds the hop task learnt as well in
+    bfloat16 and the balance task to lower returns (docs/training.md)."""
 
     def __post_init__(self):
         if self.total_timesteps is not None and self.total_timesteps < 1:

@@ -73,6 +73,9 @@ class CurvesArgs:
     shipped_seed: int | None = None
     """The seed whose policy is (or will be) shipped, chosen before training: the page says where it ranks
     (None: first_seed)."""
+    shipped: bool = True
+    """Whether the shipped seed's policy is the one shipped in policies/ (--no-shipped: a sweep beside the shipped
+    configuration, whose page names that seed as chosen before training, not as shipped)."""
     total_timesteps: int | None = None
     """Environment steps per seed (None: the file's n_timesteps)."""
     params: list[str] = field(default_factory=list)
@@ -350,6 +353,13 @@ def _precisions(by_seed: dict) -> str:
     return "; ".join(f"seed {seed} in {kind}" for seed, kind in by_seed.items())
 
 
+def _named(args: CurvesArgs) -> str:
+    """The page's sentence on the seed named before training."""
+    if args.shipped:
+        return f"The shipped seed, named before training: {args.shipped_seed}"
+    return f"The seed to ship, named before training: {args.shipped_seed} (not shipped: \"named\" in the table)"
+
+
 def _precision_title(final: dict) -> str:
     """What a page's title adds when its seeds' updates ran in bfloat16 (float32, SB3's own, adds nothing)."""
     return ", bfloat16 update" if set(final.get("precision", {}).values()) == {"bfloat16"} else ""
@@ -367,7 +377,7 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
         "",
         f"Plain PPO from scratch (SB3 `MlpPolicy`, random initialisation, no controller, no demonstrations), the "
         f"`{args.env_id}` entry of `train/hyperparams/ppo.yml`{' with ' + ' '.join(args.params) if args.params else ''}, "
-        f"{len(seeds)} training seeds ({seeds[0]}..{seeds[-1]}). The shipped seed, named before training: {args.shipped_seed}. "
+        f"{len(seeds)} training seeds ({seeds[0]}..{seeds[-1]}). {_named(args)}. "
         f"PPO's update: {_precisions(final.get('precision', {}))} (`train.ppo --update-precision`).",
         "",
         f"Curves: every {args.eval_freq:,} steps each seed's policy runs the same {args.eval_episodes} deterministic "
@@ -399,7 +409,7 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
     ]
     for s in seeds:
         row = final["per_seed"][str(s)]
-        label = f"PPO seed {s}" + (" (shipped)" if s == args.shipped_seed else "")
+        label = f"PPO seed {s}" + ((" (shipped)" if args.shipped else " (named)") if s == args.shipped_seed else "")
         lines.append(f"| {label} | {final['rank'][str(s)]} | " + " | ".join(_fmt(row[k], k) for k in keys) + " |")
     for metric in final["iqm"]:
         iqm, low, high = final["iqm"][metric]

@@ -95,6 +95,11 @@ hops per episode, an apex error of 1.20 cm (the hopper's 1.78 cm) and a return o
 bar of Solved but the drift (7.84 cm; the hopper's 6.24 cm). The two precisions part from the first update on, as
 float32 runs on two CPUs do, so one seed's result in one says little about the same seed in the other; over the five
 seeds neither learns worse here.
+A probe that chose nothing: bfloat16 seeds 5 and 6 resumed from 60M steps with the drift charge raised from 100 to
+400 by 63M, to 72M steps, their last policies scored on 100 fresh episodes (seeds 30000..30099). Seed 5 kept its
+hops and brought its COM within the bar, 94% survival, 37.1 hops per episode, an apex error of 0.83 cm and a drift
+of 2.64 cm: every bar of Solved but survival (98%). Seed 6 came apart, 73% survival, an apex error of 3.24 cm and a
+drift of 3.32 cm.
 Trained on past 60M steps (the float32 seed 5 resumed from its 60M checkpoint, the schedules at their ends), its hops come closer to
 the command, but with the task's alive bonus its falls return: the best of its later evaluations (66M steps) scores
 an apex error of 1.79 cm with 43.1 hops and a drift of 3.02 cm on the held-out episodes, and survives 91%; its

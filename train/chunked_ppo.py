@@ -16,7 +16,8 @@ about speed:
   ``PPO.load``.
 * ``update_precision="bfloat16"`` runs the hidden layers of the update in bfloat16 (``torch.autocast``), the
   parameters, optimiser, output layers and losses staying float32: on a CPU with bfloat16 arithmetic the matrix
-  products, most of the update, run about three times faster. ``train.ppo`` picks it where the CPU has it.
+  products, most of the update, run about three times faster. ``train.ppo`` uses it on request
+  (``--update-precision bfloat16``, or ``auto``: where the CPU has bfloat16 arithmetic); its default is float32.
 * In the rollouts, the step's infos are searched for episode statistics with one pass over the list rather than two
   dictionary lookups per env (``_update_info_buffer``, the same buffers).
 

@@ -46,7 +46,7 @@ import numpy as np
 import yaml
 
 from train.cli import interrupt, parse_args
-from train.machine import describe
+from train.machine import UPDATE_PRECISIONS, describe
 
 __all__ = ["CurvesArgs", "iqm_interval", "sweep", "main"]
 
@@ -111,6 +111,8 @@ class CurvesArgs:
             raise ValueError(f"seeds must be >= 1, got {self.seeds}")
         if self.first_seed < 0:
             raise ValueError(f"first_seed must be >= 0, got {self.first_seed}")
+        if self.update_precision not in ("auto", *UPDATE_PRECISIONS):  # before any seed trains
+            raise ValueError(f"update_precision must be one of {('auto', *UPDATE_PRECISIONS)}, got {self.update_precision!r}")
         if self.shipped_seed is None:
             self.shipped_seed = self.first_seed
         if not self.first_seed <= self.shipped_seed < self.first_seed + self.seeds:

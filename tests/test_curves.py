@@ -141,16 +141,20 @@ def test_seeds_trained_in_parallel_processes_learn_what_one_process_learns(tmp_p
         assert line.startswith("python -m train.ppo --env-id leg_env/PlanarLegBalance-v0 --seed 1 --out ") and "--params n_envs:8" in line
 
 
-def test_a_sweep_passes_its_update_precision_to_each_seed_and_can_be_one_not_shipped(tmp_path):
+def test_a_sweep_passes_its_update_precision_and_selection_to_each_seed_and_can_be_one_not_shipped(tmp_path):
     import yaml
 
-    main(["--env-id", "leg_env/PlanarLegBalance-v0", "--total-timesteps", "256", "--eval-freq", "256", "--eval-episodes", "2",
-          "--episodes", "2", "--seeds", "1", "--update-precision", "bfloat16", "--no-shipped", "--params", *TINY,
-          "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "page")])
+    main(["--env-id", "leg_env/PlanarLegBalance-v0", "--total-timesteps", "256", "--eval-freq", "128", "--eval-episodes", "2",
+          "--episodes", "2", "--seeds", "1", "--update-precision", "bfloat16", "--no-shipped", "--select-after", "200",
+          "--params", *TINY, "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "page")])  # fmt: skip
     folder = tmp_path / "runs" / "seed_0"
-    assert yaml.safe_load((folder / "config.yaml").read_text())["update_precision"] == "bfloat16"
+    config = yaml.safe_load((folder / "config.yaml").read_text())
+    assert config["update_precision"] == "bfloat16" and config["select_after"] == 200
     assert "--update-precision bfloat16" in (folder / "command.txt").read_text()
+    assert "--select-after 200" in (folder / "command.txt").read_text()
+    assert json.loads((folder / "evaluations.json").read_text())["selected"]["timesteps"] == 256  # not the one at 128
     page = (tmp_path / "page" / "README.md").read_text()
+    assert "selected policy (its best in-training evaluation at 200 steps or more) on 2 held-out episodes" in page
     assert page.startswith("# Learning curves: leg_env/PlanarLegBalance-v0, bfloat16 update\n")
     assert "PPO's update: the hidden layers in bfloat16 (matrix products in bfloat16, parameters and losses float32)" in page
     assert "The seed to ship, named before training: 0 (not shipped" in page and "| PPO seed 0 (named) |" in page and "(shipped)" not in page

@@ -345,6 +345,28 @@ def test_update_precision_reaches_the_model_and_a_resume_takes_its_own(tmp_path)
     assert load_checkpoint(out / "checkpoints", normalize=True, algo=ChunkedPPO).model.update_precision == "float32"
 
 
+def test_select_after_leaves_the_earlier_evaluations_out_of_the_selection(tmp_path):
+    out = train(tiny_args(tmp_path / "run", total_timesteps=384, select_after=256))
+    assert yaml.safe_load((out / "config.yaml").read_text())["select_after"] == 256
+    evaluations = json.loads((out / "evaluations.json").read_text())
+    assert [e["timesteps"] for e in evaluations["evaluations"]] == [128, 256, 384]
+    late = [e for e in evaluations["evaluations"] if e["timesteps"] >= 256]
+    best = max(late, key=lambda e: (e["survival_rate"], e["mean_return"]))
+    selected = evaluations["selected"]
+    assert selected["from"] == "best" and selected["timesteps"] == best["timesteps"] >= 256
+    assert (out / "model.zip").read_bytes() == (out / "best" / "model.zip").read_bytes()
+    # nothing evaluated after select_after: the last policy is shipped
+    out = train(tiny_args(tmp_path / "late", select_after=1000))
+    assert json.loads((out / "evaluations.json").read_text())["selected"]["from"] == "last"
+    assert (out / "model.zip").read_bytes() == (out / "last" / "model.zip").read_bytes()
+
+
+@pytest.mark.parametrize("value", [-1, 1.5, "soon", True])
+def test_a_bad_select_after_is_a_value_error_naming_it(tmp_path, value):
+    with pytest.raises(ValueError, match="select_after"):
+        tiny_args(tmp_path / "bad", select_after=value)
+
+
 def test_each_evaluation_line_prints_the_training_rate(tmp_path, capsys):
     train(tiny_args(tmp_path / "run", verbose=1, checkpoint_freq=0))
     lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("[")]

@@ -100,6 +100,9 @@ class CurvesArgs:
     """Threads of torch in each seed's training (train.ppo's --torch-threads)."""
     update_precision: str = "float32"
     """The arithmetic of the hidden layers in each seed's PPO update (train.ppo's --update-precision)."""
+    select_after: int = 0
+    """Environment steps before which no in-training evaluation is a candidate for a seed's selected policy
+    (train.ppo's --select-after)."""
     jobs: int = 1
     """Seeds trained at once, each in a process of its own with torch_threads threads (the wall-clock
     curves then show each seed's own time, on its share of the cores)."""
@@ -119,6 +122,8 @@ class CurvesArgs:
             raise ValueError(f"shipped_seed must be one of the trained seeds {self.first_seed}..{self.first_seed + self.seeds - 1}, got {self.shipped_seed}")
         if self.jobs < 1:
             raise ValueError(f"jobs must be >= 1, got {self.jobs}")
+        if isinstance(self.select_after, bool) or not isinstance(self.select_after, int) or self.select_after < 0:
+            raise ValueError(f"select_after must be a whole number of environment steps >= 0, got {self.select_after!r}")
         if self.episodes < 1 or self.eval_episodes < 1:
             raise ValueError(f"episodes and eval_episodes must be >= 1, got {self.episodes} and {self.eval_episodes}")
         if self.eval_freq < 1:
@@ -173,6 +178,7 @@ def _train_seed(args: CurvesArgs, seed: int) -> Path:
             verbose=1,
             torch_threads=args.torch_threads,
             update_precision=args.update_precision,
+            select_after=args.select_after,
         ),
         command=seed_command(args, seed),
     )
@@ -244,6 +250,8 @@ def seed_command(args: CurvesArgs, seed: int) -> str:
         argv += ["--update-precision", args.update_precision]
     if args.total_timesteps is not None:
         argv += ["--total-timesteps", str(args.total_timesteps)]
+    if args.select_after:
+        argv += ["--select-after", str(args.select_after)]
     if args.eval_env_kwargs:
         argv += ["--eval-env-kwargs", *args.eval_env_kwargs]
     if args.params:
@@ -403,7 +411,9 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
     keys = [k for k in KEYS if k in final["per_seed"][str(seeds[0])]]
     lines += [
         "",
-        f"Final scores: each seed's selected policy on {args.episodes} held-out episodes (seeds {TEST_SEED}..{TEST_SEED + args.episodes - 1}, "
+        f"Final scores: each seed's selected policy"
+        + (f" (its best in-training evaluation at {args.select_after:,} steps or more)" if args.select_after else "")
+        + f" on {args.episodes} held-out episodes (seeds {TEST_SEED}..{TEST_SEED + args.episodes - 1}, "
         f"never used in training or selection){_on(args)}" + (f"; `{args.baseline}` (model-based controller) on the same episodes." if baseline else "."),
         "",
         "| policy | rank | " + " | ".join(_COLUMNS[k][0] for k in keys) + " |",

@@ -13,7 +13,8 @@ large minibatches; its models load with SB3's ``PPO.load``.
 A run writes one folder::
 
     model.zip, vecnormalize.pkl   the selected policy and its normalisation statistics: the one with the
-                                  best in-training evaluation (``--no-select-best``: the last one)
+                                  best in-training evaluation (``--no-select-best``: the last one;
+                                  ``--select-after N``: the best of those at N env steps or more)
     best/, last/                  model.zip, vecnormalize.pkl, info.json of the best and the last policy
     config.yaml                   the resolved configuration (everything needed to rerun)
     command.txt                   the command line of every invocation (first run and resumes)
@@ -120,6 +121,9 @@ class TrainArgs:
     task) as model.zip, as SB3's EvalCallback and the Zoo keep their best model; the last policy is
     in last/ either way. Guards against PPO's late regressions; evaluation seeds differ from the
     in-training ones, so the final numbers are not selected on."""
+    select_after: int = 0
+    """Environment steps before which no in-training evaluation is a candidate for the shipped policy (e.g. the
+    steps of a training curriculum before its last stage); if none comes after, the last policy is shipped."""
     progress_bar: bool = True
     """Show SB3's progress bar."""
     verbose: int = 1
@@ -136,6 +140,8 @@ class TrainArgs:
     bfloat16 and the balance task to lower returns (docs/training.md)."""
 
     def __post_init__(self):
+        if isinstance(self.select_after, bool) or not isinstance(self.select_after, int) or self.select_after < 0:
+            raise ValueError(f"select_after must be a whole number of environment steps >= 0, got {self.select_after!r}")
         if self.total_timesteps is not None and self.total_timesteps < 1:
             raise ValueError(f"total_timesteps must be >= 1, got {self.total_timesteps}")
         if self.eval_episodes < 1:
@@ -192,6 +198,7 @@ def resolve_config(args: TrainArgs) -> dict:
         "normalize": normalize,
         "ppo": hp,
         "eval": {"freq": int(args.eval_freq), "episodes": int(args.eval_episodes), "seed": EVAL_SEED},
+        "select_after": int(args.select_after),
         "checkpoint_freq": int(args.checkpoint_freq),
         "update_precision": update_precision(args.update_precision),
         "hyperparams_file": display_path(args.hyperparams),
@@ -386,10 +393,17 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
     def score(info: dict) -> tuple:
         return (info["survival_rate"], info["mean_return"])
 
-    def report(result: dict) -> None:
+    select_after = config.get("select_after", 0)
+
+    def candidate_best() -> dict | None:
+        """best/'s record, unless it predates ``select_after`` (then it is no candidate)."""
         best = read_snapshot_info(out / "best")
+        return best if best is not None and best["timesteps"] >= select_after else None
+
+    def report(result: dict) -> None:
+        best = candidate_best()
         info = {k: result[k] for k in ("timesteps", "mean_return", "std_return", "survival_rate", "rms_base_drift")}
-        if best is None or score(info) >= score(best):
+        if info["timesteps"] >= select_after and (best is None or score(info) >= score(best)):
             save_snapshot(out / "best", model, vec_normalize, info)
         if args.verbose:
             seconds = time.perf_counter() - t0
@@ -448,7 +462,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
 
     save()
     save_snapshot(out / "last", model, vec_normalize, {k: history[-1][k] for k in ("timesteps", "mean_return", "std_return", "survival_rate", "rms_base_drift")})
-    selected = out / ("best" if args.select_best and read_snapshot_info(out / "best") else "last")
+    selected = out / ("best" if args.select_best and candidate_best() else "last")
     for name in ("model.zip", "vecnormalize.pkl"):
         if (selected / name).is_file():
             _save_atomic(lambda tmp, src=selected / name: shutil.copyfile(src, tmp), out / name)

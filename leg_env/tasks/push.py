@@ -89,7 +89,9 @@ A probe of these settings on seed 0 for 45M steps kept its best evaluation at 18
 the push curve; its evaluations fell to 59-97% as the flight charge reached 0.5 and after. The same with pushes of
 20-70 N and an alive bonus of 5 survived 9% of its 50 N evaluations at 24M steps (stopped there). A longer free
 phase does not rescue the two seeds that failed: with flight free for the first 15M steps (rising to 0.5 by 24M),
-seeds 3 and 4 still survived none of their 50 N evaluations at 24M steps.
+seeds 3 and 4 still survived none of their 50 N evaluations at 24M steps. Nor does a curriculum of push sizes
+(pushes of 0-25 N for the first 3M steps, widened linearly to 0-55 N by 12M, the training env built with 0-60 N):
+at 24M steps seed 3 survived none of its 50 N evaluations and seed 4 22-47% of them from 15M on.
 
 The same configuration on randomised robots (``randomize=True`` in training, evaluations and selection on randomised
 robots with every push at 34 N; ``benchmarks/results/learning/PlanarLegPush-v1-randomized``, seeds 6-10, seed 6 named

@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +61,10 @@ def test_run_folder_has_everything(run):
     assert selected["from"] == "best" and selected["mean_return"] == best["mean_return"]
     assert (run / "model.zip").read_bytes() == (run / "best" / "model.zip").read_bytes()
     assert json.loads((run / "last" / "info.json").read_text())["timesteps"] == STEPS
+    # the shipped model names no path of the machine that trained it (SB3 would store its TensorBoard folder)
+    with zipfile.ZipFile(run / "model.zip") as archive:
+        data = archive.read("data").decode()
+    assert str(run.parent) not in data and "tensorboard_log" not in data
 
 
 def test_reward_terms_and_violation_rates_reach_tensorboard(run):

@@ -134,7 +134,7 @@ def save_snapshot(path: Path, model, vec_normalize, info: dict) -> Path:
     recover_snapshot(path)
     tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}."))
     try:
-        model.save(tmp / "model.zip")
+        model.save(tmp / "model.zip", exclude=["tensorboard_log"])  # a machine's path; a policy needs none
         if vec_normalize is not None:
             vec_normalize.save(tmp / "vecnormalize.pkl")
         write_json_atomic(tmp / "info.json", info)

@@ -91,8 +91,8 @@ def test_randomized_push_policy_meets_its_bar_on_held_out_robots():
 
 def test_randomized_push_policy_is_the_randomised_entry_of_its_hyperparameter_file():
     """``ppo_push_randomized`` was trained as ppo.yml's ``PlanarLegPush-v1`` entry with ``randomize: true`` in its
-    training env; ``train/hyperparams/ppo_randomized.yml`` holds that configuration, and resolves to the card's run
-    exactly."""
+    training env (and the entry's initial action noise of then, ``log_std_init: -1.0``);
+    ``train/hyperparams/ppo_randomized.yml`` holds that configuration, and resolves to the card's run exactly."""
     import yaml
 
     from train.hyperparameters import load_hyperparams
@@ -102,7 +102,9 @@ def test_randomized_push_policy_is_the_randomised_entry_of_its_hyperparameter_fi
     nominal = load_hyperparams(ROOT / "train" / "hyperparams" / "ppo.yml", env_id)
     randomized = load_hyperparams(ROOT / "train" / "hyperparams" / "ppo_randomized.yml", env_id)
     assert randomized["env_kwargs"] == {**nominal["env_kwargs"], "randomize": True}
-    assert {k: v for k, v in randomized.items() if k != "env_kwargs"} == {k: v for k, v in nominal.items() if k != "env_kwargs"}
+    assert randomized["policy_kwargs"] == {**nominal["policy_kwargs"], "log_std_init": -1.0}
+    same = [k for k in nominal if k not in ("env_kwargs", "policy_kwargs")]
+    assert {k: randomized[k] for k in same} == {k: nominal[k] for k in same} and set(randomized) == set(nominal)
     shipped = yaml.safe_load((ROOT / "policies" / "ppo_push_randomized" / "config.yaml").read_text())
     args = TrainArgs(out=Path("unused"), env_id=env_id, hyperparams=ROOT / "train" / "hyperparams" / "ppo_randomized.yml", seed=6,
                      eval_freq=3_000_000, eval_episodes=32, eval_env_kwargs=["push_force:[34.0, 34.0]", "randomize:true"])

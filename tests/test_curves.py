@@ -31,7 +31,8 @@ def test_iqm_is_the_mean_of_the_middle_half_and_its_interval_contains_it():
 @pytest.mark.parametrize(
     "kwargs, field",
     [({"seeds": 0}, "seeds"), ({"seeds": 3, "shipped_seed": 3}, "shipped_seed"), ({"eval_freq": 0}, "eval_freq"), ({"episodes": 0}, "episodes"),
-     ({"jobs": 0}, "jobs"), ({"eval_env_kwargs": ["push_force"]}, "eval_env_kwargs"), ({"update_precision": "float16"}, "update_precision")],
+     ({"jobs": 0}, "jobs"), ({"eval_env_kwargs": ["push_force"]}, "eval_env_kwargs"), ({"update_precision": "float16"}, "update_precision"),
+     ({"select_after": -1}, "select_after")],
 )
 def test_bad_arguments_name_the_field(kwargs, field):
     with pytest.raises(ValueError, match=field):

@@ -122,8 +122,9 @@ class CurvesArgs:
             raise ValueError(f"shipped_seed must be one of the trained seeds {self.first_seed}..{self.first_seed + self.seeds - 1}, got {self.shipped_seed}")
         if self.jobs < 1:
             raise ValueError(f"jobs must be >= 1, got {self.jobs}")
-        if isinstance(self.select_after, bool) or not isinstance(self.select_after, int) or self.select_after < 0:
-            raise ValueError(f"select_after must be a whole number of environment steps >= 0, got {self.select_after!r}")
+        from train.ppo import check_select_after
+
+        check_select_after(self.select_after)  # before any seed trains
         if self.episodes < 1 or self.eval_episodes < 1:
             raise ValueError(f"episodes and eval_episodes must be >= 1, got {self.episodes} and {self.eval_episodes}")
         if self.eval_freq < 1:

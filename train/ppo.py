@@ -140,8 +140,7 @@ class TrainArgs:
     bfloat16 and the balance task to lower returns (docs/training.md)."""
 
     def __post_init__(self):
-        if isinstance(self.select_after, bool) or not isinstance(self.select_after, int) or self.select_after < 0:
-            raise ValueError(f"select_after must be a whole number of environment steps >= 0, got {self.select_after!r}")
+        check_select_after(self.select_after)
         if self.total_timesteps is not None and self.total_timesteps < 1:
             raise ValueError(f"total_timesteps must be >= 1, got {self.total_timesteps}")
         if self.eval_episodes < 1:
@@ -204,6 +203,12 @@ def resolve_config(args: TrainArgs) -> dict:
         "hyperparams_file": display_path(args.hyperparams),
         "overrides": list(args.params),
     }
+
+
+def check_select_after(value) -> None:
+    """``ValueError`` naming ``select_after`` unless it is a whole number of environment steps >= 0."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"select_after must be a whole number of environment steps >= 0, got {value!r}")
 
 
 def update_precision(name: str) -> str:

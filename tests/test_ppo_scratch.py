@@ -111,3 +111,18 @@ def test_randomized_push_policy_is_the_randomised_entry_of_its_hyperparameter_fi
     resolved = resolve_config(args)
     for key in ("env_id", "env_kwargs", "callback", "eval_env_kwargs", "seed", "n_envs", "total_timesteps", "policy", "normalize", "ppo"):
         assert resolved[key] == shipped[key], key
+
+
+def test_shipped_balance_policy_is_its_configuration():
+    """``policies/ppo_balance`` was trained by the ``PlanarLegBalance-v0`` entry of ``train/hyperparams/ppo.yml`` as it
+    is now: its card's command resolves to the shipped run's configuration, key for key (steps, epochs, minibatches,
+    curriculum, evaluation)."""
+    import yaml
+
+    from train.ppo import TrainArgs, resolve_config
+
+    shipped = yaml.safe_load((ROOT / "policies" / "ppo_balance" / "config.yaml").read_text())
+    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegBalance-v0", seed=2, eval_freq=3_000_000, eval_episodes=64)
+    resolved = resolve_config(args)
+    for key in ("env_id", "env_kwargs", "callback", "eval_env_kwargs", "seed", "n_envs", "total_timesteps", "policy", "normalize", "ppo"):
+        assert resolved[key] == shipped[key], key

@@ -93,10 +93,8 @@ def test_randomized_push_policy_is_the_randomised_entry_of_its_hyperparameter_fi
     """``ppo_push_randomized`` was trained as ppo.yml's ``PlanarLegPush-v1`` entry with ``randomize: true`` in its
     training env (and the entry's initial action noise of then, ``log_std_init: -1.0``);
     ``train/hyperparams/ppo_randomized.yml`` holds that configuration, and resolves to the card's run exactly."""
-    import yaml
-
     from train.hyperparameters import load_hyperparams
-    from train.ppo import TrainArgs, resolve_config
+    from train.ppo import TrainArgs
 
     env_id = "leg_env/PlanarLegPush-v1"
     nominal = load_hyperparams(ROOT / "train" / "hyperparams" / "ppo.yml", env_id)
@@ -105,24 +103,29 @@ def test_randomized_push_policy_is_the_randomised_entry_of_its_hyperparameter_fi
     assert randomized["policy_kwargs"] == {**nominal["policy_kwargs"], "log_std_init": -1.0}
     same = [k for k in nominal if k not in ("env_kwargs", "policy_kwargs")]
     assert {k: randomized[k] for k in same} == {k: nominal[k] for k in same} and set(randomized) == set(nominal)
-    shipped = yaml.safe_load((ROOT / "policies" / "ppo_push_randomized" / "config.yaml").read_text())
     args = TrainArgs(out=Path("unused"), env_id=env_id, hyperparams=ROOT / "train" / "hyperparams" / "ppo_randomized.yml", seed=6,
                      eval_freq=3_000_000, eval_episodes=32, eval_env_kwargs=["push_force:[34.0, 34.0]", "randomize:true"])
-    resolved = resolve_config(args)
-    for key in ("env_id", "env_kwargs", "callback", "eval_env_kwargs", "seed", "n_envs", "total_timesteps", "policy", "normalize", "ppo"):
-        assert resolved[key] == shipped[key], key
+    assert_resolves_to_shipped(args, "ppo_push_randomized")
 
 
 def test_shipped_balance_policy_is_its_configuration():
     """``policies/ppo_balance`` was trained by the ``PlanarLegBalance-v0`` entry of ``train/hyperparams/ppo.yml`` as it
     is now: its card's command resolves to the shipped run's configuration, key for key (steps, epochs, minibatches,
     curriculum, evaluation)."""
+    from train.ppo import TrainArgs
+
+    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegBalance-v0", seed=2, eval_freq=3_000_000, eval_episodes=64)
+    assert_resolves_to_shipped(args, "ppo_balance")
+
+
+def assert_resolves_to_shipped(args, name: str) -> None:
+    """The training configuration ``args`` resolves to (``train.ppo.resolve_config``) is the shipped run's
+    ``policies/<name>/config.yaml``, key for key."""
     import yaml
 
-    from train.ppo import TrainArgs, resolve_config
+    from train.ppo import resolve_config
 
-    shipped = yaml.safe_load((ROOT / "policies" / "ppo_balance" / "config.yaml").read_text())
-    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegBalance-v0", seed=2, eval_freq=3_000_000, eval_episodes=64)
+    shipped = yaml.safe_load((ROOT / "policies" / name / "config.yaml").read_text())
     resolved = resolve_config(args)
     for key in ("env_id", "env_kwargs", "callback", "eval_env_kwargs", "seed", "n_envs", "total_timesteps", "policy", "normalize", "ppo"):
         assert resolved[key] == shipped[key], key

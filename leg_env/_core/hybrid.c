@@ -283,17 +283,22 @@ static inline void book(int mode, const leg_model *M, double h, const leg_x *X0,
 }
 
 /* Where a control step has got to: the state, its derivative, the time taken and left, and the RK4
- * steps left by the step rule. */
+ * steps left by the step rule; and a substep from X that steady() computed but did not take (crossed): its end
+ * X1, the derivative there (k1; not formed in flight) and its sums, for the general loop to go on from. */
 typedef struct {
     leg_x X;
     leg_accel k;
     double t, t_left;
     int n_left;
+    int crossed;
+    leg_x X1;
+    leg_accel k1;
+    leg_sums sums;
 } leg_progress;
 
 /* Substeps in `mode` while no witness of it is negative at a substep's end. A substep that ends with
- * one negative is not taken: the general loop of hybrid_control_step redoes it from the same state and
- * locates the event. Called with `mode` a constant, so that the compiler specialises the RK4 stages. */
+ * one negative is not taken but kept in g (crossed): the general loop of hybrid_control_step goes on from it
+ * and locates the event. Called with `mode` a constant, so that the compiler specialises the RK4 stages. */
 LEG_INLINE void steady(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
                           leg_record *rec)
 {
@@ -306,8 +311,12 @@ LEG_INLINE void steady(int mode, const leg_model *M, const leg_drive *u, const d
              * step's last derivative is never read in flight) */
             double w1a, w1b;
             witnesses(mode, M, u, &X1, &g->k, anchor, &w1a, &w1b);
-            if (w1a < 0.0)
+            if (w1a < 0.0) {
+                g->crossed = 1;
+                g->X1 = X1;
+                g->sums = sums;
                 break;
+            }
             book(mode, M, h, &g->X, &X1, &sums, rec);
             g->X = X1;
             g->t += h;
@@ -320,8 +329,13 @@ LEG_INLINE void steady(int mode, const leg_model *M, const leg_drive *u, const d
         const leg_accel k1 = derivative(mode, M, u, &X1);
         double w1a, w1b;
         witnesses(mode, M, u, &X1, &k1, anchor, &w1a, &w1b);
-        if (w1a < 0.0 || w1b < 0.0)
+        if (w1a < 0.0 || w1b < 0.0) {
+            g->crossed = 1;
+            g->X1 = X1;
+            g->k1 = k1;
+            g->sums = sums;
             break;
+        }
         book(mode, M, h, &g->X, &X1, &sums, rec);
         g->X = X1;
         g->k = k1;
@@ -360,6 +374,7 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
     }
     g.t = 0.0;
     g.t_left = dt;
+    g.crossed = 0;
     g.n_left = substeps_for_rates(g.X.va, g.X.vb, g.X.vc, dt, substeps, max_angle);
     /* the common cases (a stick while balancing, a flight) with the mode a constant; the general loop
      * below goes on from where they stop */
@@ -374,8 +389,17 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
     while (g.n_left > 0) {
         const double h = g.t_left / g.n_left;
         leg_sums sums = {0.0, 0.0, 0.0};
-        const leg_x X1 = rk4_substep(mode, M, u, anchor, &g.X, &g.k, h, &sums);
-        const leg_accel k1 = derivative(mode, M, u, &X1);
+        leg_x X1;
+        leg_accel k1;
+        if (g.crossed) { /* the substep steady() computed from this state, with this h */
+            g.crossed = 0;
+            X1 = g.X1;
+            sums = g.sums;
+            k1 = mode == LEG_FLIGHT ? derivative(mode, M, u, &X1) : g.k1;
+        } else {
+            X1 = rk4_substep(mode, M, u, anchor, &g.X, &g.k, h, &sums);
+            k1 = derivative(mode, M, u, &X1);
+        }
         double w1a, w1b;
         witnesses(mode, M, u, &X1, &k1, anchor, &w1a, &w1b);
         /* a foot that leaves the ground within LEG_GROUND_TOL below it (round-off of a contact projection) is on

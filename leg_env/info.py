@@ -61,6 +61,8 @@ UNILATERAL = (
 """The keys of the unilateral ground's ``info`` and the ``out`` field of each."""
 
 _MODE_NAMES = np.array(MODE_NAMES)
+_MODE_CODES = _MODE_NAMES.view(np.uint32).reshape(len(MODE_NAMES), -1)
+"""Each mode name's UCS-4 code points: a row taken per robot is its name (twice as fast as taking the strings)."""
 
 
 class InfoBuilder:
@@ -101,7 +103,7 @@ class InfoBuilder:
         blocks = {"d": doubles, "i": ints, "m": ints, "?": flags, "v": vectors}
         cols = {key: blocks[kind][row] for key, kind, row in keys}
         if self.unilateral:
-            cols["contact_mode"] = np.take(_MODE_NAMES, cols["contact_mode"])
+            cols["contact_mode"] = np.take(_MODE_CODES, cols["contact_mode"], axis=0).view(_MODE_NAMES.dtype).reshape(n)
         return cols
 
     def _column_spec(self, out_dtype: np.dtype, state_dtype: np.dtype, rewards: bool):

@@ -81,6 +81,7 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
 
     from leg_env.sb3 import make_sb3_vec_env
     from train.chunked_ppo import ChunkedPPO
+    from train.normalize import BatchVecNormalize
     from train.ppo import TrainArgs, _ppo_kwargs, resolve_config
 
     torch.set_num_threads(threads)
@@ -98,8 +99,8 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
         return out
 
     inner.step_wait = timed_step_wait
-    if config["normalize"] is not False:
-        venv = VecNormalize(venv, **config["normalize"])
+    if config["normalize"] is not False:  # as train.ppo wraps it; SB3's own class for SB3's PPO
+        venv = (VecNormalize if algo == "sb3" else BatchVecNormalize)(venv, **config["normalize"])
     precision = {"chunked": config["update_precision"], "bfloat16": "bfloat16", "sb3": "float32"}[algo]
     if algo == "sb3":
         model = PPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, **_ppo_kwargs(config))

@@ -468,3 +468,68 @@ def test_train_runs_a_curriculum_from_the_hyperparameters(tmp_path):
     with pytest.raises(ValueError, match="ConfigSchedule"):
         train(tiny_args(tmp_path / "bad", params=TINY + ["callback:[{train.callbacks.ConfigSchedule: {schedule: {}}}]"]))
     assert not (tmp_path / "bad").exists()
+
+
+def _normalized_pair(**normalize):
+    """SB3's VecNormalize and BatchVecNormalize over two identical batched envs whose episodes end often."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from leg_env.sb3 import make_sb3_vec_env
+    from train.normalize import BatchVecNormalize
+
+    def venv():
+        return make_sb3_vec_env(16, seed=3, env_id="leg_env/PlanarLegBalance-v0", per_env_info=False, max_episode_steps=7)
+
+    return VecNormalize(venv(), **normalize), BatchVecNormalize(venv(), **normalize)
+
+
+def _step_both(plain, batched, steps: int, seed: int = 0) -> int:
+    """Step both with the same random actions; assert the same bits out; return the terminal observations seen."""
+    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, size=(steps, plain.num_envs, 2)).astype(np.float32)
+    ended = 0
+    for a in actions:
+        out_plain, out_batched = plain.step(a), batched.step(a)
+        for x, y in zip(out_plain[:3], out_batched[:3]):
+            assert x.dtype == y.dtype and np.array_equal(x, y)
+        for info_x, info_y in zip(out_plain[3], out_batched[3]):
+            assert info_x.keys() == info_y.keys()
+            if "terminal_observation" in info_x:
+                x, y = info_x["terminal_observation"], info_y["terminal_observation"]
+                assert x.dtype == y.dtype and x.shape == y.shape and np.array_equal(x, y)
+                ended += 1
+    for name in ("obs_rms", "ret_rms") if plain.norm_obs else ("ret_rms",):
+        assert np.array_equal(getattr(plain, name).mean, getattr(batched, name).mean)
+        assert np.array_equal(getattr(plain, name).var, getattr(batched, name).var)
+    assert np.array_equal(plain.returns, batched.returns)
+    return ended
+
+
+@pytest.mark.parametrize("normalize", [dict(), dict(norm_obs=False), dict(clip_obs=0.5, gamma=0.9)])
+def test_batch_vec_normalize_gives_sb3s_bits(normalize):
+    plain, batched = _normalized_pair(**normalize)
+    plain.reset()
+    batched.reset()
+    assert _step_both(plain, batched, 40) >= 50  # the comparison covers many ended episodes
+    plain.training = batched.training = False  # evaluation: the statistics frozen
+    _step_both(plain, batched, 10, seed=1)
+
+
+def test_batch_vec_normalize_saves_as_sb3s_class_and_resumes(tmp_path):
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from train.normalize import BatchVecNormalize
+
+    plain, batched = _normalized_pair()
+    plain.reset()
+    batched.reset()
+    _step_both(plain, batched, 20)
+    batched.save(tmp_path / "vecnormalize.pkl")
+    loaded = VecNormalize.load(tmp_path / "vecnormalize.pkl", batched.venv)
+    assert type(loaded) is VecNormalize  # loads without train.normalize
+    assert np.array_equal(loaded.obs_rms.var, plain.obs_rms.var) and loaded.clip_obs == plain.clip_obs
+    resumed = BatchVecNormalize.from_vec_normalize(loaded)
+    assert type(resumed) is BatchVecNormalize and resumed.venv is batched.venv
+    plain.save(tmp_path / "plain.pkl")  # a resume of SB3's own (loading zeroes the running returns)
+    _step_both(VecNormalize.load(tmp_path / "plain.pkl", plain.venv), resumed, 20, seed=2)
+    with pytest.raises(TypeError, match="VecNormalize"):
+        BatchVecNormalize.from_vec_normalize(batched.venv)

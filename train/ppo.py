@@ -318,7 +318,6 @@ def train(args: TrainArgs, command: str | None = None) -> Path:
 
 def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Path:
     from stable_baselines3.common.utils import set_random_seed
-    from stable_baselines3.common.vec_env import VecNormalize
 
     from leg_env.sb3 import make_sb3_vec_env
     from train.callbacks import (
@@ -331,6 +330,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
         zoo_callbacks,
     )
     from train.chunked_ppo import ChunkedPPO
+    from train.normalize import BatchVecNormalize
     from train.plots import plot_learning_curve
 
     checkpoint = None
@@ -359,7 +359,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
     venv = _with_residual(venv, config)
     if checkpoint is None:
         if config["normalize"] is not False:
-            venv = VecNormalize(venv, **config["normalize"])
+            venv = BatchVecNormalize(venv, **config["normalize"])
         model = ChunkedPPO(
             config["policy"],
             venv,
@@ -375,7 +375,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
     else:
         if checkpoint.vec_normalize is not None:
             checkpoint.vec_normalize.set_venv(venv)
-            venv = checkpoint.vec_normalize
+            venv = BatchVecNormalize.from_vec_normalize(checkpoint.vec_normalize)
         model = checkpoint.model
         model.update_precision = config["update_precision"]  # this invocation's (a resume may run on another CPU)
         model.set_env(venv)

@@ -36,11 +36,8 @@ static inline void undo_step(env_state *s)
 /* What the hybrid step did, and the unilateral extras, zero. */
 static inline void zero_record(env_out *o)
 {
-    o->impulse[0] = o->impulse[1] = o->kick[0] = o->kick[1] = 0.0;
-    o->stick_time = o->slip_time = o->flight_time = o->slip_distance = 0.0;
-    o->work = o->slip_dissipation = o->impact_dissipation = o->work_load = 0.0;
+    memset(&o->tally, 0, sizeof o->tally);
     o->energy = o->foot_height = 0.0;
-    o->events = o->painleve = o->settles = 0;
 }
 
 /* The whole-body COM and its velocity from the state's trigonometry. */
@@ -65,7 +62,6 @@ static void physics_range(const env_batch *b, Py_ssize_t lo, Py_ssize_t hi)
     const int unilateral = c->unilateral;
     const double dt = c->dt, max_angle = c->max_angle, max_rate = c->max_rate;
     const int substeps = c->substeps;
-    leg_record rec;
     for (Py_ssize_t i = lo; i < hi; i++) {
         const env_robot *r = robot_row(b, i); /* this robot's parameters, friction and torque limits */
         env_state *s = state_row(b, i);
@@ -85,26 +81,11 @@ static void physics_range(const env_batch *b, Py_ssize_t lo, Py_ssize_t hi)
         u.mu = r->mu;
         if (unilateral) {
             s->mode = hybrid_control_step(&r->p, &u, s->q, s->qd, s->mode, s->anchor, dt, substeps, max_angle,
-                                          s->trig[0], s->trig[1], s->trig[2], s->trig[3], &rec);
-            o->impulse[0] = rec.impulse[0];
-            o->impulse[1] = rec.impulse[1];
-            o->kick[0] = rec.kick[0];
-            o->kick[1] = rec.kick[1];
-            o->stick_time = rec.stick_time;
-            o->slip_time = rec.slip_time;
-            o->flight_time = rec.flight_time;
-            o->slip_distance = rec.slip_distance;
-            o->work = rec.work;
-            o->slip_dissipation = rec.slip_dissipation;
-            o->impact_dissipation = rec.impact_dissipation;
-            o->work_load = rec.work_load;
-            o->events = rec.events;
-            o->painleve = rec.painleve;
-            o->settles = rec.settles;
+                                          s->trig[0], s->trig[1], s->trig[2], s->trig[3], &o->tally, NULL);
             o->energy = 0.0;
             o->foot_height = 0.0;
-            o->lam[0] = rec.impulse[0] / dt;
-            o->lam[1] = rec.impulse[1] / dt;
+            o->lam[0] = o->tally.impulse[0] / dt;
+            o->lam[1] = o->tally.impulse[1] / dt;
         } else {
             u.mu = 0.0;
             rk4_control_step(&r->p, &u, s->q, s->qd, s->anchor, dt, substeps, max_angle, 1, s->trig[0], s->trig[1],
@@ -162,9 +143,9 @@ static int start_unilateral(const leg_params *P, double *q, double *qd, double *
     leg_x X = x_from(q, qd, s1, co1, s2, co2);
     const leg_drive u = {tau[0], tau[1], 0.0, mu};
     const leg_model M = model_of(P);
-    leg_record rec;
-    memset(&rec, 0, sizeof(rec));
-    const int m = choose_mode(LEG_FLIGHT, &X, anchor, &M, &u, -1, 0, &rec);
+    leg_tally tally;
+    memset(&tally, 0, sizeof tally);
+    const int m = choose_mode(LEG_FLIGHT, &X, anchor, &M, &u, -1, 0, &tally);
     x_to(&X, q, qd);
     if (m != LEG_STICK)
         anchor[0] = q[0] + P->l1 * co1 + P->l2 * co2;

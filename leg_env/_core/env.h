@@ -107,10 +107,7 @@ typedef struct {
 typedef struct {
     double lam[2];                              /* mean contact force over the step [N] */
     double base_drift, foot_error, normal_force;
-    /* what the hybrid step did (leg_record's sums) */
-    double impulse[2], kick[2];
-    double stick_time, slip_time, flight_time, slip_distance;
-    double work, slip_dissipation, impact_dissipation, work_load;
+    leg_tally tally;                            /* what the hybrid step added up, written by it in place */
     double energy, foot_height;
     double com[2], com_velocity[2];             /* the whole-body COM and its velocity, world frame */
     double terms[MAX_TERMS];                    /* the reward terms, in the task's order */
@@ -119,7 +116,6 @@ typedef struct {
             double push_force, work_push;
         } push;
     } task;
-    int32_t events, painleve, settles;
     int32_t mode;                               /* the contact mode at the end of the step */
     uint8_t terminated, unilateral_violation, friction_violation, numerical_failure;
 } env_out;

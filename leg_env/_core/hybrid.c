@@ -91,7 +91,7 @@ static inline int watched(int kind, int settled, int events)
 
 /* Apply the foot impulse M to X's velocity; book it and the kinetic energy it removes,
  * Delta T = M . (v_f- + v_f+) / 2. */
-static leg_x kick(const leg_model *M, const leg_x *X, double Px, double Py, leg_record *rec)
+static leg_x kick(const leg_model *M, const leg_x *X, double Px, double Py, leg_tally *rec)
 {
     const leg_response R = foot_response_m(M, X->s1, X->c1, X->s2, X->c2);
     const leg_foot before = foot_of(M, X);
@@ -111,7 +111,7 @@ static leg_x kick(const leg_model *M, const leg_x *X, double Px, double Py, leg_
 }
 
 /* The sticking impulse -Lambda^-1 v_f: the foot at rest. */
-static leg_x stop_foot(const leg_model *M, const leg_x *X, leg_record *rec)
+static leg_x stop_foot(const leg_model *M, const leg_x *X, leg_tally *rec)
 {
     const leg_response R = foot_response_m(M, X->s1, X->c1, X->s2, X->c2);
     const leg_foot f = foot_of(M, X);
@@ -125,7 +125,7 @@ static leg_x stop_foot(const leg_model *M, const leg_x *X, leg_record *rec)
  * gets the one consistent mode (mode_at_rest). `mode` is the current one (a stick that stays keeps its
  * anchor), `exclude` a mode that a transition has just made inconsistent (or -1). Updates anchor[0]. */
 static int choose_mode(int mode, leg_x *X, double *anchor, const leg_model *M, const leg_drive *u, int exclude,
-                       int settled, leg_record *rec)
+                       int settled, leg_tally *rec)
 {
     const double t_hip = u->tau_hip, t_knee = u->tau_knee, F = u->load_x, mu = u->mu;
     leg_foot f = foot_of(M, X);
@@ -250,7 +250,7 @@ static int locate(int mode, const leg_model *M, const leg_drive *u, const double
 
 /* The reset map of event `kind` at X (just past it), then the mode choice; returns the new mode. */
 static int transition(int kind, int mode, leg_x *X, double *anchor, const leg_model *M, const leg_drive *u,
-                      int *settled, leg_record *rec)
+                      int *settled, leg_tally *rec)
 {
     if (kind == LEG_TOUCHDOWN) {
         const leg_foot f = foot_of(M, X);
@@ -267,7 +267,7 @@ static int transition(int kind, int mode, leg_x *X, double *anchor, const leg_mo
 
 /* Add a substep of length h in `mode` from X0 to X1 to the step's record. */
 static inline void book(int mode, const leg_model *M, double h, const leg_x *X0, const leg_x *X1,
-                        const leg_sums *sums, leg_record *rec)
+                        const leg_sums *sums, leg_tally *rec)
 {
     rec->impulse[0] += h * sums->lx;
     rec->impulse[1] += h * sums->ly;
@@ -300,7 +300,7 @@ typedef struct {
  * one negative is not taken but kept in g (crossed): the general loop of hybrid_control_step goes on from it
  * and locates the event. Called with `mode` a constant, so that the compiler specialises the RK4 stages. */
 LEG_INLINE void steady(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
-                          leg_record *rec)
+                          leg_tally *rec)
 {
     while (g->n_left > 0) {
         const double h = g->t_left / g->n_left;
@@ -348,13 +348,14 @@ LEG_INLINE void steady(int mode, const leg_model *M, const leg_drive *u, const d
 /* One hybrid control step of one robot, in place; returns the mode at its end.
  * q, qd: the world state; anchor: the stick contact point (anchor[1] the ground's height; anchor[0] is
  * rewritten: the contact point in stick, else the foot's x); s1 .. co2: the sines/cosines of q's link
- * angles; rec: overwritten with what the step did. */
+ * angles; rec: overwritten with what the step added up; log (NULL: none kept): each located transition's
+ * kind and time written as it comes (the entries after the last are left as they were). */
 static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *q, double *qd, int mode,
                                double *anchor, double dt, int substeps, double max_angle, double s1, double co1,
-                               double s2, double co2, leg_record *rec)
+                               double s2, double co2, leg_tally *rec, leg_log *log)
 {
     const leg_model model = model_of(P), *M = &model;
-    memset(rec, 0, offsetof(leg_record, event_kind)); /* the sums and counts; the log is written as events come */
+    memset(rec, 0, sizeof *rec);
     leg_progress g;
     g.X = x_from(q, qd, s1, co1, s2, co2);
     int settled = 0, events = 0;
@@ -422,9 +423,9 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
         book(mode, M, at.s, &g.X, &at.X, &at.sums, rec);
         g.t += at.s;
         g.t_left -= at.s;
-        if (events < LEG_LOG_SIZE) {
-            rec->event_time[events] = g.t;
-            rec->event_kind[events] = kind;
+        if (log != NULL && events < LEG_LOG_SIZE) {
+            log->time[events] = g.t;
+            log->kind[events] = kind;
         }
         events += 1;
         if (events >= LEG_MAX_EVENTS && !settled) {

@@ -745,11 +745,11 @@ static PyObject *py_hybrid_step(PyObject *self, PyObject *const *args, Py_ssize_
         const leg_drive u = {tau[2 * i], tau[2 * i + 1], load[i], mu[i]};
         leg_trig(qi, &s1, &co1, &s2, &co2);
         for (int j = 0; j < LEG_LOG_SIZE; j++) { /* the log after the last event: none */
-            rec[i].event_kind[j] = -1;
-            rec[i].event_time[j] = NAN;
+            rec[i].log.kind[j] = -1;
+            rec[i].log.time[j] = NAN;
         }
         mode[i] = hybrid_control_step(P + i * ps, &u, qi, qd + i * LEG_NQ, (int)mode[i], anchor + 2 * i, dt, substeps,
-                                      max_angle, s1, co1, s2, co2, rec + i);
+                                      max_angle, s1, co1, s2, co2, &rec[i].tally, &rec[i].log);
     }
     Py_END_ALLOW_THREADS
     DONE
@@ -771,6 +771,7 @@ typedef struct {
 
 #define F(type, member, code, count) {#member, offsetof(type, member), code, count}
 #define TASK(type, member, name, code, count) {name, offsetof(type, member), code, count}
+#define NAMED(type, member, name, code, count) {name, offsetof(type, member), code, count} /* a nested member */
 
 static const field PARAMS_FIELDS[] = {
     F(leg_params, m_b, "f8", 1), F(leg_params, m1, "f8", 1), F(leg_params, m2, "f8", 1), F(leg_params, I_b, "f8", 1),
@@ -778,11 +779,14 @@ static const field PARAMS_FIELDS[] = {
     F(leg_params, c1, "f8", 1),  F(leg_params, c2, "f8", 1), F(leg_params, g, "f8", 1),  {NULL, 0, NULL, 0}};
 
 static const field RECORD_FIELDS[] = {
-    F(leg_record, impulse, "f8", 2), F(leg_record, kick, "f8", 2), F(leg_record, stick_time, "f8", 1),
-    F(leg_record, slip_time, "f8", 1), F(leg_record, flight_time, "f8", 1), F(leg_record, slip_distance, "f8", 1),
-    F(leg_record, work, "f8", 1), F(leg_record, work_load, "f8", 1), F(leg_record, slip_dissipation, "f8", 1),
-    F(leg_record, impact_dissipation, "f8", 1), F(leg_record, events, "i4", 1), F(leg_record, painleve, "i4", 1),
-    F(leg_record, settles, "i4", 1), F(leg_record, event_kind, "i4", LEG_LOG_SIZE), F(leg_record, event_time, "f8", LEG_LOG_SIZE),
+    NAMED(leg_record, tally.impulse, "impulse", "f8", 2), NAMED(leg_record, tally.kick, "kick", "f8", 2),
+    NAMED(leg_record, tally.stick_time, "stick_time", "f8", 1), NAMED(leg_record, tally.slip_time, "slip_time", "f8", 1),
+    NAMED(leg_record, tally.flight_time, "flight_time", "f8", 1), NAMED(leg_record, tally.slip_distance, "slip_distance", "f8", 1),
+    NAMED(leg_record, tally.work, "work", "f8", 1), NAMED(leg_record, tally.work_load, "work_load", "f8", 1),
+    NAMED(leg_record, tally.slip_dissipation, "slip_dissipation", "f8", 1),
+    NAMED(leg_record, tally.impact_dissipation, "impact_dissipation", "f8", 1), NAMED(leg_record, tally.events, "events", "i4", 1),
+    NAMED(leg_record, tally.painleve, "painleve", "i4", 1), NAMED(leg_record, tally.settles, "settles", "i4", 1),
+    NAMED(leg_record, log.kind, "event_kind", "i4", LEG_LOG_SIZE), NAMED(leg_record, log.time, "event_time", "f8", LEG_LOG_SIZE),
     {NULL, 0, NULL, 0}};
 
 static const field STATE_FIELDS[] = {
@@ -836,11 +840,15 @@ static const field SETTINGS_HOP_FIELDS[] = {
 
 static const field OUT_FIELDS[] = {
     F(env_out, lam, "f8", 2), F(env_out, base_drift, "f8", 1), F(env_out, foot_error, "f8", 1), F(env_out, normal_force, "f8", 1),
-    F(env_out, impulse, "f8", 2), F(env_out, kick, "f8", 2), F(env_out, stick_time, "f8", 1), F(env_out, slip_time, "f8", 1),
-    F(env_out, flight_time, "f8", 1), F(env_out, slip_distance, "f8", 1), F(env_out, work, "f8", 1),
-    F(env_out, slip_dissipation, "f8", 1), F(env_out, impact_dissipation, "f8", 1), F(env_out, work_load, "f8", 1),
+    NAMED(env_out, tally.impulse, "impulse", "f8", 2), NAMED(env_out, tally.kick, "kick", "f8", 2),
+    NAMED(env_out, tally.stick_time, "stick_time", "f8", 1), NAMED(env_out, tally.slip_time, "slip_time", "f8", 1),
+    NAMED(env_out, tally.flight_time, "flight_time", "f8", 1), NAMED(env_out, tally.slip_distance, "slip_distance", "f8", 1),
+    NAMED(env_out, tally.work, "work", "f8", 1), NAMED(env_out, tally.work_load, "work_load", "f8", 1),
+    NAMED(env_out, tally.slip_dissipation, "slip_dissipation", "f8", 1),
+    NAMED(env_out, tally.impact_dissipation, "impact_dissipation", "f8", 1), NAMED(env_out, tally.events, "events", "i4", 1),
+    NAMED(env_out, tally.painleve, "painleve", "i4", 1), NAMED(env_out, tally.settles, "settles", "i4", 1),
     F(env_out, energy, "f8", 1), F(env_out, foot_height, "f8", 1), F(env_out, com, "f8", 2), F(env_out, com_velocity, "f8", 2),
-    F(env_out, terms, "f8", MAX_TERMS), F(env_out, events, "i4", 1), F(env_out, painleve, "i4", 1), F(env_out, settles, "i4", 1),
+    F(env_out, terms, "f8", MAX_TERMS),
     F(env_out, mode, "i4", 1), F(env_out, terminated, "?", 1), F(env_out, unilateral_violation, "?", 1),
     F(env_out, friction_violation, "?", 1), F(env_out, numerical_failure, "?", 1), {NULL, 0, NULL, 0}};
 static const field OUT_PUSH_FIELDS[] = {

@@ -94,7 +94,8 @@ typedef struct {
     double lam_x, lam_y;                /* ground force on the foot [N] */
 } leg_accel;
 
-/* What one hybrid control step did (leg_env.hybrid.HybridStep). */
+/* What one hybrid control step adds up (leg_env.hybrid.HybridStep's sums and counts); an environment's
+ * env_out holds one, which the step writes in place. */
 typedef struct {
     double impulse[2];          /* integral of the contact force over the continuous modes [N s] */
     double kick[2];             /* sum of impact (and tangential) impulses [N s] */
@@ -107,8 +108,18 @@ typedef struct {
     int32_t events;             /* located transitions */
     int32_t painleve;           /* uses of the Painleve rule */
     int32_t settles;            /* Zeno settles */
-    int32_t event_kind[LEG_LOG_SIZE]; /* leg_event of each located transition, -1 after the last */
-    double event_time[LEG_LOG_SIZE];  /* its time since the step's start [s], NaN after the last */
+} leg_tally;
+
+/* The located transitions of one hybrid control step, in order. */
+typedef struct {
+    int32_t kind[LEG_LOG_SIZE]; /* leg_event of each located transition, -1 after the last */
+    double time[LEG_LOG_SIZE];  /* its time since the step's start [s], NaN after the last */
+} leg_log;
+
+/* What one hybrid control step did (leg_env.hybrid.HybridStep). */
+typedef struct {
+    leg_tally tally;
+    leg_log log;
 } leg_record;
 
 #endif

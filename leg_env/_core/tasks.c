@@ -50,7 +50,7 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, double a0, double a1
     int lost;
     double flight_time = 0.0;
     if (unilateral_model) { /* the ground cannot pull: what is charged is time off it and sliding on it */
-        flight_time = o->flight_time;
+        flight_time = o->tally.flight_time;
         lost = c->terminate_on_contact_loss && (flight_time > 0.0 || lam_y < c->contact_loss_threshold);
     } else {
         lost = c->terminate_on_contact_loss && lam_y < c->contact_loss_threshold;
@@ -62,7 +62,7 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, double a0, double a1
                  + c->w_velocity * (s->qd[0] * s->qd[0] + s->qd[1] * s->qd[1] + s->qd[2] * s->qd[2]));
     if (unilateral_model) {
         terms[2] = -c->w_unilateral * flight_time / c->dt;
-        terms[3] = -c->w_friction * o->slip_distance / c->dt;
+        terms[3] = -c->w_friction * o->tally.slip_distance / c->dt;
         o->friction_violation = friction > 1e-9 * weight; /* a stick force outside the cone: only by the Painleve rule */
     } else {
         terms[2] = -c->w_unilateral * unilateral / weight;
@@ -100,7 +100,7 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, double a0, double a1
         obs[OBS_FOOT_VY] = (float)vfy;
         obs[OBS_CONTACT] = m == LEG_FLIGHT ? 0.0f : 1.0f;
         obs[OBS_SLIP] = m == LEG_SLIP_FORWARD ? 1.0f : (m == LEG_SLIP_BACKWARD ? -1.0f : 0.0f);
-        obs[OBS_IMPULSE_Y] = (float)(o->kick[1] / (weight * c->dt));
+        obs[OBS_IMPULSE_Y] = (float)(o->tally.kick[1] / (weight * c->dt));
         o->energy = energy_core(P, s1, co1, s2, co2, s->q[1] - s->anchor[1], s->qd[0], s->qd[1], s->qd[2], w1, w2);
         o->foot_height = fy;
     }
@@ -247,14 +247,14 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     const double e_v = 0.5 * m * vy_com * vy_com + m * g * (y_com - s->anchor[1]);
     const double e_star = m * g * (y_stand + t->command);
     const double dx = x_com - t->x_com0;
-    const double px = o->kick[0], py = o->kick[1];
+    const double px = o->tally.kick[0], py = o->tally.kick[1];
     const env_settings *c = b->settings;
     /* hops: a flight of at least min_flight; the ground time runs from the end of the last one */
     const int landed = s->mode != LEG_FLIGHT && t->flight_run > 0.0; /* a flight ended in this step */
-    const double flight_length = t->flight_run + o->flight_time; /* with this step's share */
+    const double flight_length = t->flight_run + o->tally.flight_time; /* with this step's share */
     const int hop_began = s->mode == LEG_FLIGHT && flight_length >= c->task.hop.min_flight
                           && (t->flight_run < c->task.hop.min_flight || t->flight_run == 0.0); /* this flight became a hop */
-    t->flight_run = s->mode == LEG_FLIGHT ? t->flight_run + o->flight_time : 0.0;
+    t->flight_run = s->mode == LEG_FLIGHT ? t->flight_run + o->tally.flight_time : 0.0;
     t->ground_time = t->flight_run >= c->task.hop.min_flight ? 0.0 : t->ground_time + c->dt;
     terms[0] = stance_terms[0]; /* alive: the balance task's health predicate */
     if (t->ground_time > c->task.hop.max_ground_time) /* and hopping */
@@ -274,7 +274,7 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     } else if (!c->task.hop.flight_height || s->mode == LEG_FLIGHT) { /* (the kernels are not evaluated when unpaid) */
         terms[1] = w_height * height_kernel(e_v - e_star, weight, height_scale, c->task.hop.height_scale_fine);
         if (c->task.hop.flight_height) /* in flight E_v is m g times the arc's apex height: paid for the step's flight */
-            terms[1] = terms[1] * (o->flight_time / c->dt);
+            terms[1] = terms[1] * (o->tally.flight_time / c->dt);
     }
     if (c->task.hop.pay_on_landing) { /* banked over the flight, paid when it lands (and not if the landing falls) */
         t->banked += terms[1];
@@ -301,7 +301,7 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     terms[2] = -b->settings->task.hop.w_drift * dx * dx;
     terms[3] = -b->settings->task.hop.w_tilt * s->q[2] * s->q[2];
     terms[4] = -b->settings->task.hop.w_impact * (px * px + py * py) / (m * m);
-    terms[5] = -b->settings->task.hop.w_slip * o->slip_distance / b->settings->dt;
+    terms[5] = -b->settings->task.hop.w_slip * o->tally.slip_distance / b->settings->dt;
     terms[6] = stance_terms[4]; /* ctrl */
     if (o->terminated) /* terminated: nothing but the penalties */
         terms[1] = 0.0;

@@ -266,11 +266,12 @@ def arithmetic_limit() -> dict:
 
 def work_per_step(steps: int = 200) -> dict:
     """What one control step computes under the random actions of the timed rows, pinned and unilateral
-    (``make_vec`` of ``VECTOR_SIZES[-1]`` robots, ``steps`` steps): the RK4 steps the step rule takes
-    (``leg_env.integrate``: at least 2, more when a link turns fast), the located events, and the share of
-    robots in flight. The physics of a step costs about its RK4 steps (4 dynamics evaluations each, the
-    same for every contact mode) plus a few per event: their ratio bounds the unilateral share of the
-    pinned rate at equal cost per RK4 step."""
+    (``make_vec`` of ``VECTOR_SIZES[-1]`` robots, ``steps`` steps): the RK4 steps the step rule asks for
+    (``leg_env.integrate``: at least 2, more when a link turns fast), the RK4 steps the compiled step integrated
+    (``out["rk4_steps"]``: the re-integrations that locate events included), the located events, and the share
+    of robots in flight. The physics of a step costs about its RK4 steps (4 dynamics evaluations each, the same
+    for every contact mode): their ratio bounds the unilateral share of the pinned rate at equal cost per RK4
+    step."""
     from leg_env.integrate import MAX_ANGLE, SUBSTEPS
 
     n = max(VECTOR_SIZES)
@@ -281,19 +282,21 @@ def work_per_step(steps: int = 200) -> dict:
         kernel = _KernelClock(envs.task)
         envs.task = kernel  # the task's compiled step, timed inside each envs.step
         actions = sampled_actions(envs.single_action_space, steps, n)
-        rk4, events, flight, total = [], [], [], []
+        rule, rk4, events, flight, total = [], [], [], [], []
         for a in actions:
-            qd = envs._state["qd"]
+            going = ~envs._ended  # the work counts leave out the rows that restart (they step from their new start)
+            qd = envs._state["qd"][going]
             va, vb, vc = qd[:, 2], qd[:, 3], qd[:, 4]
             w = np.max(np.abs(np.stack([va, vb, vc, va + vb, va + vb + vc])), axis=0)
-            rk4.append(np.maximum(SUBSTEPS, np.ceil(w * envs.config.dt / MAX_ANGLE)).mean())
+            rule.append(np.maximum(SUBSTEPS, np.ceil(w * envs.config.dt / MAX_ANGLE)).mean())
             flight.append((envs._state["mode"] == 3).mean())
             start = time.perf_counter()
             envs.step(a)
             total.append(time.perf_counter() - start)
-            events.append(envs._out["events"].mean())
+            events.append(envs._out["events"][going].mean())
+            rk4.append(envs._out["rk4_steps"][going].mean())
         envs.close()
-        out[name] = {"rk4": float(np.mean(rk4)), "events": float(np.mean(events)), "flight": float(np.mean(flight)),
+        out[name] = {"rule": float(np.mean(rule)), "rk4": float(np.mean(rk4)), "events": float(np.mean(events)), "flight": float(np.mean(flight)),
                      "step_us": 1e6 * statistics.median(total), "kernel_us": 1e6 * statistics.median(kernel.seconds)}
     return out
 
@@ -393,11 +396,14 @@ def env_table() -> dict:
     p, u = work["pinned"], work["unilateral"]
     lines += [
         "",
-        "Work per control step under the same random actions (the step rule's RK4 steps, located events, robots in flight):",
-        f"pinned {p['rk4']:.2f} RK4 steps; unilateral {u['rk4']:.2f} RK4 steps, {u['events']:.3f} events, {100 * u['flight']:.0f}% in flight. "
-        f"At equal cost per RK4 step the unilateral physics runs at most {p['rk4'] / u['rk4']:.0%} of the pinned rate before its events "
-        "(each event re-integrates its RK4 step a few times to locate it). An RK4 step costs more in flight than pinned: "
-        "a stance step's base comes from the contact projection (its RK4 sums are never formed), a flight's is integrated.",
+        "Work per control step under the same random actions (RK4 steps integrated, located events, robots in flight):",
+        f"pinned {p['rk4']:.2f} RK4 steps; unilateral {u['rk4']:.2f} RK4 steps ({u['rule']:.2f} by the step rule at the step's start, "
+        f"the rest the work of {u['events']:.3f} located events: {(u['rk4'] - u['rule']) / max(u['events'], 1e-12):.1f} RK4 steps "
+        "per event, its location included), "
+        f"{100 * u['flight']:.0f}% in flight. "
+        f"At equal cost per RK4 step the unilateral physics runs at most {p['rk4'] / u['rk4']:.0%} of the pinned rate. "
+        "An RK4 step costs more in flight than pinned: a stance step's base comes from the contact projection (its RK4 "
+        "sums are never formed), a flight's is integrated.",
         f"Median `envs.step` over those steps: pinned {p['step_us']:,.0f} us, of which the compiled step {p['kernel_us']:,.0f} us; "
         f"unilateral {u['step_us']:,.0f} us, of which {u['kernel_us']:,.0f} us. The compiled step takes {u['kernel_us'] / p['kernel_us']:.2f}x "
         f"as long unilateral as pinned, the rest of the step (actions, resets, info) {(u['step_us'] - u['kernel_us']) / (p['step_us'] - p['kernel_us']):.2f}x.",

@@ -48,7 +48,9 @@ quadrature of ``-lam_x x_f'``), the kinetic energy lost in impulses and the work
 ``F (x_b(end) - x_b(start))``, exact), so that
 ``E(end) - E(start) = work + work_load - slip_dissipation - impact_dissipation`` up to the RK4 error.
 The force enters every mode's dynamics and so every witness and mode choice; impulses are unaffected
-(a finite force does no impulsive work).
+(a finite force does no impulsive work). ``rk4_steps`` counts the step's work: the RK4 steps it integrated, the
+step rule's (``leg_env.integrate``) plus, for each located event, the substep that crossed it and the shorter
+re-integrations that located it.
 
 Every function here runs in the compiled core (``leg_env/_core``, C, built at install); this module
 broadcasts and validates the arrays around it.
@@ -119,6 +121,7 @@ class HybridStep(NamedTuple):
     settles: np.ndarray  # (...) int, Zeno settles
     event_time: np.ndarray  # (..., LOG_SIZE) time of each event since the step's start [s], NaN after the last
     event_kind: np.ndarray  # (..., LOG_SIZE) int, LIFTOFF / SLIP_ONSET / SLIDING_STOP / TOUCHDOWN, -1 after the last
+    rk4_steps: np.ndarray  # (...) int, RK4 steps integrated, the re-integrations that located the events included
 
 
 def _initial_modes(qf, qdf, tf, mu, p: LegParams) -> np.ndarray:
@@ -208,4 +211,5 @@ def hybrid_step(
         settles=r(record["settles"].astype(np.int64)),
         event_time=r(record["event_time"], (LOG_SIZE,)),
         event_kind=r(record["event_kind"].astype(np.int64), (LOG_SIZE,)),
+        rk4_steps=r(record["rk4_steps"].astype(np.int64)),
     )

@@ -515,3 +515,60 @@ def test_step_bookkeeping(name):
         assert abs(got - r.slip_distance) < SLIP_DISTANCE_TOL, f"{msg}\nslip_distance {got!r} vs {r.slip_distance!r}"
         err = np.abs(np.asarray(s.lam_mean) - r.lam_mean).max()
         assert err < LAM_MEAN_TOL * ref.p.weight, f"{msg}\nlam_mean {s.lam_mean} vs {r.lam_mean}"
+
+
+def _step_rule(qd, dt, substeps=2, max_angle=0.02):
+    """leg_env.integrate's step rule: at least ``substeps`` RK4 steps, and no link or joint turning by more than
+    ``max_angle`` per step at the rates of ``qd``."""
+    va, vb, vc = qd[2], qd[3], qd[4]
+    w = max(abs(va), abs(vb), abs(vc), abs(va + vb), abs(va + vb + vc))
+    return max(substeps, int(np.ceil(w * dt / max_angle)))
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_rk4_steps_count_the_integration_work(name):
+    """A step without events or impulses integrates exactly the step rule's RK4 steps; a step with events more:
+    per located event, the substep that crossed it and at least one re-integration that located it."""
+    ref, recs = reference_run(name)
+    res = implementation_steps(name)
+    with_events = 0
+    for i, (r, s) in enumerate(zip(recs, res)):
+        n_rule, steps, events = _step_rule(r.start.qd, DT), int(np.asarray(s.rk4_steps)), int(np.asarray(s.events))
+        if events == 0 and not np.any(np.asarray(s.impulse)):
+            assert steps == n_rule, (_inputs(name, i, r), steps, n_rule)
+        elif events > 0:
+            with_events += 1
+            assert steps >= n_rule + 2 * events, (_inputs(name, i, r), steps, n_rule, events)
+    assert with_events > 0 or name not in ("drop", "hop", "hop_slide", "slip")
+
+
+def test_env_out_counts_the_rk4_steps_of_both_contact_models():
+    """The batched env's ``out["rk4_steps"]``: the pinned step takes the step rule's count, the unilateral one that
+    many without events, and per located event at least two more (the substep that crossed it, its location)."""
+    import gymnasium as gym
+
+    import leg_env
+
+    rng = np.random.default_rng(0)
+    for contact in ("pinned", "unilateral"):
+        envs = gym.make_vec(leg_env.ENV_ID, num_envs=256, contact=contact)
+        envs.reset(seed=0)
+        extra = 0
+        for _ in range(30):
+            qd, restarting = envs.unwrapped._state["qd"].copy(), envs.unwrapped._ended.copy()
+            envs.step(rng.uniform(-1, 1, (256, 2)).astype(np.float32))
+            out = envs.unwrapped._out
+            rule = np.array([_step_rule(row, envs.unwrapped.config.dt) for row in qd])
+            stepped = ~out["numerical_failure"] & ~restarting  # an autoreset row steps from its new start
+            steps = out["rk4_steps"][stepped]
+            if contact == "pinned":
+                assert np.array_equal(steps, rule[stepped])
+            else:
+                plain = stepped & (out["events"] == 0) & ~np.any(out["kick"] != 0, axis=1)
+                assert np.array_equal(out["rk4_steps"][plain], rule[plain])
+                eventful = stepped & (out["events"] > 0)
+                assert np.all(out["rk4_steps"][eventful] >= rule[eventful] + 2 * out["events"][eventful])
+                extra += int((out["rk4_steps"][eventful] - rule[eventful]).sum())
+        if contact == "unilateral":
+            assert extra > 0
+        envs.close()

@@ -88,8 +88,8 @@ static void physics_range(const env_batch *b, Py_ssize_t lo, Py_ssize_t hi)
             o->lam[1] = o->tally.impulse[1] / dt;
         } else {
             u.mu = 0.0;
-            rk4_control_step(&r->p, &u, s->q, s->qd, s->anchor, dt, substeps, max_angle, 1, s->trig[0], s->trig[1],
-                             s->trig[2], s->trig[3], o->lam);
+            o->tally.rk4_steps = rk4_control_step(&r->p, &u, s->q, s->qd, s->anchor, dt, substeps, max_angle, 1, s->trig[0],
+                                                  s->trig[1], s->trig[2], s->trig[3], o->lam);
         }
         int finite = isfinite(o->lam[0]) && isfinite(o->lam[1]);
         for (int j = 0; j < LEG_NQ; j++)

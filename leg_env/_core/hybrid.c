@@ -181,6 +181,7 @@ typedef struct {
     leg_x X;
     leg_accel k;
     leg_sums sums;
+    int rk4_steps; /* substeps re-integrated to locate it */
 } leg_located;
 
 static inline double watched_min(int watch_a, int watch_b, double wa, double wb)
@@ -202,6 +203,7 @@ static int locate(int mode, const leg_model *M, const leg_drive *u, const double
     out->X = *X1;
     out->k = *k1;
     out->sums = *sums1;
+    out->rk4_steps = 0;
     int side = 0;
     double s_next = -1.0; /* a Newton proposal for the touchdown witness, whose derivative is the foot's y velocity */
     for (int it = 0; it < LEG_ROOT_ITERATIONS; it++) {
@@ -212,6 +214,7 @@ static int locate(int mode, const leg_model *M, const leg_drive *u, const double
             s = 0.5 * (a + b);
         leg_sums sums = {0.0, 0.0, 0.0};
         const leg_x Xs = rk4_substep(mode, M, u, anchor, X, k, s, &sums);
+        out->rk4_steps += 1;
         /* the touchdown witness needs no derivative, and the caller reads none: flight skips it */
         const leg_accel ks = mode == LEG_FLIGHT ? *k1 : derivative(mode, M, u, &Xs);
         witnesses(mode, M, u, &Xs, &ks, anchor, &wa, &wb);
@@ -306,6 +309,7 @@ LEG_INLINE void steady(int mode, const leg_model *M, const leg_drive *u, const d
         const double h = g->t_left / g->n_left;
         leg_sums sums = {0.0, 0.0, 0.0};
         const leg_x X1 = rk4_substep(mode, M, u, anchor, &g->X, &g->k, h, &sums);
+        rec->rk4_steps += 1;
         if (mode == LEG_FLIGHT) {
             /* the touchdown witness needs no derivative: X1's is taken only if another substep follows (the
              * step's last derivative is never read in flight) */
@@ -399,6 +403,7 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
             k1 = mode == LEG_FLIGHT ? derivative(mode, M, u, &X1) : g.k1;
         } else {
             X1 = rk4_substep(mode, M, u, anchor, &g.X, &g.k, h, &sums);
+            rec->rk4_steps += 1;
             k1 = derivative(mode, M, u, &X1);
         }
         double w1a, w1b;
@@ -421,6 +426,7 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
         leg_located at;
         const int kind = locate(mode, M, u, anchor, &g.X, &g.k, h, &X1, &k1, &sums, watch_a, watch_b, &at);
         book(mode, M, at.s, &g.X, &at.X, &at.sums, rec);
+        rec->rk4_steps += at.rk4_steps;
         g.t += at.s;
         g.t_left -= at.s;
         if (log != NULL && events < LEG_LOG_SIZE) {

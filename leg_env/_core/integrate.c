@@ -190,8 +190,9 @@ static inline void x_to(const leg_x *X, double *q, double *qd)
 }
 
 /* One control step of RK4 on one robot in place, with the foot pinned at `anchor` (stance) or free
- * (flight), given the sines/cosines of q's link angles; lam_mean gets the mean contact force. */
-static void rk4_control_step(const leg_params *P, const leg_drive *u, double *q, double *qd, const double *anchor,
+ * (flight), given the sines/cosines of q's link angles; lam_mean gets the mean contact force. Returns the RK4
+ * steps taken. */
+static int rk4_control_step(const leg_params *P, const leg_drive *u, double *q, double *qd, const double *anchor,
                              double dt, int substeps, double max_angle, int stance, double s1, double co1, double s2,
                              double co2, double *lam_mean)
 {
@@ -214,4 +215,5 @@ static void rk4_control_step(const leg_params *P, const leg_drive *u, double *q,
     x_to(&X, q, qd);
     lam_mean[0] = sums.lx / n;
     lam_mean[1] = sums.ly / n;
+    return n;
 }

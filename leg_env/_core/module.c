@@ -786,6 +786,7 @@ static const field RECORD_FIELDS[] = {
     NAMED(leg_record, tally.slip_dissipation, "slip_dissipation", "f8", 1),
     NAMED(leg_record, tally.impact_dissipation, "impact_dissipation", "f8", 1), NAMED(leg_record, tally.events, "events", "i4", 1),
     NAMED(leg_record, tally.painleve, "painleve", "i4", 1), NAMED(leg_record, tally.settles, "settles", "i4", 1),
+    NAMED(leg_record, tally.rk4_steps, "rk4_steps", "i4", 1),
     NAMED(leg_record, log.kind, "event_kind", "i4", LEG_LOG_SIZE), NAMED(leg_record, log.time, "event_time", "f8", LEG_LOG_SIZE),
     {NULL, 0, NULL, 0}};
 
@@ -847,6 +848,7 @@ static const field OUT_FIELDS[] = {
     NAMED(env_out, tally.slip_dissipation, "slip_dissipation", "f8", 1),
     NAMED(env_out, tally.impact_dissipation, "impact_dissipation", "f8", 1), NAMED(env_out, tally.events, "events", "i4", 1),
     NAMED(env_out, tally.painleve, "painleve", "i4", 1), NAMED(env_out, tally.settles, "settles", "i4", 1),
+    NAMED(env_out, tally.rk4_steps, "rk4_steps", "i4", 1),
     F(env_out, energy, "f8", 1), F(env_out, foot_height, "f8", 1), F(env_out, com, "f8", 2), F(env_out, com_velocity, "f8", 2),
     F(env_out, terms, "f8", MAX_TERMS),
     F(env_out, mode, "i4", 1), F(env_out, terminated, "?", 1), F(env_out, unilateral_violation, "?", 1),

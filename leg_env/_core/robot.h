@@ -108,6 +108,7 @@ typedef struct {
     int32_t events;             /* located transitions */
     int32_t painleve;           /* uses of the Painleve rule */
     int32_t settles;            /* Zeno settles */
+    int32_t rk4_steps;          /* RK4 steps integrated, the re-integrations that located the events included */
 } leg_tally;
 
 /* The located transitions of one hybrid control step, in order. */

@@ -772,6 +772,16 @@ typedef struct {
 #define F(type, member, code, count) {#member, offsetof(type, member), code, count}
 #define TASK(type, member, name, code, count) {name, offsetof(type, member), code, count}
 #define NAMED(type, member, name, code, count) {name, offsetof(type, member), code, count} /* a nested member */
+/* the fields of a leg_tally member `tally` of `type`, under their own names (leg_record and env_out hold one) */
+#define TALLY_FIELDS(type)                                                                                              \
+    NAMED(type, tally.impulse, "impulse", "f8", 2), NAMED(type, tally.kick, "kick", "f8", 2),                           \
+    NAMED(type, tally.stick_time, "stick_time", "f8", 1), NAMED(type, tally.slip_time, "slip_time", "f8", 1),           \
+    NAMED(type, tally.flight_time, "flight_time", "f8", 1), NAMED(type, tally.slip_distance, "slip_distance", "f8", 1), \
+    NAMED(type, tally.work, "work", "f8", 1), NAMED(type, tally.work_load, "work_load", "f8", 1),                       \
+    NAMED(type, tally.slip_dissipation, "slip_dissipation", "f8", 1),                                                 \
+    NAMED(type, tally.impact_dissipation, "impact_dissipation", "f8", 1), NAMED(type, tally.events, "events", "i4", 1), \
+    NAMED(type, tally.painleve, "painleve", "i4", 1), NAMED(type, tally.settles, "settles", "i4", 1),                   \
+    NAMED(type, tally.rk4_steps, "rk4_steps", "i4", 1)
 
 static const field PARAMS_FIELDS[] = {
     F(leg_params, m_b, "f8", 1), F(leg_params, m1, "f8", 1), F(leg_params, m2, "f8", 1), F(leg_params, I_b, "f8", 1),
@@ -779,14 +789,7 @@ static const field PARAMS_FIELDS[] = {
     F(leg_params, c1, "f8", 1),  F(leg_params, c2, "f8", 1), F(leg_params, g, "f8", 1),  {NULL, 0, NULL, 0}};
 
 static const field RECORD_FIELDS[] = {
-    NAMED(leg_record, tally.impulse, "impulse", "f8", 2), NAMED(leg_record, tally.kick, "kick", "f8", 2),
-    NAMED(leg_record, tally.stick_time, "stick_time", "f8", 1), NAMED(leg_record, tally.slip_time, "slip_time", "f8", 1),
-    NAMED(leg_record, tally.flight_time, "flight_time", "f8", 1), NAMED(leg_record, tally.slip_distance, "slip_distance", "f8", 1),
-    NAMED(leg_record, tally.work, "work", "f8", 1), NAMED(leg_record, tally.work_load, "work_load", "f8", 1),
-    NAMED(leg_record, tally.slip_dissipation, "slip_dissipation", "f8", 1),
-    NAMED(leg_record, tally.impact_dissipation, "impact_dissipation", "f8", 1), NAMED(leg_record, tally.events, "events", "i4", 1),
-    NAMED(leg_record, tally.painleve, "painleve", "i4", 1), NAMED(leg_record, tally.settles, "settles", "i4", 1),
-    NAMED(leg_record, tally.rk4_steps, "rk4_steps", "i4", 1),
+    TALLY_FIELDS(leg_record),
     NAMED(leg_record, log.kind, "event_kind", "i4", LEG_LOG_SIZE), NAMED(leg_record, log.time, "event_time", "f8", LEG_LOG_SIZE),
     {NULL, 0, NULL, 0}};
 
@@ -841,14 +844,7 @@ static const field SETTINGS_HOP_FIELDS[] = {
 
 static const field OUT_FIELDS[] = {
     F(env_out, lam, "f8", 2), F(env_out, base_drift, "f8", 1), F(env_out, foot_error, "f8", 1), F(env_out, normal_force, "f8", 1),
-    NAMED(env_out, tally.impulse, "impulse", "f8", 2), NAMED(env_out, tally.kick, "kick", "f8", 2),
-    NAMED(env_out, tally.stick_time, "stick_time", "f8", 1), NAMED(env_out, tally.slip_time, "slip_time", "f8", 1),
-    NAMED(env_out, tally.flight_time, "flight_time", "f8", 1), NAMED(env_out, tally.slip_distance, "slip_distance", "f8", 1),
-    NAMED(env_out, tally.work, "work", "f8", 1), NAMED(env_out, tally.work_load, "work_load", "f8", 1),
-    NAMED(env_out, tally.slip_dissipation, "slip_dissipation", "f8", 1),
-    NAMED(env_out, tally.impact_dissipation, "impact_dissipation", "f8", 1), NAMED(env_out, tally.events, "events", "i4", 1),
-    NAMED(env_out, tally.painleve, "painleve", "i4", 1), NAMED(env_out, tally.settles, "settles", "i4", 1),
-    NAMED(env_out, tally.rk4_steps, "rk4_steps", "i4", 1),
+    TALLY_FIELDS(env_out),
     F(env_out, energy, "f8", 1), F(env_out, foot_height, "f8", 1), F(env_out, com, "f8", 2), F(env_out, com_velocity, "f8", 2),
     F(env_out, terms, "f8", MAX_TERMS),
     F(env_out, mode, "i4", 1), F(env_out, terminated, "?", 1), F(env_out, unilateral_violation, "?", 1),

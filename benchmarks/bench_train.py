@@ -226,7 +226,8 @@ def main(argv: list[str] | None = None) -> None:
         f"Each row: the median of {args.repeats} runs (interleaved, each in a fresh process) of {args.rollouts} rollouts of PPO as `python -m train.ppo` builds it (after one untimed), without evaluations: "
         f"`ChunkedPPO` (`train.chunked_ppo`: SB3's PPO with each minibatch's gradient summed over chunks of {UPDATE_CHUNK:,} samples per torch thread, "
         "its tanh computed as 2 sigmoid(2x) - 1), the same with its update's hidden layers in bfloat16 (`--update-precision bfloat16`, "
-        "on a CPU with bfloat16 arithmetic), and SB3's `PPO` itself as the reference. "
+        "on a CPU with bfloat16 arithmetic), both over `train.normalize.BatchVecNormalize` as `train.ppo` wraps the env, "
+        "and SB3's `PPO` over SB3's `VecNormalize` as the reference. "
         "Shares of the wall-clock: the rollout (policy forward pass, env step, rollout buffer), of which the env step "
         "(the `leg_env.sb3` adapter), and the update (the gradient steps). The last column: the native batch alone "
         "under random actions, in the same run.",

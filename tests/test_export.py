@@ -15,6 +15,7 @@ from train.ppo import TrainArgs, train
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policies" / "ppo_stance"
+HOP = ROOT / "policies" / "ppo_hop_v3"
 NUM_OBS = 1000
 TOLERANCE = 1e-5
 # a tiny run that normalises observations (the shipped policy normalises returns only): both paths
@@ -68,6 +69,29 @@ def test_onnx_graph_equals_predict(which, normalised_run, tmp_path):
     model = onnx.load(path)
     props = {p.key: p.value for p in model.metadata_props}
     assert props["observation_normalization"] == ("VecNormalize" if which == "normalised" else "none")
+    assert props["env_id"] == "leg_env/PlanarLegStance-v0" and props["env_id"] in model.doc_string
+
+
+def test_the_graph_names_the_policys_own_task(tmp_path):
+    """A policy of another task: the graph takes that task's observations and its metadata names that task."""
+    import gymnasium as gym
+
+    policy = load_policy(HOP)
+    assert policy.env_id == "leg_env/PlanarLegHop-v3"
+    path = export_onnx(HOP, tmp_path / "hop.onnx")
+    model = onnx.load(path)
+    props = {p.key: p.value for p in model.metadata_props}
+    assert props["env_id"] == "leg_env/PlanarLegHop-v3" and "PlanarLegHop-v3" in model.doc_string and "Stance" not in model.doc_string
+    envs = gym.make_vec("leg_env/PlanarLegHop-v3", num_envs=64)
+    obs, _ = envs.reset(seed=0)
+    rng, rows = np.random.default_rng(0), [obs]
+    for _ in range(20):
+        obs, *_ = envs.step(rng.uniform(-1.0, 1.0, size=(64, 2)))
+        rows.append(obs)
+    obs = np.concatenate(rows).astype(np.float32)
+    assert obs.shape[1] == 22
+    expected, _ = policy.predict(obs, deterministic=True)
+    np.testing.assert_allclose(run_onnx(path, obs), expected, rtol=0.0, atol=TOLERANCE)
 
 
 def test_command_line_writes_the_graph(normalised_run, tmp_path, capsys):

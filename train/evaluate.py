@@ -81,11 +81,12 @@ class TrainedPolicy:
     ``predict`` has SB3's signature and takes raw env observations, one ``(12,)`` or a batch ``(N, 12)``.
     """
 
-    def __init__(self, model, vec_normalize=None, env_kwargs: dict | None = None, path: Path | None = None):
+    def __init__(self, model, vec_normalize=None, env_kwargs: dict | None = None, path: Path | None = None, env_id: str | None = None):
         self.model = model
         self.vec_normalize = vec_normalize
         self.env_kwargs = dict(env_kwargs or {})
         self.path = path
+        self.env_id = env_id  # the task it was trained on (its config.yaml's env_id), None if unknown
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         obs = np.asarray(observation, dtype=np.float32)
@@ -213,8 +214,7 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
             )
     if env_kwargs is None:
         env_kwargs = config.get("eval_env_kwargs", config.get("env_kwargs")) or {}
-    policy = TrainedPolicy(model, vec_normalize, env_kwargs, folder)
-    policy.env_id = config.get("env_id")
+    policy = TrainedPolicy(model, vec_normalize, env_kwargs, folder, env_id=config.get("env_id"))
     residual = config.get("residual")
     if residual:  # a residual on a model-based controller (train.residual): the policy is their sum
         from train.residual import ResidualPolicy

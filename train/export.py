@@ -7,7 +7,8 @@
 ``model.zip``, ``vecnormalize.pkl`` or ``config.yaml`` is an error naming that file). The graph
 computes what ``load_policy(folder).predict(obs, deterministic=True)`` computes:
 
-    input  "observation"  float32 (batch, 12)   raw observations of leg_env/PlanarLegStance-v0
+    input  "observation"  float32 (batch, n)    raw observations of the policy's task (n = 12 on the pinned
+                                                balance; the task is its run's ``config.yaml`` ``env_id``)
     1. if the run normalised observations (VecNormalize ``norm_obs``):
        clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs), in float64 as VecNormalize
        computes it, then float32 (the shipped policy normalises returns only: no such step)
@@ -15,6 +16,9 @@ computes what ``load_policy(folder).predict(obs, deterministic=True)`` computes:
        the mean of the Gaussian policy, i.e. the deterministic action
     3. clip to the action space, [-1, 1], as SB3's ``predict`` does
     output "action"       float32 (batch, 2)    [hip, knee] in [-1, 1], times ``torque_limit`` N m
+
+The model's doc string and its ``env_id`` metadata name the task (``leg_env.ENV_ID``, the pinned balance, for a
+bare ``model.zip`` without a ``config.yaml``, as ``train.evaluate`` assumes).
 
 The graph is written node by node from the network's weights (no tracing through torch's exporter):
 it needs only the ``onnx`` package, and reads like the policy. Supported: ``MlpPolicy`` (flat Box
@@ -53,6 +57,7 @@ def policy_to_onnx(policy: TrainedPolicy, source: str = ""):
     from stable_baselines3.common.torch_layers import FlattenExtractor
 
     sb3_policy = policy.model.policy
+    env_id = policy.env_id or ENV_ID
     obs_space, action_space = sb3_policy.observation_space, sb3_policy.action_space
     if not (isinstance(obs_space, spaces.Box) and len(obs_space.shape) == 1):
         raise ExportError(f"only flat Box observations can be exported, the model has {obs_space}")
@@ -123,13 +128,13 @@ def policy_to_onnx(policy: TrainedPolicy, source: str = ""):
         producer_name="leg-env train.export",
         producer_version=__version__,
         doc_string=(
-            f"Deterministic PPO policy for {ENV_ID}: raw float32 observations (batch, {n_obs}) -> actions (batch, {n_act}) "
+            f"Deterministic PPO policy for {env_id}: raw float32 observations (batch, {n_obs}) -> actions (batch, {n_act}) "
             f"clipped to [{action_space.low.min():g}, {action_space.high.max():g}]"
             + ("; observations normalised by the run's VecNormalize statistics" if normalised else "")
         ),
     )
     model.ir_version = IR_VERSION
-    props = {"env_id": ENV_ID, "source": source, "observation_normalization": "VecNormalize" if normalised else "none"}
+    props = {"env_id": env_id, "source": source, "observation_normalization": "VecNormalize" if normalised else "none"}
     for key, value in props.items():
         entry = model.metadata_props.add()
         entry.key, entry.value = key, value

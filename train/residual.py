@@ -55,7 +55,7 @@ class ResidualPolicy:
 
     def __init__(self, network, controller, scale: float):
         self.network, self.controller, self.scale = network, controller, float(scale)
-        self.env_kwargs, self.path, self.env_id = network.env_kwargs, network.path, getattr(network, "env_id", None)
+        self.env_kwargs, self.path, self.env_id = network.env_kwargs, network.path, network.env_id
 
     def reset(self) -> None:
         if hasattr(self.controller, "reset"):

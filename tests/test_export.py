@@ -3,12 +3,12 @@
 import shutil
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import onnx
 import onnxruntime
 import pytest
 
-from leg_env.envs.vector import PlanarLegStanceVectorEnv
 from train.evaluate import load_policy
 from train.export import ExportError, export_onnx, main
 from train.ppo import TrainArgs, train
@@ -29,10 +29,10 @@ def normalised_run(tmp_path_factory) -> Path:
     return train(args)
 
 
-def observations(n: int = NUM_OBS, seed: int = 0) -> np.ndarray:
-    """``n`` rows: 90% states the env reaches (resets, balancing, falls under random torques) and 10%
-    far outside them (a sensor glitch), which saturate the normalisation's clipping."""
-    envs = PlanarLegStanceVectorEnv(100)
+def observations(n: int = NUM_OBS, seed: int = 0, env_id: str = "leg_env/PlanarLegStance-v0") -> np.ndarray:
+    """``n`` rows of the task ``env_id``: 90% states the env reaches (resets, balancing, falls under random torques)
+    and 10% far outside them (a sensor glitch), which saturate the normalisation's clipping."""
+    envs = gym.make_vec(env_id, num_envs=100)
     obs, _ = envs.reset(seed=seed)
     rows, rng = [obs], np.random.default_rng(seed)
     while len(rows) * 100 < n:
@@ -74,22 +74,14 @@ def test_onnx_graph_equals_predict(which, normalised_run, tmp_path):
 
 def test_the_graph_names_the_policys_own_task(tmp_path):
     """A policy of another task: the graph takes that task's observations and its metadata names that task."""
-    import gymnasium as gym
-
     policy = load_policy(HOP)
     assert policy.env_id == "leg_env/PlanarLegHop-v3"
     path = export_onnx(HOP, tmp_path / "hop.onnx")
     model = onnx.load(path)
     props = {p.key: p.value for p in model.metadata_props}
     assert props["env_id"] == "leg_env/PlanarLegHop-v3" and "PlanarLegHop-v3" in model.doc_string and "Stance" not in model.doc_string
-    envs = gym.make_vec("leg_env/PlanarLegHop-v3", num_envs=64)
-    obs, _ = envs.reset(seed=0)
-    rng, rows = np.random.default_rng(0), [obs]
-    for _ in range(20):
-        obs, *_ = envs.step(rng.uniform(-1.0, 1.0, size=(64, 2)))
-        rows.append(obs)
-    obs = np.concatenate(rows).astype(np.float32)
-    assert obs.shape[1] == 22
+    obs = observations(env_id="leg_env/PlanarLegHop-v3")
+    assert obs.shape == (NUM_OBS, 22)
     expected, _ = policy.predict(obs, deterministic=True)
     np.testing.assert_allclose(run_onnx(path, obs), expected, rtol=0.0, atol=TOLERANCE)
 

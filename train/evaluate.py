@@ -78,7 +78,7 @@ class PolicyLoadError(ValueError):
 class TrainedPolicy:
     """A trained SB3 model with the observation normalisation it was trained with.
 
-    ``predict`` has SB3's signature and takes raw env observations, one ``(12,)`` or a batch ``(N, 12)``.
+    ``predict`` has SB3's signature and takes raw env observations of its task, one ``(n,)`` or a batch ``(N, n)``.
     """
 
     def __init__(self, model, vec_normalize=None, env_kwargs: dict | None = None, path: Path | None = None, env_id: str | None = None):

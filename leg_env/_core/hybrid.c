@@ -347,7 +347,9 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
                                double *anchor, double dt, int substeps, double max_angle, double s1, double co1,
                                double s2, double co2, leg_tally *rec, leg_log *log)
 {
-    const leg_model model = model_of(P), *M = &model;
+    leg_model model;
+    model_init(&model, P);
+    const leg_model *M = &model;
     memset(rec, 0, sizeof *rec);
     leg_progress g;
     g.X = x_from(q, qd, s1, co1, s2, co2);

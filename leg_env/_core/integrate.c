@@ -198,7 +198,8 @@ static int rk4_control_step(const leg_params *P, const leg_drive *u, double *q, 
 {
     const int n = substeps_for_rates(qd[2], qd[3], qd[4], dt, substeps, max_angle);
     const double h = dt / n;
-    const leg_model M = model_of(P);
+    leg_model M;
+    model_init(&M, P);
     leg_x X = x_from(q, qd, s1, co1, s2, co2);
     leg_sums sums = {0.0, 0.0, 0.0};
     if (stance) { /* the mode a constant in each loop: its stages compile to that mode's dynamics alone */

@@ -177,20 +177,27 @@ static inline leg_accel flight_core(const leg_params *P, double s1, double co1, 
     return flight_m(&M, s1, co1, s2, co2, w1, w2, tau_hip, tau_knee, F);
 }
 
-/* Mechanical energy T + V [J] from the link trigonometry, base height and velocity and rates (Koenig:
- * T = m |v_com|^2 / 2 + I_b th_b'^2 / 2 + theta'^T K theta' / 2, V = m g y_com). */
+/* Mechanical energy T + V [J] from the link trigonometry, base height, the whole-body COM's velocity
+ * (vcx, vcy) and the rates (Koenig: T = m |v_com|^2 / 2 + I_b th_b'^2 / 2 + theta'^T K theta' / 2,
+ * V = m g y_com), with the flight inertia f of the robot's parameters. */
+static inline double energy_flight(const leg_flight_inertia *f, double I_b, double g, double s1, double co1, double s2,
+                                   double co2, double y_b, double vcx, double vcy, double w_b, double w1, double w2)
+{
+    const double m = f->m, a = f->a, b = f->b;
+    const double K12 = f->kf * (co1 * co2 + s1 * s2);
+    const double T = 0.5 * (m * (vcx * vcx + vcy * vcy) + I_b * w_b * w_b + f->K11 * w1 * w1 + 2.0 * K12 * w1 * w2
+                            + f->K22 * w2 * w2);
+    return T + g * (m * y_b + a * s1 + b * s2);
+}
+
+/* energy_flight from the parameters and the base velocity (vx, vy) and rates. */
 static inline double energy_core(const leg_params *P, double s1, double co1, double s2, double co2, double y_b,
                                  double vx, double vy, double w_b, double w1, double w2)
 {
-    const double I_b = P->I_b, g = P->g;
     const leg_flight_inertia f = flight_inertia(P);
-    const double m = f.m, a = f.a, b = f.b;
-    const double K12 = f.kf * (co1 * co2 + s1 * s2);
-    const double vcx = vx - (a * s1 * w1 + b * s2 * w2) / m;
-    const double vcy = vy + (a * co1 * w1 + b * co2 * w2) / m;
-    const double T = 0.5 * (m * (vcx * vcx + vcy * vcy) + I_b * w_b * w_b + f.K11 * w1 * w1 + 2.0 * K12 * w1 * w2
-                            + f.K22 * w2 * w2);
-    return T + g * (m * y_b + a * s1 + b * s2);
+    const double vcx = vx - (f.a * s1 * w1 + f.b * s2 * w2) / f.m;
+    const double vcy = vy + (f.a * co1 * w1 + f.b * co2 * w2) / f.m;
+    return energy_flight(&f, P->I_b, P->g, s1, co1, s2, co2, y_b, vcx, vcy, w_b, w1, w2);
 }
 
 /* M(q) (section 2), written into M (5x5, row-major). */

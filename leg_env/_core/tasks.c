@@ -20,8 +20,10 @@ static inline double weight_of(const leg_params *P)
 
 /* The balance task's reward terms (alive, drift, unilateral, friction, ctrl), flags, extras and
  * observation of robot i at its (finite) state and force. The one place where its predicates (health,
- * feasibility) are written; the other tasks call it and add their own terms. */
-static void stance_assess(const env_batch *b, Py_ssize_t i, double a0, double a1, double *terms)
+ * feasibility) are written; the other tasks call it and add their own terms. shared: the flight inertia
+ * of the robot every row shares (task_assess), or NULL to work out robot i's. */
+static void stance_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *shared, double a0, double a1,
+                          double *terms)
 {
     const env_robot *r = robot_row(b, i);
     const env_settings *c = b->settings;
@@ -101,7 +103,11 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, double a0, double a1
         obs[OBS_CONTACT] = m == LEG_FLIGHT ? 0.0f : 1.0f;
         obs[OBS_SLIP] = m == LEG_SLIP_FORWARD ? 1.0f : (m == LEG_SLIP_BACKWARD ? -1.0f : 0.0f);
         obs[OBS_IMPULSE_Y] = (float)(o->tally.kick[1] / (weight * c->dt));
-        o->energy = energy_core(P, s1, co1, s2, co2, s->q[1] - s->anchor[1], s->qd[0], s->qd[1], s->qd[2], w1, w2);
+        leg_flight_inertia own;
+        if (shared == NULL)
+            own = flight_inertia(P);
+        o->energy = energy_flight(shared ? shared : &own, P->I_b, P->g, s1, co1, s2, co2, s->q[1] - s->anchor[1],
+                                  o->com_velocity[0], o->com_velocity[1], s->qd[2], w1, w2);
         o->foot_height = fy;
     }
 }
@@ -130,7 +136,7 @@ static void fail_row(const env_batch *b, Py_ssize_t i, double *terms, int n_term
  * failure). A numerical failure of the physics pays nothing and ends the episode; so does an
  * observation that does not fit float32: the step is undone and the observation left at the last good
  * one. Returns whether the robot was evaluated (no numerical failure). */
-static int evaluate(const env_batch *b, Py_ssize_t i, double *terms, int n_terms)
+static int evaluate(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *shared, double *terms, int n_terms)
 {
     env_out *o = out_row(b, i);
     if (o->numerical_failure) {
@@ -143,7 +149,7 @@ static int evaluate(const env_batch *b, Py_ssize_t i, double *terms, int n_terms
     for (Py_ssize_t j = 0; j < b->obs_cols; j++)
         kept[j] = obs[j];
     const double a0 = leg_fmin(1.0, leg_fmax(-1.0, s->action[0])), a1 = leg_fmin(1.0, leg_fmax(-1.0, s->action[1]));
-    stance_assess(b, i, a0, a1, terms);
+    stance_assess(b, i, shared, a0, a1, terms);
     uint32_t non_finite = 0; /* an all-ones exponent: inf or NaN (a test of the bits, with no chain of additions) */
     for (Py_ssize_t j = 0; j < b->obs_cols; j++) {
         uint32_t bits;
@@ -177,13 +183,13 @@ static inline double push_load_at(const push_state *t, int32_t n, int32_t push_s
     return 0.0;
 }
 
-static void push_assess(const env_batch *b, Py_ssize_t i)
+static void push_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *shared)
 {
     env_state *s = state_row(b, i);
     env_out *o = out_row(b, i);
     push_state *t = &s->task.push;
     const double force = s->load;
-    if (evaluate(b, i, o->terms, PUSH_TERMS)) {
+    if (evaluate(b, i, shared, o->terms, PUSH_TERMS)) {
         const double dx = o->com[0] - t->x_com0;
         o->terms[PUSH_TERMS - 1] = -b->settings->task.push.w_com * dx * dx;
         if (b->settings->task.push.observe_com) /* the last column (the width is checked against the settings) */
@@ -200,7 +206,7 @@ static void push_start(const env_batch *b, Py_ssize_t i)
     env_state *s = state_row(b, i);
     env_out *o = out_row(b, i);
     push_state *t = &s->task.push;
-    stance_assess(b, i, 0.0, 0.0, o->terms);
+    stance_assess(b, i, NULL, 0.0, 0.0, o->terms);
     for (int j = 0; j < PUSH_TERMS; j++)
         o->terms[j] = 0.0;
     o->task.push.push_force = 0.0;
@@ -226,7 +232,7 @@ static double height_kernel(double de, double weight, double scale, double fine)
     return exp(-err * err);
 }
 
-static void hop_assess(const env_batch *b, Py_ssize_t i)
+static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *shared)
 {
     const env_robot *r = robot_row(b, i);
     const leg_params *P = &r->p;
@@ -238,7 +244,7 @@ static void hop_assess(const env_batch *b, Py_ssize_t i)
     const double m = P->m_b + P->m1 + P->m2, g = P->g, weight = weight_of(P);
     const double y_stand = r->com_nom[1]; /* the standing COM height above the foot */
     const double w_height = b->settings->task.hop.w_height, height_scale = b->settings->task.hop.height_scale;
-    if (!evaluate(b, i, stance_terms, STANCE_TERMS)) {
+    if (!evaluate(b, i, shared, stance_terms, STANCE_TERMS)) {
         for (int j = 0; j < HOP_TERMS; j++)
             terms[j] = 0.0;
         return;
@@ -312,7 +318,7 @@ static void hop_start(const env_batch *b, Py_ssize_t i)
     env_state *s = state_row(b, i);
     env_out *o = out_row(b, i);
     double stance_terms[STANCE_TERMS];
-    stance_assess(b, i, 0.0, 0.0, stance_terms);
+    stance_assess(b, i, NULL, 0.0, 0.0, stance_terms);
     for (int j = 0; j < HOP_TERMS; j++)
         o->terms[j] = 0.0;
     b->obs[i * b->obs_cols + OBS_COMMAND] = (float)s->task.hop.command;
@@ -347,16 +353,23 @@ static Py_ssize_t task_obs_dim(int task, const env_settings *c)
     return task == TASK_PUSH && c->task.push.observe_com ? dim + 1 : dim;
 }
 
-/* The task after a control step of robots lo .. hi - 1. */
+/* The task after a control step of robots lo .. hi - 1. When every row shares one robot, its flight inertia
+ * (which the energy of the unilateral ground needs) is worked out once, not per row. */
 static void task_assess(int task, const env_batch *b, Py_ssize_t lo, Py_ssize_t hi)
 {
+    leg_flight_inertia one;
+    const leg_flight_inertia *shared = NULL;
+    if (b->robot_rows == 1 && b->settings->unilateral) {
+        one = flight_inertia(&b->robots[0].p);
+        shared = &one;
+    }
     for (Py_ssize_t i = lo; i < hi; i++) {
         if (task == TASK_PUSH)
-            push_assess(b, i);
+            push_assess(b, i, shared);
         else if (task == TASK_HOP)
-            hop_assess(b, i);
+            hop_assess(b, i, shared);
         else
-            evaluate(b, i, out_row(b, i)->terms, STANCE_TERMS);
+            evaluate(b, i, shared, out_row(b, i)->terms, STANCE_TERMS);
     }
 }
 
@@ -370,7 +383,7 @@ static void task_start(int task, const env_batch *b)
             hop_start(b, i);
         } else {
             double *terms = out_row(b, i)->terms;
-            stance_assess(b, i, 0.0, 0.0, terms);
+            stance_assess(b, i, NULL, 0.0, 0.0, terms);
             for (int k = 0; k < STANCE_TERMS; k++)
                 terms[k] = 0.0;
         }

@@ -301,6 +301,33 @@ def work_per_step(steps: int = 200) -> dict:
     return out
 
 
+def balancing_work(steps: int = 200) -> dict:
+    """RK4 steps and located events per control step of the balancing rows (the stance LQR plus noise, as
+    ``vector_env_runner(balance=True)`` drives them) on the unilateral stance and on every task, ``make_vec`` of
+    ``VECTOR_SIZES[-1]`` robots, ``steps`` steps. A task whose episodes knock the robot off balance (a push) asks
+    for more RK4 steps than the stance: their ratio bounds the task's share of the stance's rate at equal cost
+    per RK4 step."""
+    from policies.lqr import LQRController
+
+    n = max(VECTOR_SIZES)
+    out = {}
+    for name, env_id, kwargs in (("unilateral", LEG, UNILATERAL), *((i, i, {}) for i in TASK_IDS)):
+        envs = gym.make_vec(env_id, num_envs=n, **kwargs)
+        lqr = LQRController(envs.params, envs.config)
+        noise = np.random.default_rng(SEED).uniform(-BALANCE_NOISE, BALANCE_NOISE, size=(steps, n, 2))
+        width = 12 if envs.single_observation_space.shape[0] == 12 else 18
+        obs = envs.reset(seed=SEED)[0]
+        rk4, events = [], []
+        for k in range(steps):
+            going = ~envs._ended  # the rows that restart step from their new start: left out, as in work_per_step
+            obs = envs.step((lqr.predict(obs[:, :width])[0] + noise[k]).astype(np.float32))[0]
+            rk4.append(envs._out["rk4_steps"][going].mean())
+            events.append(envs._out["events"][going].mean())
+        envs.close()
+        out[name] = {"rk4": float(np.mean(rk4)), "events": float(np.mean(events))}
+    return out
+
+
 class _KernelClock:
     """A task whose ``step`` (the one compiled call of a batched env step) is timed; everything else is the task's."""
 
@@ -407,6 +434,19 @@ def env_table() -> dict:
         f"Median `envs.step` over those steps: pinned {p['step_us']:,.0f} us, of which the compiled step {p['kernel_us']:,.0f} us; "
         f"unilateral {u['step_us']:,.0f} us, of which {u['kernel_us']:,.0f} us. The compiled step takes {u['kernel_us'] / p['kernel_us']:.2f}x "
         f"as long unilateral as pinned, the rest of the step (actions, resets, info) {(u['step_us'] - u['kernel_us']) / (p['step_us'] - p['kernel_us']):.2f}x.",
+    ]
+    balancing = balancing_work()
+    stance = balancing["unilateral"]
+    lines += [
+        "",
+        f"Work per control step while balancing (RK4 steps integrated, located events): unilateral stance {stance['rk4']:.2f} "
+        f"RK4 steps, {stance['events']:.4f} events; "
+        + "; ".join(
+            f"{env_id} {w['rk4']:.2f}, {w['events']:.4f} events (at equal cost per RK4 step at most {stance['rk4'] / w['rk4']:.0%} of the stance's rate)"
+            for env_id, w in balancing.items()
+            if env_id != "unilateral"
+        )
+        + ". A push knocks a balancing robot into slip and flight: located events and faster links ask for more RK4 steps.",
     ]
     print("\n" + "\n".join(lines))
     rate["lines"] = lines

@@ -62,7 +62,7 @@ UNILATERAL = (
 
 _MODE_NAMES = np.array(MODE_NAMES)
 _MODE_CODES = _MODE_NAMES.view(np.uint32).reshape(len(MODE_NAMES), -1)
-"""Each mode name's UCS-4 code points: a row taken per robot is its name (twice as fast as taking the strings)."""
+"""Each mode name's UCS-4 code points: the compiled pass writes a robot's row of them as its ``contact_mode``."""
 
 
 class InfoBuilder:
@@ -92,19 +92,17 @@ class InfoBuilder:
     def columns(self, out: np.ndarray, state: np.ndarray, rewards: bool = False) -> dict:
         """Every key as one fresh array over the rows of ``out`` and ``state``; with ``rewards`` the reward terms.
 
-        One compiled pass (``kernels.info_columns``) fills a block per type (doubles, int64 counts and modes,
-        bools, ``(N, 2)`` vectors); each key's array is its row of a block (fresh, and no two share memory)."""
+        One compiled pass (``kernels.info_columns``) fills a block per type (doubles, int64 counts, bools, ``(N, 2)``
+        vectors, the contact modes' names); each key's array is its row of a block (fresh, and no two share memory)."""
         spec, layout_ = self._column_spec(out.dtype, state.dtype, rewards)
         n = out.shape[0]
-        (d, i, b, v), keys = layout_
+        (d, i, b, v, m), keys = layout_
         doubles, ints = np.empty((d, n)), np.empty((i, n), dtype=np.int64)
         flags, vectors = np.empty((b, n), dtype=np.bool_), np.empty((v, n, 2))
-        kernels.info_columns(spec, out, state, doubles, ints, flags, vectors)
-        blocks = {"d": doubles, "i": ints, "m": ints, "?": flags, "v": vectors}
-        cols = {key: blocks[kind][row] for key, kind, row in keys}
-        if self.unilateral:
-            cols["contact_mode"] = np.take(_MODE_CODES, cols["contact_mode"], axis=0).view(_MODE_NAMES.dtype).reshape(n)
-        return cols
+        names = np.empty((m, n), dtype=_MODE_NAMES.dtype)
+        kernels.info_columns(spec, out, state, doubles, ints, flags, vectors, names.view(np.uint32), _MODE_CODES)
+        blocks = {"d": doubles, "i": ints, "m": names, "?": flags, "v": vectors}
+        return {key: blocks[kind][row] for key, kind, row in keys}
 
     def _column_spec(self, out_dtype: np.dtype, state_dtype: np.dtype, rewards: bool):
         """``info_columns``' spec and the blocks' sizes and keys, for arrays of these dtypes (made once)."""
@@ -120,13 +118,12 @@ class InfoBuilder:
         if rewards:
             terms = out_dtype.fields["terms"][1]
             entries += [(key, 0, terms + 8 * k, "d") for k, key in enumerate(self.reward_keys)]
-        counts, spec, keys = {"d": 0, "i": 0, "?": 0, "v": 0}, [], []
+        counts, spec, keys = {"d": 0, "i": 0, "?": 0, "v": 0, "m": 0}, [], []
         for key, source, offset, kind in entries:
-            block = "i" if kind == "m" else kind
-            spec.append((source, offset, kind, counts[block]))
-            keys.append((key, kind, counts[block]))
-            counts[block] += 1
-        cache[rewards] = (tuple(spec), ((counts["d"], counts["i"], counts["?"], counts["v"]), keys))
+            spec.append((source, offset, kind, counts[kind]))
+            keys.append((key, kind, counts[kind]))
+            counts[kind] += 1
+        cache[rewards] = (tuple(spec), ((counts["d"], counts["i"], counts["?"], counts["v"], counts["m"]), keys))
         return cache[rewards]
 
 

@@ -395,3 +395,39 @@ def test_np_random_seed_and_reset_mask_errors_follow_sync_vector_env():
             envs.reset(options={"reset_mask": np.ones(n, dtype=np.int64)})
         with pytest.raises(AssertionError if lenient else ValueError):
             envs.reset(options={"reset_mask": np.ones(n + 1, dtype=np.bool_)})
+
+
+def test_info_names_each_contact_mode_and_refuses_a_corrupt_one_without_writing_it():
+    """The compiled info pass writes each robot's mode as its name; a mode outside 0..3 in ``out`` (a corrupted
+    array) is a ValueError, and bad name buffers are refused by name, never a crash."""
+    from leg_env._core import kernels
+    from leg_env.contact import MODE_NAMES
+    from leg_env.info import _MODE_CODES
+
+    envs = gym.make_vec("leg_env/PlanarLegBalance-v0", num_envs=4)
+    envs.reset(seed=0)
+    envs.step(np.zeros((4, 2), dtype=np.float32))
+    out, state = envs._out.copy(), envs._state.copy()
+    out["mode"] = [0, 1, 2, 3]
+    columns = envs._info_builder.columns(out, state)
+    assert columns["contact_mode"].tolist() == [MODE_NAMES[m] for m in range(4)]
+    out["mode"][2] = 4
+    with pytest.raises(ValueError, match="contact mode"):
+        envs._info_builder.columns(out, state)
+    out["mode"][2] = -1
+    with pytest.raises(ValueError, match="contact mode"):
+        envs._info_builder.columns(out, state)
+    out["mode"][2] = 2
+    spec, ((d, i, b, v, m), _) = envs._info_builder._column_spec(out.dtype, state.dtype, False)
+    blocks = [np.empty((d, 4)), np.empty((i, 4), dtype=np.int64), np.empty((b, 4), dtype=np.bool_), np.empty((v, 4, 2))]
+    names = np.empty((m, 4), dtype=np.array(MODE_NAMES).dtype)
+    for bad_names, bad_codes, word in (
+        (names.view(np.uint32), _MODE_CODES[:3], "codes"),
+        (names.view(np.uint32), _MODE_CODES.astype(np.int64), "codes"),
+        (names.view(np.uint32)[:, :-1], _MODE_CODES, "names"),
+        (np.zeros((m, 4, 6), dtype=np.uint32)[:, :, ::2], _MODE_CODES, "names"),
+        (names, _MODE_CODES, "names"),
+    ):
+        with pytest.raises(ValueError, match=word):
+            kernels.info_columns(spec, out, state, *blocks, bad_names, bad_codes)
+    envs.close()

@@ -51,11 +51,11 @@ static void release_all(held *h)
     h->n = 0;
 }
 
-enum kind { F64, I64, F32, BOOL, RECORD };
+enum kind { F64, I64, F32, BOOL, U32, RECORD };
 
-static const char *const KIND_NAME[] = {"float64", "int64", "float32", "bool", "leg_record"};
-static const char KIND_CODE[] = {'d', 'q', 'f', '?', 0};
-static const Py_ssize_t KIND_SIZE[] = {8, 8, 4, 1, (Py_ssize_t)sizeof(leg_record)};
+static const char *const KIND_NAME[] = {"float64", "int64", "float32", "bool", "uint32", "leg_record"};
+static const char KIND_CODE[] = {'d', 'q', 'f', '?', 'I', 0};
+static const Py_ssize_t KIND_SIZE[] = {8, 8, 4, 1, 4, (Py_ssize_t)sizeof(leg_record)};
 
 static int format_is(const Py_buffer *v, char code)
 {
@@ -952,7 +952,8 @@ static PyMethodDef methods[] = {
     FAST("perturbed_starts", py_perturbed_starts, "perturbed_starts(noise, scale, q_nom, p, q, qd, anchor)."),
     FAST("robot_params", py_robot_params, "robot_params(u, spec, base, limits, row) -> accepted."),
     FAST("info_columns", py_info_columns,
-         "info_columns(spec, out, state, doubles, ints, flags, vectors): every row's info keys, a block row per key."),
+         "info_columns(spec, out, state, doubles, ints, flags, vectors, names, codes): every row's info keys, a block row per "
+         "key."),
     FAST("draw_uniform", py_draw_uniform, "draw_uniform(generators, rows, out): uniforms from each row's generator."),
     FAST("draw_robots", py_draw_robots, "draw_robots(generators, rows, spec, base, limits, max_draws, robots, rejected)."),
     {"layouts", (PyCFunction)py_layouts, METH_NOARGS, "layouts(): {struct: (itemsize, [(field, offset, size)])}."},

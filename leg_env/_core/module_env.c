@@ -674,19 +674,21 @@ fail:
     return NULL;
 }
 
-/* info_columns(spec, out, state, doubles, ints, flags, vectors): every row's info keys in one pass, each key's
- * values into a row of a fresh block: spec is a tuple of (source, offset, kind, row): source 0 out, 1 state;
- * kind 'd' a double into doubles[row], 'i' an int32 (or 'm', the contact mode) into ints[row] (int64), '?' a
- * byte into flags[row] (bool), 'v' two doubles into vectors[row] (an (N, 2) block). leg_env.info makes the
- * blocks and the keys' views of them. */
+/* info_columns(spec, out, state, doubles, ints, flags, vectors, names, codes): every row's info keys in one
+ * pass, each key's values into a row of a fresh block: spec is a tuple of (source, offset, kind, row): source
+ * 0 out, 1 state; kind 'd' a double into doubles[row], 'i' an int32 into ints[row] (int64), '?' a byte into
+ * flags[row] (bool), 'v' two doubles into vectors[row] (an (N, 2) block), 'm' the contact mode (an int32 in
+ * 0 .. 3) as its name into names[row]: the mode's row of codes, the (4, W) UCS-4 code points of the names
+ * (names is the uint32 view of an (R, N) array of W-character strings). leg_env.info makes the blocks and
+ * the keys' views of them. */
 #define INFO_BLOCK_ROWS 128 /* rows of out and state read per block: 128 x 680 bytes stay in L1/L2 */
 
 static PyObject *py_info_columns(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     held h;
     h.n = 0;
-    Py_ssize_t n = 0, n_state = 0, r_d = 0, r_i = 0, r_b = 0, r_v = 0;
-    if (!n_args(nargs, 7, "info_columns"))
+    Py_ssize_t n = 0, n_state = 0, r_d = 0, r_i = 0, r_b = 0, r_v = 0, r_m = 0, n_codes = 0;
+    if (!n_args(nargs, 9, "info_columns"))
         return NULL;
     if (!PyTuple_Check(args[0])) {
         PyErr_SetString(PyExc_TypeError, "info_columns: spec must be a tuple");
@@ -698,7 +700,12 @@ static PyObject *py_info_columns(PyObject *self, PyObject *const *args, Py_ssize
     int64_t *ints = doubles ? (int64_t *)buffer_of(args[4], "ints", I64, -(n > 0 ? n : 1), 1, &h, &r_i) : NULL;
     unsigned char *flags = ints ? (unsigned char *)matrix_of(args[5], "flags", BOOL, 1, &h, &r_b, &n_state) : NULL;
     double *vectors = flags ? (double *)buffer_of(args[6], "vectors", F64, -(2 * (n > 0 ? n : 1)), 1, &h, &r_v) : NULL;
-    if (vectors == NULL)
+    const uint32_t *codes = vectors ? (const uint32_t *)buffer_of(args[8], "codes", U32, -LEG_N_MODES, 0, &h, &n_codes) : NULL;
+    const Py_ssize_t width = n_codes; /* characters of a mode's name */
+    uint32_t *names = codes && width > 0 ? (uint32_t *)buffer_of(args[7], "names", U32, -(width * (n > 0 ? n : 1)), 1, &h, &r_m) : NULL;
+    if (codes != NULL && width == 0)
+        PyErr_SetString(PyExc_ValueError, "info_columns: codes must have shape (4, W) with W > 0");
+    if (names == NULL)
         goto fail;
     Py_ssize_t n_rows_state = 0;
     rows_of(args[2], "state", sizeof(env_state), 0, &h, &n_rows_state);
@@ -727,9 +734,9 @@ static PyObject *py_info_columns(PyObject *self, PyObject *const *args, Py_ssize
             goto fail;
         }
         const size_t size = source == 0 ? sizeof(env_out) : sizeof(env_state);
-        const size_t width = kind[0] == 'd' ? 8 : (kind[0] == 'v' ? 16 : (kind[0] == '?' ? 1 : 4));
-        const Py_ssize_t rows = kind[0] == 'd' ? r_d : (kind[0] == 'v' ? r_v : (kind[0] == '?' ? r_b : r_i));
-        if ((source != 0 && source != 1) || offset < 0 || (size_t)offset + width > size || row < 0 || row >= rows
+        const size_t bytes = kind[0] == 'd' ? 8 : (kind[0] == 'v' ? 16 : (kind[0] == '?' ? 1 : 4));
+        const Py_ssize_t rows = kind[0] == 'd' ? r_d : (kind[0] == 'v' ? r_v : (kind[0] == '?' ? r_b : (kind[0] == 'm' ? r_m : r_i)));
+        if ((source != 0 && source != 1) || offset < 0 || (size_t)offset + bytes > size || row < 0 || row >= rows
             || !(kind[0] == 'd' || kind[0] == 'i' || kind[0] == 'm' || kind[0] == '?' || kind[0] == 'v')) {
             PyMem_Free(spec);
             PyErr_Format(PyExc_ValueError, "info_columns: spec entry %zd is outside its row or block", k);
@@ -742,6 +749,7 @@ static PyObject *py_info_columns(PyObject *self, PyObject *const *args, Py_ssize
     }
     /* a block of rows at a time (their out and state rows stay in cache), in it a key at a time: one strided
      * read, one contiguous write */
+    int bad_mode = 0;
     for (Py_ssize_t i0 = 0; i0 < n; i0 += INFO_BLOCK_ROWS) {
         const Py_ssize_t i1 = i0 + INFO_BLOCK_ROWS < n ? i0 + INFO_BLOCK_ROWS : n;
         for (Py_ssize_t k = 0; k < m; k++) {
@@ -755,8 +763,21 @@ static PyObject *py_info_columns(PyObject *self, PyObject *const *args, Py_ssize
                     memcpy(dst + i, at + i * stride, 8);
                 break;
             }
-            case 'i':
             case 'm': {
+                uint32_t *dst = names + row * n * width;
+                for (Py_ssize_t i = i0; i < i1; i++) {
+                    int32_t mode;
+                    memcpy(&mode, at + i * stride, 4);
+                    if (mode < 0 || mode >= LEG_N_MODES) {
+                        bad_mode = 1;
+                        mode = 0;
+                    }
+                    for (Py_ssize_t j = 0; j < width; j++)
+                        dst[i * width + j] = codes[mode * width + j];
+                }
+                break;
+            }
+            case 'i': {
                 int64_t *dst = ints + row * n;
                 for (Py_ssize_t i = i0; i < i1; i++) {
                     int32_t i32;
@@ -780,6 +801,10 @@ static PyObject *py_info_columns(PyObject *self, PyObject *const *args, Py_ssize
         }
     }
     PyMem_Free(spec);
+    if (bad_mode) {
+        PyErr_SetString(PyExc_ValueError, "info_columns: a contact mode outside 0 .. 3 in out");
+        goto fail;
+    }
     release_all(&h);
     Py_RETURN_NONE;
 fail:

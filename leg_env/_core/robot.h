@@ -64,6 +64,7 @@ typedef struct {
 
 /* Contact modes of the foot (leg_env.contact). */
 typedef enum { LEG_STICK = 0, LEG_SLIP_FORWARD = 1, LEG_SLIP_BACKWARD = 2, LEG_FLIGHT = 3 } leg_mode;
+#define LEG_N_MODES 4 /* the contact modes */
 
 /* Located transitions (leg_env.hybrid), one witness each. */
 typedef enum { LEG_LIFTOFF = 0, LEG_SLIP_ONSET = 1, LEG_SLIDING_STOP = 2, LEG_TOUCHDOWN = 3 } leg_event;

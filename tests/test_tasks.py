@@ -509,6 +509,65 @@ def test_hop_v3_pays_the_last_landed_hops_apex_at_every_step_while_hopping():
     assert hops >= 4 and paid > 100 and stopped > 0 and short_flights > 0
 
 
+def test_hop_command_schedule_changes_the_command_every_period_and_judges_each_hop_by_its_own():
+    """With ``command_period`` the command is drawn at the reset as before, and ``COMMANDS_AHEAD`` more after it
+    from the same generator: each holds for ``command_steps`` control steps, then the next takes over from the
+    next step (the observation and ``info["command"]`` show it after the step that ends the last one's period),
+    and after the last the command holds. Up to the first change the episode is the registered v3's, step for
+    step. The height term of a flight is the kernel of its apex error against the command in force during the
+    step (modelled here as in the v3 test above, over the model-based hopper). The registered v3 has no schedule."""
+    from leg_env.tasks.hop import COMMANDS_AHEAD, command_steps
+    from policies.hopper import HopperController
+
+    assert gym.make("leg_env/PlanarLegHop-v3").unwrapped.config.command_period == float("inf")
+    plain = gym.make("leg_env/PlanarLegHop-v3").unwrapped
+    env = gym.make("leg_env/PlanarLegHop-v3", command_period=0.5).unwrapped
+    cfg, period = env.config, command_steps(env.config)
+    assert period == 50 and command_steps(plain.config) == 0
+    y_stand = dyn.com_position(env.nominal.q, env.params)[1]
+    hopper = HopperController(env.params, env.config)
+    changes = hops = 0
+    for seed in range(3):
+        o, info = env.reset(seed=seed)
+        op, infop = plain.reset(seed=seed)
+        assert np.array_equal(o, op) and info["command"] == infop["command"]
+        lo, hi = cfg.command_range
+        ahead = env._state["next_commands"][0].copy()
+        assert np.all((lo <= ahead) & (ahead <= hi)) and len(set(ahead.tolist())) == COMMANDS_AHEAD
+        hopper.reset()
+        command, run, held, arc = info["command"], 0.0, 0.0, 0.0
+        for k in range(400):
+            a = hopper.predict(o)[0].astype(np.float32)
+            o, _, terminated, _, info = env.step(a)
+            if k < period:
+                op, _, tp, _, infop = plain.step(a)
+                same = np.arange(o.size) != 18 if k == period - 1 else slice(None)  # the command shown changes after the period's last step
+                assert np.array_equal(o[same], op[same]) and tp == terminated and info["reward_height"] == infop["reward_height"]
+            flight = info["contact_mode"] == "flight"
+            landed = not flight and run > 0.0
+            length = run + info["flight_time"]
+            if flight:  # the arc's apex against the command this step was taken under
+                y, vy = info["com_position"][1], info["com_velocity"][1]
+                err = y + vy * vy / (2.0 * env.params.g) - (y_stand + command)
+                arc = np.exp(-((err / cfg.height_scale) ** 2)) + np.exp(-((err / cfg.height_scale_fine) ** 2))
+            if landed and length >= cfg.min_flight:
+                held, hops = arc, hops + 1
+            run = run + info["flight_time"] if flight else 0.0
+            if not terminated and info["ground_time"] <= cfg.max_ground_time:
+                assert info["reward_height"] == pytest.approx(cfg.height_weight * held, rel=1e-9, abs=1e-12), (seed, k)
+            turn = (k + 1) // period  # commands taken up after this step
+            expected = ahead[turn - 1] if 1 <= turn <= COMMANDS_AHEAD else (ahead[-1] if turn > COMMANDS_AHEAD else command)
+            changes += info["command"] != command
+            assert info["command"] == expected and o[18] == np.float32(expected), (seed, k)
+            command = info["command"]
+            if terminated:
+                break
+    assert changes >= 2 * COMMANDS_AHEAD and hops >= 10
+    for bad in (0.0, -1.0, 0.001, float("nan")):
+        with pytest.raises(ValueError, match="command_period"):
+            gym.make("leg_env/PlanarLegHop-v3", command_period=bad)
+
+
 def test_hop_v3_prefers_hopping_to_the_command_to_bouncing():
     """On the same episodes the model-based hopper (hops to the command) earns v3's height term several times over
     what a fixed bounce of low hops earns: the bounce's flights, however many, are paid no more than its apex."""

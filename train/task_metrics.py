@@ -49,7 +49,8 @@ class HopTracker:
         from leg_env.dynamics import com_position
         from leg_env.tasks.stance import nominal_state
 
-        self._target = float(com_position(nominal_state(u.params, u.config).q, u.params)[1]) + float(info["command"])
+        self._standing = float(com_position(nominal_state(u.params, u.config).q, u.params)[1])
+        self._target = self._standing + float(info["command"])
         self._x0 = float(info["com_position"][0])
         self._t, self._flying, self._last_liftoff, self._hops = 0.0, obs[Obs.contact] < 0.5, None, 0
         self._flight_time, self._long = 0.0, 0
@@ -57,6 +58,7 @@ class HopTracker:
 
     def step(self, env, obs, info) -> None:
         (x, y), vy = info["com_position"].tolist(), float(info["com_velocity"][1])
+        target = self._standing + float(info["command"])  # the command the observation shows (a schedule changes it)
         self._t += self._dt
         flying = info["contact_mode"] == "flight"
         self._flight_time += float(info["flight_time"])  # this flight's time so far (the step's share of it)
@@ -66,7 +68,7 @@ class HopTracker:
             self._flight_time = 0.0
         apex = y + vy * vy / (2.0 * self._g) if flying else np.nan
         if flying and not self._flying:  # a lift-off in this step: one hop, its apex known now
-            self.errors.append(apex - self._target)
+            self.errors.append(apex - target)
             self._hops += 1
             if self._last_liftoff is not None:
                 self.periods.append(self._t - self._last_liftoff)

@@ -16,6 +16,7 @@
 typedef enum { TASK_STANCE = 0, TASK_PUSH = 1, TASK_HOP = 2, N_TASKS = 3 } env_task;
 
 #define PUSH_MAX 8     /* pushes scheduled per episode */
+#define HOP_COMMANDS 4 /* hop commands drawn ahead at a reset, for a command schedule (command_steps) */
 #define MAX_TERMS 8    /* reward terms of a task, at most */
 
 /* The push-recovery task's state: its push schedule. */
@@ -38,6 +39,9 @@ typedef struct {
     double held;        /* the height kernel of the last landed hop's apex, paid at every step while hopping (hold_height) */
     double arc_apex;    /* the current (or last) flight's apex rise above standing [m] */
     double apex;        /* the last landed hop's apex rise above standing [m] (0 before the first) */
+    double next_commands[HOP_COMMANDS]; /* with command_steps: the commands to come, in turn [m] */
+    int32_t command_age;  /* control steps since the command was set */
+    int32_t next_command; /* the index of the next of next_commands */
 } hop_state;
 
 /* One robot's state. */
@@ -99,6 +103,8 @@ typedef struct {
             uint8_t pay_on_next_hop;  /* ... and not at its landing but when the next hop has lasted min_flight */
             uint8_t hold_height;      /* the last landed hop's apex kernel is paid at every step while hopping */
             uint8_t observe_apex;     /* the last landed hop's apex rise is an observation entry (after observe_progress's) */
+            int32_t command_steps;    /* > 0: the command changes every this many control steps, to each of
+                                       * next_commands in turn (0: it holds for the episode) */
         } hop;
     } task;
 } env_settings;

@@ -808,6 +808,9 @@ static const field STATE_HOP_FIELDS[] = {
     TASK(env_state, task.hop.banked, "banked", "f8", 1), TASK(env_state, task.hop.pending, "pending", "f8", 1),
     TASK(env_state, task.hop.arc_kernel, "arc_kernel", "f8", 1), TASK(env_state, task.hop.held, "held", "f8", 1),
     TASK(env_state, task.hop.arc_apex, "arc_apex", "f8", 1), TASK(env_state, task.hop.apex, "apex", "f8", 1),
+    TASK(env_state, task.hop.next_commands, "next_commands", "f8", HOP_COMMANDS),
+    TASK(env_state, task.hop.command_age, "command_age", "i4", 1),
+    TASK(env_state, task.hop.next_command, "next_command", "i4", 1),
     {NULL, 0, NULL, 0}};
 
 static const field ROBOT_FIELDS[] = {
@@ -840,6 +843,7 @@ static const field SETTINGS_HOP_FIELDS[] = {
     TASK(env_settings, task.hop.pay_on_next_hop, "pay_on_next_hop", "?", 1),
     TASK(env_settings, task.hop.hold_height, "hold_height", "?", 1),
     TASK(env_settings, task.hop.observe_apex, "observe_apex", "?", 1),
+    TASK(env_settings, task.hop.command_steps, "command_steps", "i4", 1),
     {NULL, 0, NULL, 0}};
 
 static const field OUT_FIELDS[] = {

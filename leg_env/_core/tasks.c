@@ -232,6 +232,24 @@ static double height_kernel(double de, double weight, double scale, double fine)
     return exp(-err * err);
 }
 
+/* A command schedule (command_steps > 0): once the command has held for command_steps control steps, the
+ * next of next_commands takes over from the next step on, and the observation shows it (after the last of
+ * them, the command holds). A step is judged by the command it was taken under. */
+static void next_hop_command(const env_batch *b, Py_ssize_t i, hop_state *t)
+{
+    const int32_t steps = b->settings->task.hop.command_steps;
+    if (steps <= 0 || t->next_command < 0 || t->next_command >= HOP_COMMANDS)
+        return;
+    if (t->command_age < steps - 1) {
+        t->command_age += 1;
+        return;
+    }
+    t->command = t->next_commands[t->next_command];
+    t->next_command += 1;
+    t->command_age = 0;
+    b->obs[i * b->obs_cols + OBS_COMMAND] = (float)t->command;
+}
+
 static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *shared)
 {
     const env_robot *r = robot_row(b, i);
@@ -311,6 +329,7 @@ static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inerti
     terms[6] = stance_terms[4]; /* ctrl */
     if (o->terminated) /* terminated: nothing but the penalties */
         terms[1] = 0.0;
+    next_hop_command(b, i, t);
 }
 
 static void hop_start(const env_batch *b, Py_ssize_t i)
@@ -330,6 +349,8 @@ static void hop_start(const env_batch *b, Py_ssize_t i)
     s->task.hop.held = 0.0;
     s->task.hop.arc_apex = 0.0;
     s->task.hop.apex = 0.0;
+    s->task.hop.command_age = 0;
+    s->task.hop.next_command = 0;
     if (b->settings->task.hop.observe_progress) {
         b->obs[i * b->obs_cols + OBS_COM_DRIFT] = 0.0f;
         b->obs[i * b->obs_cols + OBS_GROUND_TIME] = 0.0f;

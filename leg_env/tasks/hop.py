@@ -58,7 +58,11 @@ never pulls. ``info["flight_time"]``, ``impulse`` and the event counts describe 
 
 ## Starting State, Episode End
 The nominal posture plus noise ``reset_noise_scale = 0.01`` (as ``PlanarLegStance``); the command is drawn
-after the posture noise (one uniform). Terminates on a fall (torso below 0.5 m above the ground or below
+after the posture noise (one uniform). With ``command_period`` finite (a setting for training; every registered
+version has ``inf``, one command per episode) the reset also draws ``COMMANDS_AHEAD`` (4) more commands, each
+held for ``command_period`` seconds in turn after the first; after the last the command holds. A step's height
+term is judged by the command in force during it, and the observation shows the next one from the step that ends
+a period. Terminates on a fall (torso below 0.5 m above the ground or below
 the knee, ``|th_b| > 1`` rad) or a joint out of range; truncated at 1000 steps (10 s).
 
 ## Solved
@@ -326,6 +330,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import checks
+from ..layout import state_dtype
 from .base import Task
 from .stance import OBS_DIM_UNILATERAL, StanceConfig, observation_space as _stance_space
 
@@ -363,6 +368,7 @@ class HopConfig(StanceConfig):
     pay_on_next_hop: bool = False  # with pay_on_landing: a landed flight's term is paid when the next hop lasts min_flight (v2)
     hold_height: bool = False  # the last landed hop's apex kernel paid at every step while hopping (v3)
     observe_apex: bool = False  # the last landed hop's apex rise above standing as observation entry 21 (v3; needs observe_progress)
+    command_period: float = float("inf")  # [s] a new command from command_range every this long, up to COMMANDS_AHEAD times an episode (inf: one per episode)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -383,6 +389,9 @@ class HopConfig(StanceConfig):
             if getattr(self, name) and not self.pay_on_landing:
                 raise ValueError(f"HopConfig.{name} needs pay_on_landing=True (it changes what a flight's landing pays)")
         object.__setattr__(self, "max_ground_time", checks.real("HopConfig.max_ground_time", self.max_ground_time, 0.0, float("inf"), lo_open=True, unit="s"))
+        object.__setattr__(self, "command_period", checks.real("HopConfig.command_period", self.command_period, 0.0, float("inf"), lo_open=True, unit="s"))
+        if self.command_period < self.dt:
+            raise ValueError(f"HopConfig.command_period must be at least dt ({self.dt} s), got {self.command_period!r}")
         if self.observe_apex and not self.observe_progress:
             raise ValueError("HopConfig.observe_apex needs observe_progress=True (the apex is the entry after the ground time)")
         if self.hold_height:
@@ -400,6 +409,7 @@ class HopConfig(StanceConfig):
         row["height_scale_fine"], row["pay_on_landing"] = self.height_scale_fine, self.pay_on_landing
         row["pay_hops_only"], row["pay_on_next_hop"] = self.pay_hops_only, self.pay_on_next_hop
         row["hold_height"], row["observe_apex"] = self.hold_height, self.observe_apex
+        row["command_steps"] = command_steps(self)
 
 
 def observation_space(params, config: HopConfig):
@@ -418,14 +428,30 @@ def observation_space(params, config: HopConfig):
     return spaces.Box(low, high, dtype=np.float32)
 
 
+COMMANDS_AHEAD = state_dtype("hop")["next_commands"].shape[0]
+"""The commands a reset draws ahead for a command schedule (``command_period``): the episode's first and this many more."""
+
+
+def command_steps(config: HopConfig) -> int:
+    """Control steps each command of a schedule holds (``command_period / dt``, rounded, at least 1), 0 for one
+    command per episode."""
+    if config.command_period == float("inf"):
+        return 0
+    return max(1, round(config.command_period / config.dt))
+
+
 def _draws(config: HopConfig) -> int:
-    return 1
+    return 1 if command_steps(config) == 0 else 1 + COMMANDS_AHEAD
 
 
 def _columns(draws: np.ndarray, config: HopConfig) -> dict:
-    """The command of ``k`` robots from their ``(k, 1)`` uniforms."""
+    """The command of ``k`` robots from their ``(k, 1)`` uniforms; with a command schedule, also the
+    ``COMMANDS_AHEAD`` commands to come, from the uniforms after it."""
     lo, hi = config.command_range
-    return {"command": lo + (hi - lo) * draws[:, 0]}
+    columns = {"command": lo + (hi - lo) * draws[:, 0]}
+    if draws.shape[1] > 1:
+        columns["next_commands"] = lo + (hi - lo) * draws[:, 1:]
+    return columns
 
 
 TASK = Task(

@@ -178,7 +178,11 @@ episode contrasts hop heights; the shipped configuration otherwise) on seeds 7 a
 at 72M steps in the training evaluations, against 1,589 and 962 without), both seeds survived 98-100% of the fresh
 episodes with the COM within the drift bar (3.77 and 1.75 cm), but the apex errors were 4.81 and 4.38 cm: both
 hop about 5.5 cm whatever the command (0.47 and 0.27 cm at the 5-6 cm commands, 4.57 and 4.12 cm at 9-10 cm, 9.75
-and 9.15 cm at 14-15 cm; 20 episodes each). The configuration keeps one command per episode.
+and 9.15 cm at 14-15 cm; 20 episodes each). The configuration keeps one command per episode. The gaits differ
+(5 fresh episodes per command range): at the 14-15 cm commands the shipped seed 5 swings its hip over 1.1 rad,
+straightens its knee to 0.07 rad (the limit is 0.05) and pitches its torso 0.35 rad RMS; these two seeds swing the
+hip over 0.3 rad, straighten the knee to 0.27-0.29 rad at most and keep the torso within 0.04-0.19 rad RMS, the
+same at 5-6 cm, with the hip torque at its limit 61-73% of the time.
 
 With the curricula of commands and of the kernel's width alone (the height weight and the drift charge the task's)
 the five seeds 0-4 survived at least 99% (IQM 100% [99%, 100%]) with 62-81 hops per episode; three kept the COM

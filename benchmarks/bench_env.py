@@ -26,7 +26,8 @@ Rows:
 (d) the unilateral contact model (``contact="unilateral"``) next to the pinned one: ``env.step``
     (ratio to Hopper-v5), ``gym.make_vec`` at N = 4096 under the same random actions (lift-offs, slips and
     touchdowns included; ratio to the pinned batch), and both models balancing: the stance LQR's action
-    plus uniform noise of +-``BALANCE_NOISE``, only ``step`` timed (ratio of unilateral to pinned).
+    plus uniform noise of +-``BALANCE_NOISE``, only ``step`` timed, after ``BALANCE_WARMUP`` steps (ratio of
+    unilateral to pinned).
 (e) every other registered task (``leg_env.tasks.REGISTRY``: ``PlanarLegBalance-v0``, ``PlanarLegPush-v0``)
     through ``gym.make_vec`` at N = 4096, under random actions and balancing, each as a share of the
     unilateral stance batch's rate under the same actions (the target: at least 90%).
@@ -87,6 +88,7 @@ TARGET_TASK_SHARE = 0.9  # every other task's make_vec N = 4096 as a share of th
 TASK_IDS = tuple(i for i in leg_env.ENV_IDS if i != LEG)
 TARGET_UNILATERAL_BALANCE = 0.8  # balancing: unilateral over pinned
 BALANCE_NOISE = 0.02  # half-width of the noise on the LQR's action in the balancing rows
+BALANCE_WARMUP = 400  # untimed steps of every balancing row first (4 s: two pushes of a push episode, its falls and restarts)
 UNILATERAL = {"contact": "unilateral"}
 RANDOMISED = {"pinned": {}, "unilateral": UNILATERAL}  # randomize=True rows, against the same rows without it
 _RANDOMISED_REFERENCE = {
@@ -147,7 +149,9 @@ def calls_for(n: int) -> int:
 def vector_env_runner(envs, calls: int | None = None, balance: bool = False) -> Runner:
     """Env-steps of a ``gymnasium.vector.VectorEnv`` (it autoresets) under pre-sampled random actions, or with
     ``balance`` under the stance LQR (``policies.lqr``) plus uniform noise of +-``BALANCE_NOISE``: every robot
-    balances near the nominal posture. The LQR's own time is not counted: only ``envs.step`` is timed."""
+    balances near the nominal posture, timed after ``BALANCE_WARMUP`` untimed steps (a task whose episodes bring
+    pushes is timed with them, not over its quiet first second). The LQR's own time is not counted: only
+    ``envs.step`` is timed."""
     n = envs.num_envs
     calls = calls or calls_for(n)
     if balance:
@@ -157,6 +161,8 @@ def vector_env_runner(envs, calls: int | None = None, balance: bool = False) -> 
         noise = np.random.default_rng(SEED).uniform(-BALANCE_NOISE, BALANCE_NOISE, size=(calls, n, 2))
         width = 12 if envs.single_observation_space.shape[0] == 12 else 18  # the hop task's command is not read
         state = {"obs": envs.reset(seed=SEED)[0]}
+        for k in range(BALANCE_WARMUP):
+            state["obs"] = envs.step((lqr.predict(state["obs"][:, :width])[0] + noise[k % calls]).astype(np.float32))[0]
 
         def run_balanced() -> tuple[int, float]:
             obs, spent = state["obs"], 0.0
@@ -304,7 +310,7 @@ def work_per_step(steps: int = 200) -> dict:
 def balancing_work(steps: int = 200) -> dict:
     """RK4 steps and located events per control step of the balancing rows (the stance LQR plus noise, as
     ``vector_env_runner(balance=True)`` drives them) on the unilateral stance and on every task, ``make_vec`` of
-    ``VECTOR_SIZES[-1]`` robots, ``steps`` steps. A task whose episodes knock the robot off balance (a push) asks
+    ``VECTOR_SIZES[-1]`` robots, ``steps`` steps after the rows' ``BALANCE_WARMUP``. A task whose episodes knock the robot off balance (a push) asks
     for more RK4 steps than the stance: their ratio bounds the task's share of the stance's rate at equal cost
     per RK4 step."""
     from policies.lqr import LQRController
@@ -317,6 +323,8 @@ def balancing_work(steps: int = 200) -> dict:
         noise = np.random.default_rng(SEED).uniform(-BALANCE_NOISE, BALANCE_NOISE, size=(steps, n, 2))
         width = 12 if envs.single_observation_space.shape[0] == 12 else 18
         obs = envs.reset(seed=SEED)[0]
+        for k in range(BALANCE_WARMUP):
+            obs = envs.step((lqr.predict(obs[:, :width])[0] + noise[k % steps]).astype(np.float32))[0]
         rk4, events = [], []
         for k in range(steps):
             going = ~envs._ended  # the rows that restart step from their new start: left out, as in work_per_step

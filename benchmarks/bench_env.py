@@ -146,6 +146,26 @@ def calls_for(n: int) -> int:
     return int(np.clip(ENV_STEPS_PER_REPEAT // n, MIN_CALLS, MAX_CALLS))
 
 
+def balancer(envs, calls: int):
+    """The balancing rows' actions for ``envs``: ``action(obs, k)``, the stance LQR (``policies.lqr``) on the
+    observation's stance entries plus the ``k``-th (mod ``calls``) of ``calls`` uniform noises of +-``BALANCE_NOISE``.
+    The first observation is ``envs``' reset's, after ``BALANCE_WARMUP`` untimed steps under these actions."""
+    from leg_env.layout import OBS
+    from policies.lqr import LQRController
+
+    lqr = LQRController(envs.params, envs.config)
+    noise = np.random.default_rng(SEED).uniform(-BALANCE_NOISE, BALANCE_NOISE, size=(calls, envs.num_envs, 2))
+    width = OBS["unilateral_dim"] if envs.unilateral else OBS["pinned_dim"]  # the stance's entries (not a hop's command)
+
+    def action(obs, k: int) -> np.ndarray:
+        return (lqr.predict(obs[:, :width])[0] + noise[k % calls]).astype(np.float32)
+
+    obs = envs.reset(seed=SEED)[0]
+    for k in range(BALANCE_WARMUP):
+        obs = envs.step(action(obs, k))[0]
+    return action, obs
+
+
 def vector_env_runner(envs, calls: int | None = None, balance: bool = False) -> Runner:
     """Env-steps of a ``gymnasium.vector.VectorEnv`` (it autoresets) under pre-sampled random actions, or with
     ``balance`` under the stance LQR (``policies.lqr``) plus uniform noise of +-``BALANCE_NOISE``: every robot
@@ -155,19 +175,13 @@ def vector_env_runner(envs, calls: int | None = None, balance: bool = False) -> 
     n = envs.num_envs
     calls = calls or calls_for(n)
     if balance:
-        from policies.lqr import LQRController
-
-        lqr = LQRController(envs.params, envs.config)
-        noise = np.random.default_rng(SEED).uniform(-BALANCE_NOISE, BALANCE_NOISE, size=(calls, n, 2))
-        width = 12 if envs.single_observation_space.shape[0] == 12 else 18  # the hop task's command is not read
-        state = {"obs": envs.reset(seed=SEED)[0]}
-        for k in range(BALANCE_WARMUP):
-            state["obs"] = envs.step((lqr.predict(state["obs"][:, :width])[0] + noise[k % calls]).astype(np.float32))[0]
+        act, first = balancer(envs, calls)
+        state = {"obs": first}
 
         def run_balanced() -> tuple[int, float]:
             obs, spent = state["obs"], 0.0
             for k in range(calls):
-                action = (lqr.predict(obs[:, :width])[0] + noise[k]).astype(np.float32)
+                action = act(obs, k)
                 start = time.perf_counter()
                 obs = envs.step(action)[0]
                 spent += time.perf_counter() - start
@@ -310,25 +324,18 @@ def work_per_step(steps: int = 200) -> dict:
 def balancing_work(steps: int = 200) -> dict:
     """RK4 steps and located events per control step of the balancing rows (the stance LQR plus noise, as
     ``vector_env_runner(balance=True)`` drives them) on the unilateral stance and on every task, ``make_vec`` of
-    ``VECTOR_SIZES[-1]`` robots, ``steps`` steps after the rows' ``BALANCE_WARMUP``. A task whose episodes knock the robot off balance (a push) asks
-    for more RK4 steps than the stance: their ratio bounds the task's share of the stance's rate at equal cost
+    ``VECTOR_SIZES[-1]`` robots, ``steps`` steps after the rows' ``BALANCE_WARMUP`` (``balancer``). A task whose
+    episodes knock the robot off balance (a push) asks for more RK4 steps than the stance: their ratio bounds the task's share of the stance's rate at equal cost
     per RK4 step."""
-    from policies.lqr import LQRController
-
     n = max(VECTOR_SIZES)
     out = {}
     for name, env_id, kwargs in (("unilateral", LEG, UNILATERAL), *((i, i, {}) for i in TASK_IDS)):
         envs = gym.make_vec(env_id, num_envs=n, **kwargs)
-        lqr = LQRController(envs.params, envs.config)
-        noise = np.random.default_rng(SEED).uniform(-BALANCE_NOISE, BALANCE_NOISE, size=(steps, n, 2))
-        width = 12 if envs.single_observation_space.shape[0] == 12 else 18
-        obs = envs.reset(seed=SEED)[0]
-        for k in range(BALANCE_WARMUP):
-            obs = envs.step((lqr.predict(obs[:, :width])[0] + noise[k % steps]).astype(np.float32))[0]
+        act, obs = balancer(envs, steps)
         rk4, events = [], []
         for k in range(steps):
             going = ~envs._ended  # the rows that restart step from their new start: left out, as in work_per_step
-            obs = envs.step((lqr.predict(obs[:, :width])[0] + noise[k]).astype(np.float32))[0]
+            obs = envs.step(act(obs, k))[0]
             rk4.append(envs._out["rk4_steps"][going].mean())
             events.append(envs._out["events"][going].mean())
         envs.close()

@@ -50,6 +50,7 @@ CASES = {  # name: (env id, keyword arguments)
     "hop v1 randomised": ("leg_env/PlanarLegHop-v1", {"randomize": True}),
     "hop v2 randomised": ("leg_env/PlanarLegHop-v2", {"randomize": True}),
     "hop v3 randomised": ("leg_env/PlanarLegHop-v3", {"randomize": True}),
+    "hop v3 command schedule": ("leg_env/PlanarLegHop-v3", {"command_period": 0.5}),  # the training setting
 }
 ACTIONS = ("random", "bang_bang")
 TORQUE_LIMIT = 500.0  # ten times the default 50 N m

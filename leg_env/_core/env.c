@@ -43,13 +43,7 @@ static inline void zero_record(env_out *o)
 /* The whole-body COM and its velocity from the state's trigonometry. */
 static inline void com_of(const leg_params *P, const env_state *s, double *com, double *vel)
 {
-    const double m = P->m_b + P->m1 + P->m2, a = P->m1 * P->c1 + P->m2 * P->l1, b = P->m2 * P->c2;
-    const double s1 = s->trig[0], co1 = s->trig[1], s2 = s->trig[2], co2 = s->trig[3];
-    const double w1 = s->qd[2] + s->qd[3], w2 = w1 + s->qd[4];
-    com[0] = s->q[0] + (a * co1 + b * co2) / m;
-    com[1] = s->q[1] + (a * s1 + b * s2) / m;
-    vel[0] = s->qd[0] - (a * s1 * w1 + b * s2 * w2) / m;
-    vel[1] = s->qd[1] + (a * co1 * w1 + b * co2 * w2) / m;
+    com_trig(P, s->q, s->qd, s->trig[0], s->trig[1], s->trig[2], s->trig[3], com, vel);
 }
 
 /* One control step of robots lo .. hi - 1, in place. A numerical failure (a non-finite state or force, or

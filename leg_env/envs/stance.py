@@ -262,71 +262,13 @@ class PlanarLegStanceEnv(LegEnv):
     return was 563, below both controllers' (``PlanarLegBalance-v0-45M``): the runs were continued to 60M steps
     from their 45M checkpoints, a length chosen after seeing that seed.
 
-    With the update's hidden layers in bfloat16 (``--update-precision bfloat16``: 1.2-1.3x float32's env-steps per
-    second in the training benchmark on a CPU with bfloat16 arithmetic; 11.6 minutes per seed on one core beside
-    another), the same configuration trained from scratch for 60M steps survived at least 99%
-    of the held-out starts on every seed (IQM 100% [99%, 100%]) with returns of 923, 929, 950 (seed 2), 942 and
-    814 (IQM 931 [850, 947]): four seeds of five above the gated controller's return, seed 4 below both
-    controllers' (``PlanarLegBalance-v0-bfloat16-e2``). The configuration stays float32, where all five pass.
-
-    With 4 epochs of minibatches of 16384 and 45M steps, the configuration before (the same gradient steps per
-    rollout, twice the computation per step), four seeds survived all of the held-out starts and one 93% (IQM 100%
-    [95%, 100%]), with returns of 412-947 (IQM 816 [520, 932]): seed 2 (100%, 947) was shipped then and passed the
-    gated controller's return, seed 0 (100%, 902) only the LQR's, seeds 1 and 4 survived every start at 811 and 412,
-    seed 3 fell from 7 starts (``PlanarLegBalance-v0-e4``).
-
-    With the late charge ending at 3 (at 40M steps) instead of 10, an earlier configuration,
-    every seed survived at least 97% of the held-out starts (IQM 100% [98%, 100%]) with returns of 401-829 (IQM
-    734 [494, 816]), all below the gated controller's: the policies hopped more than they must (seed 2 was charged
-    80 per episode for flight, 100%, 829) and leant their torsos (seed 2, 16 degrees RMS).
-
-    Before the curriculum the configuration charged flight 0.5 and drew starts of noise 0.1 throughout. Two seeds
-    of five then never learnt the step back: seeds 2 and 3 survived 93% of the held-out starts (the same seven
-    falls), seeds 0, 1 and 4 survived 99-100% with returns of 907, 875 and 346 (IQM 97% [93%, 100%], return 815
-    [485, 886]). Without the entropy bonus, four of five seeds stopped at the same 56 of the 64 evaluation starts
-    from 30M steps on; the fifth reached 97% on held-out starts by leaning its torso about 30 degrees (a return of
-    620). The curriculum came from probes on the two seeds that did not learn the step, each from scratch and
-    scored on the 100 held-out starts:
-
-    - the reset noise widened from 0.05 to 0.15 (6M to 30M steps), flight 0.5 throughout: seed 2 stopped at the
-      same 56 of 64 training-evaluation starts (93%, 818); seed 3 survived every start, by hopping in most
-      episodes (return 584: flight charged 399 per episode);
-    - flight free for 9M steps, then charged 0.5 by 24M (noise 0.1): seed 2 found the step at once (100% of the
-      training-evaluation starts from 15M steps on) and survived 98%, but hopped and leaned its torso 30 degrees
-      (return 601);
-    - the widening noise, and flight 0.5 raised to 3 from 30M to 40M: seed 3 survived every start, return 811.
-
-    The configuration with the charge ending at 3 combined the last two. Two probes after it, on seed 2 (45M steps):
-
-    - its late charge raised to the task's own 10 per step of flight (from 0.5 at 30M steps to 10 at 42M): 100% of
-      the held-out starts with a return of 947; over five seeds, the shipped configuration above;
-    - the torso angle's weight at 3 as well: 100%, but a return of 28, the policy still hopping through most
-      episodes (flight charged 928 per episode on the task).
-
-    Probes before it, each from scratch on seed 2 (93%, a return
-    of 763 under the configuration of the time):
-
-    - the torso angle's weight at 3: the policy's 20-degree lean goes (the drift term charges 30 per episode
-      instead of 153), 93%, 888: the same seven falls on the starts that need a step back. On seeds 0 and 1
-      it stopped at 80% and 77% of the 64 training-evaluation starts;
-    - that and an entropy bonus of 0.01: 95%, 844 (at 0.02 the training collapsed after 30M steps);
-    - that and flight charged 2: 97%, 927. It recovers from four of the seven hard starts without leaving
-      the ground: its foot slides (the friction term charges 14 per episode). On seeds 0 and 1 the same
-      settings stopped at 77% and 89% of the 64 training-evaluation starts, where the configuration of the time
-      reached 100% on both.
-
-    Neither a decaying learning rate (86% in training evaluations) nor, with the angle weight at 3, starts
-    three times as wide (84%) helped seed 2. Three epochs per rollout instead of four, which trains at 65k
-    env-steps/s on one thread instead of 49k: seed 2 97%, 704; seed 0 78%, 675 (100%, 907 at four). Under the
-    shipped configuration three epochs cost return too: seed 2 survived every held-out start with a return of
-    829 (947 at four), its 45M steps taking 10.8 minutes instead of 12.1 beside another run. What the other shapings did, each from scratch:
-
-    - an alive bonus of 3 with flight at 0.5: the policy hops all the time (a return of about -3,800 on the task);
-    - an alive bonus of 3 with flight at 10: it slides its foot instead (93% survival, return 674);
-    - the torso-angle weight at 10: early on every step costs more than the alive bonus, and the
-      policy learns to fall at once (0% survival after 21M steps).
-
-    The results over five seeds are in ``benchmarks/results/learning/PlanarLegBalance-v0``.
+    What was tried, each a probe of plain PPO from scratch (the numbers are on the documentation's page "The
+    unilateral balance from scratch: what was tried", ``docs/balance_probes.md``): the update in bfloat16 (every
+    seed survives at least 99% of the starts, four of five above the gated controller's return; the configuration
+    stays float32, where all five are), 4 epochs of 16384 per rollout (returns of 412-947), a late flight charge ending at 3 instead of 10
+    (every seed below the gated controller's return), the configuration before the curriculum (two seeds of five
+    never learnt the step back), and the shapings that led to the curriculum: more weight on the torso's angle, an
+    entropy bonus, flight charges, alive bonuses, wider starts, a decaying learning rate, fewer epochs.
 
     ## Version History
     ``PlanarLegBalance-v0`` is this task on the unilateral ground (``contact="unilateral"``) with a reset

@@ -81,7 +81,7 @@ from 2-6 cm for the first 6M steps, a range widened linearly to the task's 5-15 
 coarse kernel is 10 cm wide for the first 20M steps, narrowed linearly to the task's 5 cm by 45M (a wide kernel still
 pays a hop far short of the command for rising); the COM's drift is charged the task's 10 per m^2 until 36M steps,
 100 by 54M, once the policy hops (charged 100 from the start, the policy may never learn to hop; see the probes on the
-page below), and 400 from 60M to 63M; and from 60M to 61M the alive bonus rises from the task's 1 to 2, which keeps away
+probes page), and 400 from 60M to 63M; and from 60M to 61M the alive bonus rises from the task's 1 to 2, which keeps away
 the falls that the stronger drift charge brings. The policy kept is the best in-training evaluation from 63M steps
 on, once every schedule has reached its end (``--select-after``). The evaluation is the task as registered.
 On the 100 held-out episodes (``benchmarks/results/learning/PlanarLegHop-v3-bfloat16``; seeds 5-9, seed 5 named as
@@ -91,7 +91,7 @@ the shipped one before any trained) the five seeds survive 95-100% (IQM 99% [96%
 ``policies/ppo_hop_v3``. Seed 6 hops to the command (1.31 cm) but drifts 7.43 cm and survives 95%; seeds 7-9 keep
 the COM near its start (1.49-5.46 cm) but hop off the command (apex errors 4.30-9.74 cm; seed 7 bounces, 80 hops
 per episode). The last stage (the drift charge of 400 and the alive bonus of 2 after 60M steps) was chosen on the
-probes of seeds 5 and 6 (the page below), so seed 5's result does not test that choice independently; seeds 7-9 do. The five
+probes of seeds 5 and 6 (the probes page), so seed 5's result does not test that choice independently; seeds 7-9 do. The five
 runs are the bfloat16 60M-step runs of the configuration before (the same schedules up to 60M steps) resumed from
 their 60,030,976-step checkpoints: a run from scratch draws other episodes after 60M. Each seed's 72M steps took 17.8
 minutes (median) on one core of a 2-core AMD EPYC beside another seed, evaluations included. The shipped policy's

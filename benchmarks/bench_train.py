@@ -82,7 +82,7 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
     from leg_env.sb3 import make_sb3_vec_env
     from train.chunked_ppo import ChunkedPPO
     from train.normalize import BatchVecNormalize
-    from train.ppo import TrainArgs, _ppo_kwargs, resolve_config
+    from train.ppo import TrainArgs, ppo_kwargs, resolve_config
 
     torch.set_num_threads(threads)
     config = resolve_config(TrainArgs(env_id=env_id, seed=SEED))
@@ -103,9 +103,9 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
         venv = (VecNormalize if algo == "sb3" else BatchVecNormalize)(venv, **config["normalize"])
     precision = {"chunked": config["update_precision"], "bfloat16": "bfloat16", "sb3": "float32"}[algo]
     if algo == "sb3":
-        model = PPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, **_ppo_kwargs(config))
+        model = PPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, **ppo_kwargs(config))
     else:
-        model = ChunkedPPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, update_precision=precision, **_ppo_kwargs(config))
+        model = ChunkedPPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, update_precision=precision, **ppo_kwargs(config))
     rollout_steps = n_envs * model.n_steps
 
     class Phases(BaseCallback):

@@ -68,7 +68,7 @@ from train.hyperparameters import DEFAULT_HYPERPARAMS, display_path, load_hyperp
 from train.machine import UPDATE_PRECISIONS, cpu_name, native_bfloat16
 from train.runfolder import RunFolderError, prepare_run_folder, run_locked, runnable_command
 
-__all__ = ["TrainArgs", "train", "resolve_config", "load_hyperparams", "ENV_ID", "DEFAULT_HYPERPARAMS"]
+__all__ = ["TrainArgs", "train", "resolve_config", "ppo_kwargs", "load_hyperparams", "ENV_ID", "DEFAULT_HYPERPARAMS"]
 
 EVAL_SEED = 20_000
 """Seed of the in-training evaluation episodes (training envs use small seeds, ``train.evaluate`` 10_000+)."""
@@ -255,7 +255,9 @@ def warm_start(model, init_from: str, config: dict) -> None:
         warmstart.copy_policy(model, Path(init_from))
 
 
-def _ppo_kwargs(config: dict) -> dict:
+def ppo_kwargs(config: dict) -> dict:
+    """The keyword arguments of SB3's ``PPO`` in a resolved ``config`` (``resolve_config``): its ``ppo`` entries,
+    a learning rate or clip range written as a schedule (``"lin_3e-4"``) made the callable SB3 takes."""
     kwargs = dict(config["ppo"])
     for key in ("learning_rate", "clip_range", "clip_range_vf"):
         if key in kwargs:
@@ -368,7 +370,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
             tensorboard_log=str(out / "tb"),
             verbose=max(0, args.verbose - 1),
             update_precision=config["update_precision"],
-            **_ppo_kwargs(config),
+            **ppo_kwargs(config),
         )
         if config.get("init_from"):
             warm_start(model, config["init_from"], config)

@@ -185,3 +185,69 @@ def test_episode_buffers_are_filled_as_sb3_fills_them():
     reference, chunked = models
     assert list(chunked.ep_info_buffer) == list(reference.ep_info_buffer) and len(reference.ep_info_buffer) > 10
     assert list(chunked.ep_success_buffer) == list(reference.ep_success_buffer) and len(reference.ep_success_buffer) > 5
+
+
+def _bounded_update(coef: float, precision: str = "float32"):
+    """One SGD step on one rollout of the hop task, the policy's mean action held at (3, -2) (beyond both ends of
+    the box [-1, 1]) by a zero action-net weight; returns the model and its action net's bias before the step."""
+    torch.set_num_threads(1)
+    venv = make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v3", per_env_info=False)
+    model = ChunkedPPO("MlpPolicy", venv, n_steps=N_STEPS, batch_size=N_ENVS * N_STEPS, n_epochs=1, learning_rate=1e-3,
+                       max_grad_norm=1e9, seed=0, device="cpu", update_chunk=128, update_precision=precision,
+                       bounds_loss_coef=coef, policy_kwargs={"net_arch": [32, 32], "optimizer_class": torch.optim.SGD})
+    with torch.no_grad():
+        model.policy.action_net.weight.zero_()
+        model.policy.action_net.bias.copy_(torch.tensor([3.0, -2.0]))
+    bias = model.policy.action_net.bias.detach().clone()
+    model.learn(N_ENVS * N_STEPS)
+    venv.close()
+    return model, bias
+
+
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+def test_bounds_loss_charges_the_mean_beyond_the_box(precision):
+    """With the mean action at (3, -2) for every sample, the charge is (3 - 1.1)^2 + (-1.1 + 2)^2 = 4.42 per sample,
+    its gradient on the action net's bias (2 * 1.9, -2 * 0.9): one SGD step moves that bias by exactly
+    ``-lr * coef * (3.8, -1.8)`` more than PPO's own loss does."""
+    coef, lr = 0.5, 1e-3
+    plain, start = _bounded_update(0.0, precision)
+    charged, start_again = _bounded_update(coef, precision)
+    assert torch.equal(start, start_again)
+    assert "train/bounds_loss" not in plain.logger.name_to_value
+    np.testing.assert_allclose(charged.logger.name_to_value["train/bounds_loss"], 4.42, rtol=1e-6)
+    extra = (charged.policy.action_net.bias - plain.policy.action_net.bias).detach().numpy()
+    np.testing.assert_allclose(extra, -lr * coef * np.array([3.8, -1.8]), rtol=1e-3)
+    assert charged.logger.name_to_value["train/loss"] > plain.logger.name_to_value["train/loss"] + coef * 4.0
+
+
+def test_bounds_loss_does_not_touch_a_mean_inside_the_box():
+    """A mean within 1.1 of the box's centre costs nothing: the update is the one without the charge, bit for bit."""
+    torch.set_num_threads(1)
+    reference = _one_update(ChunkedPPO, update_chunk=128)
+    charged = _one_update(ChunkedPPO, update_chunk=128, bounds_loss_coef=0.5)  # a fresh policy's means are near 0
+    assert charged.logger.name_to_value["train/bounds_loss"] == 0.0
+    after_ref, after = _parameters(reference), _parameters(charged)
+    for name in after_ref:
+        assert torch.equal(after[name], after_ref[name]), name
+
+
+@pytest.mark.parametrize("coef, error", [(-0.1, ValueError), (float("nan"), ValueError), (float("inf"), ValueError),
+                                         ("0.1", TypeError), (True, TypeError), (None, TypeError)])
+def test_bad_bounds_loss_coef(coef, error):
+    with pytest.raises(error, match="bounds_loss_coef"):
+        ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), bounds_loss_coef=coef, n_steps=8, batch_size=16, device="cpu")
+
+
+def test_bounds_loss_needs_a_box_action_space():
+    import gymnasium as gym
+
+    with pytest.raises(ValueError, match="bounds_loss_coef applies to a Box"):
+        ChunkedPPO("MlpPolicy", gym.make("CartPole-v1"), bounds_loss_coef=0.1, n_steps=8, batch_size=8, device="cpu")
+    ChunkedPPO("MlpPolicy", gym.make("CartPole-v1"), n_steps=8, batch_size=8, device="cpu")  # without it, any space
+
+
+def test_bounds_loss_coef_survives_save_and_load(tmp_path):
+    model = ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), bounds_loss_coef=0.25, n_steps=8, batch_size=16, device="cpu")
+    model.save(tmp_path / "model.zip")
+    assert ChunkedPPO.load(tmp_path / "model.zip", device="cpu").bounds_loss_coef == 0.25
+    PPO.load(tmp_path / "model.zip", device="cpu")  # still SB3's model

@@ -21,6 +21,12 @@ about speed:
 * In the rollouts, the step's infos are searched for episode statistics with one pass over the list rather than two
   dictionary lookups per env (``_update_info_buffer``, the same buffers).
 
+One option changes the update, and is off by default: ``bounds_loss_coef`` adds to the loss a charge on the policy's
+mean action beyond its box (as rl_games's ``bounds_loss_coef``). SB3 clips a sampled action to the action space, so
+where the mean lies far outside it the sampled actions are all the bound: the exploration noise does nothing there
+and the mean drifts without a signal. With the charge the mean stays near the box, where the noise still moves the
+action.
+
 ``benchmarks/bench_train.py`` measures each against SB3's own PPO in the same run
 (``benchmarks/results/train_speed.md``). Minibatches no larger than a chunk, in float32, take SB3's ``train``
 unchanged.
@@ -36,7 +42,10 @@ from stable_baselines3.common.utils import explained_variance
 
 from train.machine import UPDATE_PRECISIONS
 
-__all__ = ["ChunkedPPO", "FastTanh", "UPDATE_CHUNK"]
+__all__ = ["ChunkedPPO", "FastTanh", "BOUNDS_MARGIN", "UPDATE_CHUNK"]
+
+BOUNDS_MARGIN = 1.1
+"""``bounds_loss_coef`` charges a mean action beyond this many half-widths of the action box from its centre."""
 
 UPDATE_CHUNK = 4096
 """Samples per chunk and torch thread by default: on one thread the fastest of 1,024-16,384 here; on two, 8,192 was."""
@@ -81,17 +90,25 @@ class ChunkedPPO(PPO):
             in bfloat16 with float32 accumulation, while the parameters, the optimiser, the output layers, the
             action distribution and the losses stay float32. On a CPU with bfloat16 arithmetic (AVX512-BF16 or
             AMX) the products run about three times faster; elsewhere it is emulated and slower. The rollouts
-            are float32 either way. Every other argument is PPO's.
+            are float32 either way.
+        bounds_loss_coef: the weight (a number >= 0; 0, the default, is SB3's loss) of a charge on the mean action
+            ``mu`` of a ``Box`` action space beyond ``BOUNDS_MARGIN`` (1.1) times the box's half-width from its
+            centre: ``sum_j max(0, mu_j - b_j)^2 + max(0, a_j - mu_j)^2`` per sample, ``[a_j, b_j]`` the widened box,
+            averaged over the minibatch and added to PPO's loss; ``train/bounds_loss`` logs it. The rollouts are
+            unchanged. Every other argument is PPO's.
 
     Every ``torch.nn.Tanh`` of the policy is a ``FastTanh`` (the same function, faster); a saved model is SB3's
     and loads as ``PPO`` too.
 
     Raises:
-        TypeError: ``update_chunk`` is not an int, ``update_precision`` not a str.
-        ValueError: ``update_chunk`` is not positive, ``update_precision`` not one of ``UPDATE_PRECISIONS``.
+        TypeError: ``update_chunk`` is not an int, ``update_precision`` not a str, ``bounds_loss_coef`` not a real
+            number.
+        ValueError: ``update_chunk`` is not positive, ``update_precision`` not one of ``UPDATE_PRECISIONS``,
+            ``bounds_loss_coef`` negative or not finite, or positive with an action space that is not a ``Box``.
     """
 
-    def __init__(self, *args, update_chunk: int | None = None, update_precision: str = "float32", **kwargs):
+    def __init__(self, *args, update_chunk: int | None = None, update_precision: str = "float32",
+                 bounds_loss_coef: float = 0.0, **kwargs):
         if update_chunk is not None:
             if isinstance(update_chunk, bool) or not isinstance(update_chunk, (int, np.integer)):
                 raise TypeError(f"update_chunk must be an int or None, got {type(update_chunk).__name__}")
@@ -102,8 +119,13 @@ class ChunkedPPO(PPO):
             raise TypeError(f"update_precision must be a str, got {type(update_precision).__name__}")
         if update_precision not in UPDATE_PRECISIONS:
             raise ValueError(f"update_precision must be one of {UPDATE_PRECISIONS}, got {update_precision!r}")
+        if isinstance(bounds_loss_coef, bool) or not isinstance(bounds_loss_coef, (int, float, np.integer, np.floating)):
+            raise TypeError(f"bounds_loss_coef must be a real number, got {type(bounds_loss_coef).__name__}")
+        if not (np.isfinite(bounds_loss_coef) and bounds_loss_coef >= 0):
+            raise ValueError(f"bounds_loss_coef must be finite and >= 0, got {bounds_loss_coef}")
         self.update_chunk = update_chunk
         self.update_precision = update_precision
+        self.bounds_loss_coef = float(bounds_loss_coef)
         super().__init__(*args, **kwargs)
 
     def _update_info_buffer(self, infos: list[dict], dones: np.ndarray | None = None) -> None:
@@ -119,6 +141,8 @@ class ChunkedPPO(PPO):
                 self.ep_success_buffer.append(maybe_is_success)
 
     def _setup_model(self) -> None:
+        if self.bounds_loss_coef > 0 and not isinstance(self.action_space, spaces.Box):
+            raise ValueError(f"bounds_loss_coef applies to a Box action space, got {type(self.action_space).__name__}")
         super()._setup_model()
         for parent in self.policy.modules():
             for name, child in parent.named_children():
@@ -133,7 +157,7 @@ class ChunkedPPO(PPO):
     def train(self) -> None:
         """One PPO update on the rollout buffer (``PPO.train``), each minibatch's gradient summed over chunks."""
         chunk_size = self.chunk
-        if self.batch_size <= chunk_size and self.update_precision == "float32":
+        if self.batch_size <= chunk_size and self.update_precision == "float32" and not self.bounds_loss_coef:
             return super().train()
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
@@ -142,7 +166,7 @@ class ChunkedPPO(PPO):
         if self.clip_range_vf is not None:
             clip_range_vf = self.clip_range_vf(self._current_progress_remaining)  # type: ignore[operator]
 
-        entropy_losses, pg_losses, value_losses, clip_fractions = [], [], [], []
+        entropy_losses, pg_losses, value_losses, clip_fractions, bounds_losses = [], [], [], [], []
         approx_kl_divs: list[float] = []
         loss_value = float("nan")
         continue_training = True
@@ -154,17 +178,18 @@ class ChunkedPPO(PPO):
                 if self.normalize_advantage and batch > 1:
                     advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
                 self.policy.optimizer.zero_grad()
-                sums = np.zeros(5)  # policy loss, value loss, entropy loss, clipped samples, KL estimate: sums over the minibatch
+                sums = np.zeros(6)  # policy loss, value loss, entropy loss, clipped samples, KL estimate, bounds loss: sums over the minibatch
                 for start in range(0, batch, chunk_size):
                     chunk = slice(start, start + chunk_size)
                     sums += self._chunk_backward(rollout_data, advantages, chunk, batch, clip_range, clip_range_vf)
-                policy_loss, value_loss, entropy_loss, clipped, kl = sums / batch
+                policy_loss, value_loss, entropy_loss, clipped, kl, bounds_loss = sums / batch
                 pg_losses.append(policy_loss)
                 value_losses.append(value_loss)
                 entropy_losses.append(entropy_loss)
                 clip_fractions.append(clipped)
                 approx_kl_divs.append(kl)
-                loss_value = policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss
+                bounds_losses.append(bounds_loss)
+                loss_value = policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss + self.bounds_loss_coef * bounds_loss
                 if self.target_kl is not None and kl > 1.5 * self.target_kl:
                     continue_training = False
                     if self.verbose >= 1:
@@ -183,6 +208,8 @@ class ChunkedPPO(PPO):
         self.logger.record("train/approx_kl", np.mean(approx_kl_divs))
         self.logger.record("train/clip_fraction", np.mean(clip_fractions))
         self.logger.record("train/loss", loss_value)
+        if self.bounds_loss_coef:
+            self.logger.record("train/bounds_loss", np.mean(bounds_losses))
         self.logger.record("train/explained_variance", explained_var)
         if hasattr(self.policy, "log_std"):
             self.logger.record("train/std", th.exp(self.policy.log_std).mean().item())
@@ -192,12 +219,13 @@ class ChunkedPPO(PPO):
             self.logger.record("train/clip_range_vf", clip_range_vf)
 
     def _evaluate_actions(self, observations: th.Tensor, actions: th.Tensor):
-        """``policy.evaluate_actions``, its hidden layers in ``update_precision``."""
-        if self.update_precision == "float32":
-            return self.policy.evaluate_actions(observations, actions)
+        """``policy.evaluate_actions`` (the same operations), its hidden layers in ``update_precision``; also the
+        mean action when ``bounds_loss_coef`` charges it (else None)."""
+        if self.update_precision == "float32" and not self.bounds_loss_coef:
+            return (*self.policy.evaluate_actions(observations, actions), None)
         policy = self.policy
         features = policy.extract_features(observations)
-        with th.autocast("cpu", dtype=th.bfloat16):
+        with th.autocast("cpu", dtype=th.bfloat16, enabled=self.update_precision == "bfloat16"):
             if policy.share_features_extractor:
                 latent_pi, latent_vf = policy.mlp_extractor(features)
             else:
@@ -205,7 +233,16 @@ class ChunkedPPO(PPO):
                 latent_vf = policy.mlp_extractor.forward_critic(features[1])
         distribution = policy._get_action_dist_from_latent(latent_pi.float())
         values = policy.value_net(latent_vf.float())
-        return values, distribution.log_prob(actions), distribution.entropy()
+        mean = distribution.distribution.mean if self.bounds_loss_coef else None
+        return values, distribution.log_prob(actions), distribution.entropy(), mean
+
+    def _bounds_loss(self, mean: th.Tensor) -> th.Tensor:
+        """The sum over the samples of ``mean`` (n, action dims) of the charge ``bounds_loss_coef`` weighs."""
+        low, high = self.action_space.low.astype(np.float64), self.action_space.high.astype(np.float64)
+        centre, half = (high + low) / 2, (high - low) / 2
+        upper = th.as_tensor(centre + BOUNDS_MARGIN * half, dtype=mean.dtype)
+        lower = th.as_tensor(centre - BOUNDS_MARGIN * half, dtype=mean.dtype)
+        return ((mean - upper).clamp(min=0) ** 2 + (lower - mean).clamp(min=0) ** 2).sum()
 
     def _chunk_backward(self, data, advantages: th.Tensor, chunk: slice, batch: int, clip_range: float,
                         clip_range_vf: float | None) -> np.ndarray:
@@ -215,7 +252,7 @@ class ChunkedPPO(PPO):
         actions = data.actions[chunk]
         if isinstance(self.action_space, spaces.Discrete):
             actions = actions.long().flatten()
-        values, log_prob, entropy = self._evaluate_actions(data.observations[chunk], actions)
+        values, log_prob, entropy, mean = self._evaluate_actions(data.observations[chunk], actions)
         values = values.flatten()
         advantages = advantages[chunk]
         log_ratio = log_prob - data.old_log_prob[chunk]
@@ -225,8 +262,14 @@ class ChunkedPPO(PPO):
         values_pred = values if clip_range_vf is None else old_values + th.clamp(values - old_values, -clip_range_vf, clip_range_vf)
         value_loss = ((data.returns[chunk] - values_pred) ** 2).sum()
         entropy_loss = log_prob.sum() if entropy is None else -entropy.sum()
-        ((policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss) / batch).backward()
+        loss = policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss
+        bounds_loss = 0.0
+        if mean is not None:
+            bounds_loss = self._bounds_loss(mean)
+            loss = loss + self.bounds_loss_coef * bounds_loss
+            bounds_loss = bounds_loss.item()
+        (loss / batch).backward()
         with th.no_grad():
             clipped = (th.abs(ratio - 1) > clip_range).sum()
             kl = ((ratio - 1) - log_ratio).sum()
-        return np.array([policy_loss.item(), value_loss.item(), entropy_loss.item(), clipped.item(), kl.item()])
+        return np.array([policy_loss.item(), value_loss.item(), entropy_loss.item(), clipped.item(), kl.item(), bounds_loss])

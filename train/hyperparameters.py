@@ -32,6 +32,7 @@ PPO_KEYS = (
     "target_kl",
     "stats_window_size",
     "policy_kwargs",
+    "bounds_loss_coef",  # train.chunked_ppo.ChunkedPPO's: a charge on the mean action beyond the action box
 )
 
 

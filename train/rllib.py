@@ -33,8 +33,8 @@ and these do not map; the run prints which it ignored and keeps them in ``config
     policy_kwargs.log_std_init   RLlib's Gaussian head starts from the network's output
     policy, stats_window_size    RLlib's default MLP; logging only
 
-``target_kl``, ``use_sde`` and schedules of ``clip_range`` are errors (RLlib's ``kl_target`` is an
-adaptive penalty, not SB3's early stop). RLlib's own KL penalty is off (``use_kl_loss=False``), as SB3's
+``target_kl``, ``use_sde``, ``bounds_loss_coef`` (``train.chunked_ppo``'s) and schedules of ``clip_range`` are
+errors (RLlib's ``kl_target`` is an adaptive penalty, not SB3's early stop). RLlib's own KL penalty is off (``use_kl_loss=False``), as SB3's
 PPO has none, and advantages are standardised per batch as in SB3.
 
 The run folder::
@@ -157,7 +157,7 @@ _MAPPED = {
     "vf_coef": "vf_loss_coeff",
     "max_grad_norm": "grad_clip",
 }
-_REFUSED = ("target_kl", "use_sde", "sde_sample_freq", "callback")
+_REFUSED = ("target_kl", "use_sde", "sde_sample_freq", "callback", "bounds_loss_coef")
 
 
 def resolve_config(args: RLlibArgs) -> dict:
@@ -166,6 +166,8 @@ def resolve_config(args: RLlibArgs) -> dict:
     refused = sorted(k for k in _REFUSED if k in hp and hp[k] not in (None, False))
     if refused:
         raise ValueError(f"{refused} have no counterpart in RLlib's PPO; remove them (see train/rllib.py)")
+    for key in _REFUSED:  # what is left of them is off (None, false, 0): nothing to map
+        hp.pop(key, None)
     not_mapped = {}
     normalize = hp.pop("normalize", False)
     if normalize is True:

@@ -125,6 +125,9 @@ def test_unmapped_keys_are_errors_or_recorded(tmp_path):
         resolve_config(RLlibArgs(out=tmp_path, params=["target_kl:0.01"]))
     with pytest.raises(ValueError, match="callback"):  # SB3 callbacks (a curriculum) have no counterpart either
         resolve_config(RLlibArgs(out=tmp_path, params=["callback:train.callbacks.ConfigSchedule"]))
+    with pytest.raises(ValueError, match="bounds_loss_coef"):  # ChunkedPPO's charge on the mean action
+        resolve_config(RLlibArgs(out=tmp_path, params=["bounds_loss_coef:0.05"]))
+    resolve_config(RLlibArgs(out=tmp_path, params=["bounds_loss_coef:0.0", "target_kl:null", "use_sde:false"]))  # off: nothing to refuse
     with pytest.raises(ValueError, match="norm_obs"):
         resolve_config(RLlibArgs(out=tmp_path, params=["normalize:{norm_obs: true}"]))
     config = resolve_config(RLlibArgs(out=tmp_path, num_env_runners=3))

@@ -104,8 +104,9 @@ What was tried, each a probe of plain PPO from scratch with one change (the numb
 survive on every seed of its curves; which seeds hop *to the command* varies, and no configuration has brought more
 than two seeds of five within the apex bar. More initial action noise, gSDE, a command that changes within each
 episode, commands from high to low, no charge on the torso's tilt, an entropy bonus, 2 epochs per rollout instead of
-3, the task's narrow kernel from the first step, a critic twice as wide as the actor and a knee free to straighten
-past its limit early in training each moved which seeds hop to the command, or how close, not how many. Seeds 7 and 8, which miss it in most probes, settle on a gait of one
+3, the task's narrow kernel from the first step, a critic twice as wide as the actor, a knee free to straighten
+past its limit early in training, a charge on mean actions beyond the action box and an actor half as wide as its
+critic each moved which seeds hop to the command, or how close, not how many. Seeds 7 and 8, which miss it in most probes, settle on a gait of one
 height (about 5.5 cm whatever the command): at the highest commands their hip swings over 0.3 rad, their knee
 straightens to 0.27-0.29 rad at most and their hip torque is at its limit 61-73% of the time, where the shipped seed
 swings its hip over 1.1 rad and straightens its knee to 0.07 rad. The page also has the float32 update, the

@@ -251,3 +251,40 @@ def test_bounds_loss_coef_survives_save_and_load(tmp_path):
     model.save(tmp_path / "model.zip")
     assert ChunkedPPO.load(tmp_path / "model.zip", device="cpu").bounds_loss_coef == 0.25
     PPO.load(tmp_path / "model.zip", device="cpu")  # still SB3's model
+
+
+def test_torch_tanh_is_sb3_bit_for_bit_and_use_tanh_switches_both_ways():
+    """``tanh="torch"`` keeps SB3's ``nn.Tanh``: within one chunk the update is SB3's PPO's, bit for bit; ``use_tanh``
+    swaps a model's activations either way without changing what the policy computes (beyond float32's rounding)."""
+    torch.set_num_threads(1)
+    reference, chunked = _one_update(PPO), _one_update(ChunkedPPO, update_chunk=256, tanh="torch")
+    assert chunked.tanh == "torch" and not any(isinstance(m, FastTanh) for m in chunked.policy.modules())
+    after_ref, after = _parameters(reference), _parameters(chunked)
+    for name in after_ref:
+        assert torch.equal(after[name], after_ref[name]), name
+    obs = np.random.default_rng(1).normal(size=(64, *chunked.observation_space.shape)).astype(np.float32)
+    before = chunked.predict(obs, deterministic=True)[0]
+    chunked.use_tanh("fast")
+    assert chunked.tanh == "fast" and sum(type(m) is FastTanh for m in chunked.policy.modules()) == 4  # two per network
+    assert not any(type(m) is torch.nn.Tanh for m in chunked.policy.modules())
+    np.testing.assert_allclose(chunked.predict(obs, deterministic=True)[0], before, rtol=0, atol=1e-5)
+    chunked.use_tanh("torch")
+    assert sum(type(m) is torch.nn.Tanh for m in chunked.policy.modules()) == 4
+    assert not any(isinstance(m, FastTanh) for m in chunked.policy.modules())
+
+
+def test_saved_tanh_choice_comes_back_on_load(tmp_path):
+    model = ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), tanh="torch", n_steps=8, batch_size=16, device="cpu")
+    model.save(tmp_path / "model.zip")
+    again = ChunkedPPO.load(tmp_path / "model.zip", device="cpu")
+    assert again.tanh == "torch" and not any(isinstance(m, FastTanh) for m in again.policy.modules())
+
+
+@pytest.mark.parametrize("tanh, error", [("sigmoid", ValueError), ("", ValueError), (None, TypeError), (1, TypeError)])
+def test_bad_tanh(tanh, error):
+    with pytest.raises(error, match="tanh"):
+        ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), tanh=tanh, n_steps=8, batch_size=16, device="cpu")
+    model = ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), n_steps=8, batch_size=16, device="cpu")
+    with pytest.raises(error, match="tanh"):
+        model.use_tanh(tanh)
+    assert model.tanh == "fast" and any(type(m) is FastTanh for m in model.policy.modules())

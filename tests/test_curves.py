@@ -31,7 +31,7 @@ def test_iqm_is_the_mean_of_the_middle_half_and_its_interval_contains_it():
 @pytest.mark.parametrize(
     "kwargs, field",
     [({"seeds": 0}, "seeds"), ({"seeds": 3, "shipped_seed": 3}, "shipped_seed"), ({"eval_freq": 0}, "eval_freq"), ({"episodes": 0}, "episodes"),
-     ({"jobs": 0}, "jobs"), ({"eval_env_kwargs": ["push_force"]}, "eval_env_kwargs"), ({"update_precision": "float16"}, "update_precision"),
+     ({"jobs": 0}, "jobs"), ({"eval_env_kwargs": ["push_force"]}, "eval_env_kwargs"), ({"update_precision": "float16"}, "update_precision"), ({"tanh": "sigmoid"}, "tanh"),
      ({"select_after": -1}, "select_after")],
 )
 def test_bad_arguments_name_the_field(kwargs, field):
@@ -146,12 +146,13 @@ def test_a_sweep_passes_its_update_precision_and_selection_to_each_seed_and_can_
     import yaml
 
     main(["--env-id", "leg_env/PlanarLegBalance-v0", "--total-timesteps", "256", "--eval-freq", "128", "--eval-episodes", "2",
-          "--episodes", "2", "--seeds", "1", "--update-precision", "bfloat16", "--no-shipped", "--select-after", "200",
+          "--episodes", "2", "--seeds", "1", "--update-precision", "bfloat16", "--tanh", "torch", "--no-shipped", "--select-after", "200",
           "--params", *TINY, "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "page")])  # fmt: skip
     folder = tmp_path / "runs" / "seed_0"
     config = yaml.safe_load((folder / "config.yaml").read_text())
-    assert config["update_precision"] == "bfloat16" and config["select_after"] == 200
+    assert config["update_precision"] == "bfloat16" and config["select_after"] == 200 and config["tanh"] == "torch"
     assert "--update-precision bfloat16" in (folder / "command.txt").read_text()
+    assert "--tanh torch" in (folder / "command.txt").read_text()
     assert "--select-after 200" in (folder / "command.txt").read_text()
     assert json.loads((folder / "evaluations.json").read_text())["selected"]["timesteps"] == 256  # not the one at 128
     page = (tmp_path / "page" / "README.md").read_text()

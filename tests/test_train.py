@@ -350,6 +350,23 @@ def test_update_precision_reaches_the_model_and_a_resume_takes_its_own(tmp_path)
     assert load_checkpoint(out / "checkpoints", normalize=True, algo=ChunkedPPO).model.update_precision == "float32"
 
 
+def test_tanh_choice_reaches_the_model_and_a_resume_takes_its_own(tmp_path):
+    from train.chunked_ppo import ChunkedPPO, FastTanh
+    from train.checkpoints import load_checkpoint
+
+    assert resolve_config(tiny_args(tmp_path / "a"))["tanh"] == "fast"  # the default
+    out = train(tiny_args(tmp_path / "run", tanh="torch", eval_freq=0, total_timesteps=128))
+    assert yaml.safe_load((out / "config.yaml").read_text())["tanh"] == "torch"
+    model = load_checkpoint(out / "checkpoints", normalize=True, algo=ChunkedPPO).model
+    assert model.tanh == "torch" and not any(isinstance(m, FastTanh) for m in model.policy.modules())
+    out = train(tiny_args(tmp_path / "run", tanh="fast", eval_freq=0, total_timesteps=256))  # resumed
+    assert yaml.safe_load((out / "config.yaml").read_text())["tanh"] == "fast"
+    model = load_checkpoint(out / "checkpoints", normalize=True, algo=ChunkedPPO).model
+    assert model.tanh == "fast" and any(type(m) is FastTanh for m in model.policy.modules())
+    with pytest.raises(ValueError, match="tanh"):
+        tiny_args(tmp_path / "bad", tanh="sigmoid")
+
+
 def test_select_after_leaves_the_earlier_evaluations_out_of_the_selection(tmp_path):
     out = train(tiny_args(tmp_path / "run", total_timesteps=384, select_after=256))
     assert yaml.safe_load((out / "config.yaml").read_text())["select_after"] == 256

@@ -11,9 +11,10 @@ about speed:
   logged statistics. With 1024 envs and minibatches of 16,384 samples, each activation of a [128, 128] network is
   an 8 MB array, far larger than a core's cache; chunks of 4,096 samples per torch thread keep them in cache.
 * The policy's ``torch.nn.Tanh`` activations are ``FastTanh``: ``2 sigmoid(2x) - 1``, the same function to
-  float32's rounding, because torch's CPU ``tanh`` kernel is several times slower than its ``sigmoid`` and took a
-  quarter of a large-batch update. A saved model is SB3's (its ``policy_kwargs`` name ``nn.Tanh``) and loads with
-  ``PPO.load``.
+  float32's rounding, because torch's CPU ``tanh`` kernel is several times slower than its ``sigmoid`` on the
+  project's AMD EPYC and took a quarter of a large-batch update there. On other CPUs torch's own is the faster (an
+  Intel Xeon of the Sapphire Rapids class: 0.84 ms against 5.99 ms on a 16,384 x 128 array): ``tanh="torch"`` keeps
+  it. A saved model is SB3's (its ``policy_kwargs`` name ``nn.Tanh``) and loads with ``PPO.load``.
 * ``update_precision="bfloat16"`` runs the hidden layers of the update in bfloat16 (``torch.autocast``), the
   parameters, optimiser, output layers and losses staying float32: on a CPU with bfloat16 arithmetic the matrix
   products, most of the update, run about three times faster. ``train.ppo`` uses it on request
@@ -40,7 +41,7 @@ from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.utils import explained_variance
 
-from train.machine import UPDATE_PRECISIONS
+from train.machine import TANHS, UPDATE_PRECISIONS
 
 __all__ = ["ChunkedPPO", "FastTanh", "BOUNDS_MARGIN", "UPDATE_CHUNK"]
 
@@ -78,6 +79,13 @@ class FastTanh(th.nn.Tanh):
         return _SigmoidTanh.apply(x)
 
 
+def _check_tanh(tanh) -> None:
+    if not isinstance(tanh, str):
+        raise TypeError(f"tanh must be a str, got {type(tanh).__name__}")
+    if tanh not in TANHS:
+        raise ValueError(f"tanh must be one of {TANHS}, got {tanh!r}")
+
+
 class ChunkedPPO(PPO):
     """``stable_baselines3.PPO`` whose minibatch gradients are summed over chunks of at most ``update_chunk`` samples.
 
@@ -91,6 +99,9 @@ class ChunkedPPO(PPO):
             action distribution and the losses stay float32. On a CPU with bfloat16 arithmetic (AVX512-BF16 or
             AMX) the products run about three times faster; elsewhere it is emulated and slower. The rollouts
             are float32 either way.
+        tanh: how the networks compute their ``tanh`` activations: ``"fast"`` (``FastTanh``, the default) or
+            ``"torch"`` (``torch.nn.Tanh``, SB3's). The same function to float32's rounding; which is faster depends on
+            the CPU. ``use_tanh`` switches a model.
         bounds_loss_coef: the weight (a number >= 0; 0, the default, is SB3's loss) of a charge on the mean action
             ``mu`` of a ``Box`` action space beyond ``BOUNDS_MARGIN`` (1.1) times the box's half-width from its
             centre: ``sum_j max(0, mu_j - b_j)^2 + max(0, a_j - mu_j)^2`` per sample, ``[a_j, b_j]`` the widened box,
@@ -101,13 +112,14 @@ class ChunkedPPO(PPO):
     and loads as ``PPO`` too.
 
     Raises:
-        TypeError: ``update_chunk`` is not an int, ``update_precision`` not a str, ``bounds_loss_coef`` not a real
-            number.
-        ValueError: ``update_chunk`` is not positive, ``update_precision`` not one of ``UPDATE_PRECISIONS``,
+        TypeError: ``update_chunk`` is not an int, ``update_precision`` or ``tanh`` not a str, ``bounds_loss_coef``
+            not a real number.
+        ValueError: ``update_chunk`` is not positive, ``update_precision`` not one of ``UPDATE_PRECISIONS``, ``tanh``
+            not one of ``TANHS``,
             ``bounds_loss_coef`` negative or not finite, or positive with an action space that is not a ``Box``.
     """
 
-    def __init__(self, *args, update_chunk: int | None = None, update_precision: str = "float32",
+    def __init__(self, *args, update_chunk: int | None = None, update_precision: str = "float32", tanh: str = "fast",
                  bounds_loss_coef: float = 0.0, **kwargs):
         if update_chunk is not None:
             if isinstance(update_chunk, bool) or not isinstance(update_chunk, (int, np.integer)):
@@ -123,8 +135,10 @@ class ChunkedPPO(PPO):
             raise TypeError(f"bounds_loss_coef must be a real number, got {type(bounds_loss_coef).__name__}")
         if not (np.isfinite(bounds_loss_coef) and bounds_loss_coef >= 0):
             raise ValueError(f"bounds_loss_coef must be finite and >= 0, got {bounds_loss_coef}")
+        _check_tanh(tanh)
         self.update_chunk = update_chunk
         self.update_precision = update_precision
+        self.tanh = tanh
         self.bounds_loss_coef = float(bounds_loss_coef)
         super().__init__(*args, **kwargs)
 
@@ -144,10 +158,19 @@ class ChunkedPPO(PPO):
         if self.bounds_loss_coef > 0 and not isinstance(self.action_space, spaces.Box):
             raise ValueError(f"bounds_loss_coef applies to a Box action space, got {type(self.action_space).__name__}")
         super()._setup_model()
+        self.use_tanh(self.tanh)
+
+    def use_tanh(self, tanh: str) -> None:
+        """Compute the policy's ``tanh`` activations as ``tanh`` says from now on: ``"fast"`` (``FastTanh``) or
+        ``"torch"`` (``torch.nn.Tanh``). ``train.ppo`` calls it on a resumed model with the invocation's choice, as a
+        resume may run on another CPU. Raises ``TypeError`` / ``ValueError`` naming ``tanh``."""
+        _check_tanh(tanh)
+        old, new = (th.nn.Tanh, FastTanh) if tanh == "fast" else (FastTanh, th.nn.Tanh)
         for parent in self.policy.modules():
             for name, child in parent.named_children():
-                if type(child) is th.nn.Tanh:
-                    setattr(parent, name, FastTanh())
+                if type(child) is old:
+                    setattr(parent, name, new())
+        self.tanh = tanh
 
     @property
     def chunk(self) -> int:

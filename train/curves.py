@@ -46,7 +46,7 @@ import numpy as np
 import yaml
 
 from train.cli import interrupt, parse_args
-from train.machine import UPDATE_PRECISIONS, describe
+from train.machine import TANHS, UPDATE_PRECISIONS, describe
 
 __all__ = ["CurvesArgs", "iqm_interval", "sweep", "main"]
 
@@ -100,6 +100,8 @@ class CurvesArgs:
     """Threads of torch in each seed's training (train.ppo's --torch-threads)."""
     update_precision: str = "float32"
     """The arithmetic of the hidden layers in each seed's PPO update (train.ppo's --update-precision)."""
+    tanh: str = "fast"
+    """How each seed's networks compute tanh (train.ppo's --tanh: 'fast' or 'torch'; the faster depends on the CPU)."""
     select_after: int = 0
     """Environment steps before which no in-training evaluation is a candidate for a seed's selected policy
     (train.ppo's --select-after)."""
@@ -116,6 +118,8 @@ class CurvesArgs:
             raise ValueError(f"first_seed must be >= 0, got {self.first_seed}")
         if self.update_precision not in ("auto", *UPDATE_PRECISIONS):  # before any seed trains
             raise ValueError(f"update_precision must be one of {('auto', *UPDATE_PRECISIONS)}, got {self.update_precision!r}")
+        if self.tanh not in TANHS:
+            raise ValueError(f"tanh must be one of {TANHS}, got {self.tanh!r}")
         if self.shipped_seed is None:
             self.shipped_seed = self.first_seed
         if not self.first_seed <= self.shipped_seed < self.first_seed + self.seeds:
@@ -179,6 +183,7 @@ def _train_seed(args: CurvesArgs, seed: int) -> Path:
             verbose=1,
             torch_threads=args.torch_threads,
             update_precision=args.update_precision,
+            tanh=args.tanh,
             select_after=args.select_after,
         ),
         command=seed_command(args, seed),
@@ -249,6 +254,8 @@ def seed_command(args: CurvesArgs, seed: int) -> str:
             "--eval-freq", str(args.eval_freq), "--eval-episodes", str(args.eval_episodes), "--torch-threads", str(args.torch_threads)]
     if args.update_precision != "float32":
         argv += ["--update-precision", args.update_precision]
+    if args.tanh != "fast":
+        argv += ["--tanh", args.tanh]
     if args.total_timesteps is not None:
         argv += ["--total-timesteps", str(args.total_timesteps)]
     if args.select_after:

@@ -7,10 +7,13 @@ import platform
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-__all__ = ["cpu_name", "describe", "native_bfloat16", "UPDATE_PRECISIONS"]
+__all__ = ["cpu_name", "describe", "native_bfloat16", "UPDATE_PRECISIONS", "TANHS"]
 
 UPDATE_PRECISIONS = ("float32", "bfloat16")
 """The arithmetic of the hidden layers in PPO's update (``train.chunked_ppo.ChunkedPPO(update_precision=...)``)."""
+TANHS = ("fast", "torch")
+"""``train.chunked_ppo.ChunkedPPO``'s ways of computing ``tanh``: ``FastTanh``, or torch's own (which is faster
+depends on the CPU)."""
 
 
 def cpu_name() -> str:

@@ -65,7 +65,7 @@ from train.checkpoints import (
 )
 from train.cli import interrupt, parse_args
 from train.hyperparameters import DEFAULT_HYPERPARAMS, display_path, load_hyperparams, parse_override
-from train.machine import UPDATE_PRECISIONS, cpu_name, native_bfloat16
+from train.machine import TANHS, UPDATE_PRECISIONS, cpu_name, native_bfloat16
 from train.runfolder import RunFolderError, prepare_run_folder, run_locked, runnable_command
 
 __all__ = ["TrainArgs", "train", "resolve_config", "ppo_kwargs", "load_hyperparams", "ENV_ID", "DEFAULT_HYPERPARAMS"]
@@ -138,6 +138,10 @@ class TrainArgs:
     float32: on a CPU with bfloat16 arithmetic the update runs about twice as fast), or 'auto': bfloat16 on a CPU
     with bfloat16 arithmetic (AVX512-BF16 or AMX), else float32. Over five seeds the hop task learnt as well in
     bfloat16 and the balance task to lower returns (docs/training.md)."""
+    tanh: str = "fast"
+    """How the networks compute tanh (train.chunked_ppo.ChunkedPPO): 'fast' (FastTanh, 2 sigmoid(2x) - 1: faster where
+    torch's tanh kernel is slow, as on an AMD EPYC) or 'torch' (torch's own: faster on an Intel Xeon of the Sapphire
+    Rapids class). The same function to float32's rounding, so a run's last digits differ; a resume takes its own."""
 
     def __post_init__(self):
         check_select_after(self.select_after)
@@ -156,6 +160,8 @@ class TrainArgs:
             raise ValueError(f"torch_threads must be an integer >= 1, got {self.torch_threads!r}")
         if self.update_precision not in ("auto", *UPDATE_PRECISIONS):
             raise ValueError(f"update_precision must be one of {('auto', *UPDATE_PRECISIONS)}, got {self.update_precision!r}")
+        if self.tanh not in TANHS:
+            raise ValueError(f"tanh must be one of {TANHS}, got {self.tanh!r}")
 
 
 def _controllers() -> tuple:
@@ -200,6 +206,7 @@ def resolve_config(args: TrainArgs) -> dict:
         "select_after": int(args.select_after),
         "checkpoint_freq": int(args.checkpoint_freq),
         "update_precision": update_precision(args.update_precision),
+        "tanh": args.tanh,
         "hyperparams_file": display_path(args.hyperparams),
         "overrides": list(args.params),
     }
@@ -370,6 +377,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
             tensorboard_log=str(out / "tb"),
             verbose=max(0, args.verbose - 1),
             update_precision=config["update_precision"],
+            tanh=config["tanh"],
             **ppo_kwargs(config),
         )
         if config.get("init_from"):
@@ -380,6 +388,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
             venv = BatchVecNormalize.from_vec_normalize(checkpoint.vec_normalize)
         model = checkpoint.model
         model.update_precision = config["update_precision"]  # this invocation's (a resume may run on another CPU)
+        model.use_tanh(config["tanh"])  # this invocation's too
         model.set_env(venv)
         restore_rng(checkpoint.rng)
         if args.verbose:

@@ -115,8 +115,8 @@ class ChunkedPPO(PPO):
         TypeError: ``update_chunk`` is not an int, ``update_precision`` or ``tanh`` not a str, ``bounds_loss_coef``
             not a real number.
         ValueError: ``update_chunk`` is not positive, ``update_precision`` not one of ``UPDATE_PRECISIONS``, ``tanh``
-            not one of ``TANHS``,
-            ``bounds_loss_coef`` negative or not finite, or positive with an action space that is not a ``Box``.
+            not one of ``TANHS``, ``bounds_loss_coef`` negative or not finite, or positive with an action space that
+            is not a ``Box``.
     """
 
     def __init__(self, *args, update_chunk: int | None = None, update_precision: str = "float32", tanh: str = "fast",

@@ -263,8 +263,9 @@ def warm_start(model, init_from: str, config: dict) -> None:
 
 
 def ppo_kwargs(config: dict) -> dict:
-    """The keyword arguments of SB3's ``PPO`` in a resolved ``config`` (``resolve_config``): its ``ppo`` entries,
-    a learning rate or clip range written as a schedule (``"lin_3e-4"``) made the callable SB3 takes."""
+    """The keyword arguments of ``ChunkedPPO`` in a resolved ``config`` (``resolve_config``): its ``ppo`` entries (SB3
+    PPO's, and ``bounds_loss_coef`` where set), a learning rate or clip range written as a schedule (``"lin_3e-4"``)
+    made the callable SB3 takes."""
     kwargs = dict(config["ppo"])
     for key in ("learning_rate", "clip_range", "clip_range_vf"):
         if key in kwargs:

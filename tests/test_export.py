@@ -109,3 +109,20 @@ def test_missing_or_corrupt_files_are_errors_naming_the_file(normalised_run, tmp
     assert not (tmp_path / "x.onnx").exists()
     with pytest.raises(ExportError, match="not a network"):
         export_onnx("lqr", tmp_path / "x.onnx")
+
+
+def test_a_policy_with_command_gains_exports_with_its_products(tmp_path):
+    """``train.features.CommandGains`` in the graph: Slice, Mul and Concat before the actor, equal to predict."""
+    from train.features import CommandGains
+
+    params = TINY + ["policy_kwargs:{net_arch: [16, 16], features_extractor_class: train.features.CommandGains}"]
+    args = TrainArgs(out=tmp_path / "run", env_id="leg_env/PlanarLegHop-v3", params=params, total_timesteps=256, eval_freq=0,
+                     eval_episodes=1, checkpoint_freq=0, progress_bar=False, verbose=0)  # fmt: skip
+    folder = train(args)
+    policy = load_policy(folder)
+    assert isinstance(policy.model.policy.pi_features_extractor, CommandGains)
+    path = export_onnx(folder, tmp_path / "gains.onnx")
+    assert {"Slice", "Mul", "Concat"} <= {n.op_type for n in onnx.load(path).graph.node}
+    obs = observations(env_id="leg_env/PlanarLegHop-v3")
+    expected, _ = policy.predict(obs, deterministic=True)
+    np.testing.assert_allclose(run_onnx(path, obs), expected, rtol=0.0, atol=TOLERANCE)

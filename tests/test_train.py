@@ -550,3 +550,144 @@ def test_batch_vec_normalize_saves_as_sb3s_class_and_resumes(tmp_path):
     _step_both(VecNormalize.load(tmp_path / "plain.pkl", plain.venv), resumed, 20, seed=2)
     with pytest.raises(TypeError, match="VecNormalize"):
         BatchVecNormalize.from_vec_normalize(batched.venv)
+
+
+class _Records:
+    """A logger that keeps what is recorded."""
+
+    def __init__(self):
+        self.values = {}
+
+    def record(self, key, value, exclude=None):
+        self.values[key] = value
+
+
+def _curriculum(**kwargs):
+    """A CommandCurriculum driven by hand: a model that holds its level, raw observations through ``locals``."""
+    from types import SimpleNamespace
+
+    from train.callbacks import CommandCurriculum
+
+    curriculum = CommandCurriculum([0.02, 0.06], [0.05, 0.15], **kwargs)
+    calls = []
+    env = SimpleNamespace(env_method=lambda name, **kw: calls.append((name, kw)))
+    curriculum.model = SimpleNamespace(get_env=lambda: env, logger=_Records())
+    return curriculum, calls
+
+
+def _observe(curriculum, apex, command, dones):
+    from leg_env.tasks.stance import Obs
+
+    obs = np.zeros((len(apex), 22), dtype=np.float32)
+    obs[:, Obs.last_apex], obs[:, Obs.command] = apex, command
+    curriculum.locals = {"new_obs": obs, "dones": np.array(dones)}
+    curriculum._on_step()
+
+
+def test_command_curriculum_rises_a_level_once_the_hops_meet_the_command():
+    curriculum, calls = _curriculum(levels=4, max_error=0.01, min_hops=3)
+    curriculum._on_training_start()
+    assert curriculum.model.curriculum_level == 0 and calls == [("set_config", {"command_range": (0.02, 0.06)})]
+    c = [np.float32(0.04)] * 3
+    _observe(curriculum, [0, 0, 0], c, [False] * 3)
+    _observe(curriculum, [0.035, 0, 0.04], c, [False] * 3)  # two hops, errors 0.005 and 0
+    _observe(curriculum, [0.035, 0, 0], c, [False, False, True])  # row 2 restarted (its start shows no apex): not a hop
+    curriculum._on_rollout_end()
+    assert curriculum.level == 0  # three hops needed
+    assert curriculum.logger.values["rollout/apex_error"] == pytest.approx(0.0025, abs=1e-7)
+    _observe(curriculum, [0.035, 0, 0], c, [False] * 3)  # no apex moved: no hop
+    _observe(curriculum, [0.035, 0.0615, 0], c, [False] * 3)  # error 0.0215: the three average 0.0088
+    curriculum._on_rollout_end()
+    assert curriculum.level == 1 and curriculum.logger.values["curriculum/command_level"] == 1
+    curriculum._on_rollout_start()
+    assert calls[-1] == ("set_config", {"command_range": pytest.approx((0.0275, 0.0825))})
+    # the next level counts only its own hops, the last min_hops of them
+    _observe(curriculum, [0.06, 0.0615, 0], c, [False] * 3)  # error 0.02
+    _observe(curriculum, [0.04, 0.05, 0.04], c, [False] * 3)  # errors 0, 0.01, 0: the last three average 0.0033
+    curriculum._on_rollout_end()
+    assert curriculum.level == 2
+    _observe(curriculum, [0.06, 0.06, 0.06], c, [False] * 3)  # errors 0.02
+    curriculum._on_rollout_end()
+    assert curriculum.level == 2
+
+
+def test_command_curriculum_stops_at_its_last_level_and_refuses_bad_arguments():
+    from train.callbacks import CommandCurriculum
+
+    curriculum, calls = _curriculum(levels=1, max_error=0.5, min_hops=1)
+    curriculum._on_training_start()
+    for apex in (0.01, 0.02, 0.03):
+        _observe(curriculum, [apex], [0.04], [False])
+        curriculum._on_rollout_end()
+    assert curriculum.level == 1 and curriculum.command_range(1) == (0.05, 0.15)
+    for kwargs, field in [({"levels": 0}, "levels"), ({"levels": 2.5}, "levels"), ({"max_error": 0}, "max_error"),
+                          ({"max_error": float("nan")}, "max_error"), ({"min_hops": 0}, "min_hops"), ({"min_hops": True}, "min_hops")]:  # fmt: skip
+        with pytest.raises(ValueError, match=field):
+            CommandCurriculum([0.02, 0.06], [0.05, 0.15], **kwargs)
+    with pytest.raises(ValueError, match="start and end"):
+        CommandCurriculum([0.02], [0.05, 0.15])
+
+
+def test_train_keeps_the_command_level_in_the_model_and_resumes_from_it(tmp_path):
+    """Any landed hop raises the level here (max_error of 10 m): the level reached is saved with the model, and a
+    resumed run starts its episodes at that level's commands and goes on from it."""
+    from stable_baselines3 import PPO
+
+    curriculum = ("callback:[{train.callbacks.CommandCurriculum: {start: [0.02, 0.03], end: [0.14, 0.15], levels: 1000, "
+                  "max_error: 10.0, min_hops: 1}}]")  # fmt: skip
+    params = TINY + ["env_kwargs:{command_range: [0.02, 0.15]}", curriculum]
+    out = tmp_path / "run"
+    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, total_timesteps=2048, params=params))
+    first = PPO.load(out / "last" / "model.zip", device="cpu").curriculum_level
+    assert first > 0
+    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, total_timesteps=4096, params=params))
+    assert PPO.load(out / "last" / "model.zip", device="cpu").curriculum_level >= first
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    levels = []
+    for events in sorted((out / "tb").rglob("events.out.tfevents.*")):
+        accumulator = EventAccumulator(str(events))
+        accumulator.Reload()
+        levels += [(e.step, e.value) for e in accumulator.Scalars("curriculum/command_level")]
+    resumed = [level for step, level in sorted(levels) if step > 2048]
+    assert resumed and resumed[0] >= first  # the resumed run's first rollout was at the saved level, not back at 0
+
+
+def test_command_gains_are_the_observation_and_its_products_with_the_command():
+    import gymnasium as gym
+    import torch
+
+    from leg_env.tasks.stance import Obs
+    from train.features import CommandGains
+
+    space = gym.spaces.Box(-np.inf, np.inf, (22,), np.float32)
+    gains = CommandGains(space)
+    assert gains.features_dim == 44 and not list(gains.parameters())
+    x = torch.randn(5, 22)
+    features = gains(x)
+    assert torch.equal(features[:, :22], x) and torch.equal(features[:, 22:], x * x[:, Obs.command, None])
+    assert torch.equal(CommandGains(space, command=3)(x)[:, 22:], x * x[:, 3, None])
+    for bad, error in [({"command": 22}, ValueError), ({"command": -1}, ValueError), ({"command": 1.0}, TypeError)]:
+        with pytest.raises(error, match="command"):
+            CommandGains(space, **bad)
+    with pytest.raises(TypeError, match="flat Box"):
+        CommandGains(gym.spaces.Box(-1, 1, (2, 3), np.float32))
+
+
+def test_train_takes_a_features_extractor_by_its_class_path(tmp_path):
+    from stable_baselines3 import PPO
+
+    from train.features import CommandGains
+
+    params = TINY + ["policy_kwargs:{net_arch: [8], features_extractor_class: train.features.CommandGains}"]
+    out = train(tiny_args(tmp_path / "run", env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, params=params))
+    model = PPO.load(out / "model.zip", device="cpu")
+    assert isinstance(model.policy.features_extractor, CommandGains)
+    assert model.policy.mlp_extractor.policy_net[0].in_features == 44
+    assert yaml.safe_load((out / "config.yaml").read_text())["ppo"]["policy_kwargs"]["features_extractor_class"] == "train.features.CommandGains"
+    for path, match in [("train.features.Nothing", "cannot import|not an SB3"), ("no_such.Module", "cannot import"),
+                        ("train.callbacks.ConfigSchedule", "not an SB3 features extractor")]:  # fmt: skip
+        bad = TINY + [f"policy_kwargs:{{features_extractor_class: {path}}}"]
+        with pytest.raises(ValueError, match=f"features_extractor_class.*({match})"):
+            train(tiny_args(tmp_path / "bad", env_id="leg_env/PlanarLegHop-v3", params=bad))
+        assert not (tmp_path / "bad").exists()

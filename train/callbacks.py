@@ -17,6 +17,7 @@ __all__ = [
     "PeriodicCheckpoint",
     "FrozenActor",
     "ConfigSchedule",
+    "CommandCurriculum",
     "zoo_callbacks",
     "run_vec_episodes",
     "evaluate_now",
@@ -370,3 +371,94 @@ def zoo_callbacks(spec) -> list[BaseCallback]:
             raise ValueError(f"callback: the arguments of {path!r} must be a mapping, got {kwargs!r}")
         callbacks.append(cls(**kwargs))
     return callbacks
+
+
+class CommandCurriculum(BaseCallback):
+    """A curriculum of the hop task's commands driven by how well the policy hops to them.
+
+    The training env's ``command_range`` moves from ``start`` to ``end`` (both bounds linearly) in ``levels`` steps,
+    one level at a time, each once the policy has hopped to the commands of the level it is on: at least
+    ``min_hops`` hops landed in training since the level began (read from the training env's raw observations: a
+    hop lands where the last landed apex, ``Obs.last_apex``, changes), with a mean absolute apex error (that apex
+    minus ``Obs.command``) of at most ``max_error`` [m] over the last ``min_hops`` of them. A fixed schedule widens
+    the commands whatever the policy does; this one waits on the policy, as legged_gym's command curriculum
+    widens velocity commands once they are tracked. The level only rises. It is kept in the model
+    (``curriculum_level``), so a saved and resumed run goes on from it.
+
+    TensorBoard keys: ``curriculum/command_level``, ``curriculum/command_range_0`` and ``_1``, and
+    ``rollout/apex_error`` (the mean over the hops landed in the rollout).
+    """
+
+    def __init__(self, start, end, levels: int = 30, max_error: float = 0.015, min_hops: int = 2000, verbose: int = 0):
+        super().__init__(verbose)
+        self.start = np.asarray(start, dtype=np.float64)
+        self.end = np.asarray(end, dtype=np.float64)
+        if self.start.shape != (2,) or self.end.shape != (2,) or not (np.all(np.isfinite(self.start)) and np.all(np.isfinite(self.end))):
+            raise ValueError(f"CommandCurriculum: start and end must be [low, high] pairs of numbers, got {start!r}, {end!r}")
+        if isinstance(levels, bool) or not isinstance(levels, int) or levels < 1:
+            raise ValueError(f"CommandCurriculum: levels must be a positive int, got {levels!r}")
+        if not (isinstance(max_error, (int, float)) and np.isfinite(max_error) and max_error > 0):
+            raise ValueError(f"CommandCurriculum: max_error must be a positive number [m], got {max_error!r}")
+        if isinstance(min_hops, bool) or not isinstance(min_hops, int) or min_hops < 1:
+            raise ValueError(f"CommandCurriculum: min_hops must be a positive int, got {min_hops!r}")
+        self.levels, self.max_error, self.min_hops = levels, float(max_error), min_hops
+        self._errors: list[np.ndarray] = []
+        self._count = 0
+        self._rollout: list[np.ndarray] = []
+        self._last_apex: np.ndarray | None = None
+        self._applied = None
+
+    @property
+    def level(self) -> int:
+        return int(getattr(self.model, "curriculum_level", 0))
+
+    def command_range(self, level: int) -> tuple[float, float]:
+        low, high = self.start + (self.end - self.start) * (level / self.levels)
+        return float(low), float(high)
+
+    def set_on(self, venv: VecEnv, level: int) -> None:
+        value = self.command_range(level)
+        if value != self._applied:
+            venv.env_method("set_config", command_range=value)
+            self._applied = value
+
+    def _on_training_start(self) -> None:
+        if not hasattr(self.model, "curriculum_level"):
+            self.model.curriculum_level = 0
+        self._last_apex = None
+        self.set_on(self.training_env, self.level)
+
+    def _on_rollout_start(self) -> None:
+        self.set_on(self.training_env, self.level)
+        self._rollout = []
+
+    def _on_step(self) -> bool:
+        from leg_env.tasks.stance import Obs
+
+        obs = self.training_env.get_original_obs() if isinstance(self.training_env, VecNormalize) else self.locals["new_obs"]
+        apex, command = obs[:, Obs.last_apex], obs[:, Obs.command]
+        dones = np.asarray(self.locals["dones"], dtype=bool)
+        if self._last_apex is not None:
+            landed = (apex != self._last_apex) & ~dones  # a done row shows its next episode's start
+            if landed.any():
+                errors = np.abs(apex[landed] - command[landed])
+                self._errors.append(errors)
+                self._count += errors.size
+                self._rollout.append(errors)
+        self._last_apex = apex.copy()
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if self._rollout:
+            self.logger.record("rollout/apex_error", float(np.concatenate(self._rollout).mean()))
+        if self._count >= self.min_hops and self.level < self.levels:
+            recent = np.concatenate(self._errors)[-self.min_hops:]
+            if recent.mean() <= self.max_error:
+                self.model.curriculum_level = self.level + 1
+                self._errors, self._count = [], 0
+            else:
+                self._errors, self._count = [recent], recent.size
+        low, high = self.command_range(self.level)
+        self.logger.record("curriculum/command_level", self.level)
+        self.logger.record("curriculum/command_range_0", low)
+        self.logger.record("curriculum/command_range_1", high)

@@ -12,7 +12,8 @@ computes what ``load_policy(folder).predict(obs, deterministic=True)`` computes:
     1. if the run normalised observations (VecNormalize ``norm_obs``):
        clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs), in float64 as VecNormalize
        computes it, then float32 (the shipped policy normalises returns only: no such step)
-    2. the actor: ``mlp_extractor.policy_net`` (Gemm + activation per layer), then ``action_net``,
+    2. with ``train.features.CommandGains``, the observation followed by its products with the command entry
+       (Slice, Mul, Concat); then the actor: ``mlp_extractor.policy_net`` (Gemm + activation per layer), then ``action_net``,
        the mean of the Gaussian policy, i.e. the deterministic action
     3. clip to the action space, [-1, 1], as SB3's ``predict`` does
     output "action"       float32 (batch, 2)    [hip, knee] in [-1, 1], times ``torque_limit`` N m
@@ -22,7 +23,8 @@ bare ``model.zip`` without a ``config.yaml``, as ``train.evaluate`` assumes).
 
 The graph is written node by node from the network's weights (no tracing through torch's exporter):
 it needs only the ``onnx`` package, and reads like the policy. Supported: ``MlpPolicy`` (flat Box
-observations, Box actions, ``net_arch`` of any depth, activations Tanh, ReLU, ELU, LeakyReLU, Sigmoid).
+observations, Box actions, ``net_arch`` of any depth, activations Tanh, ReLU, ELU, LeakyReLU, Sigmoid), with SB3's
+``FlattenExtractor`` or ``train.features.CommandGains``.
 Any ONNX runtime can run it, e.g. ``onnxruntime.InferenceSession(path).run(None, {"observation": obs})``.
 """
 
@@ -56,6 +58,8 @@ def policy_to_onnx(policy: TrainedPolicy, source: str = ""):
     from onnx import TensorProto, helper, numpy_helper
     from stable_baselines3.common.torch_layers import FlattenExtractor
 
+    from train.features import CommandGains
+
     sb3_policy = policy.model.policy
     env_id = policy.env_id or ENV_ID
     obs_space, action_space = sb3_policy.observation_space, sb3_policy.action_space
@@ -65,8 +69,9 @@ def policy_to_onnx(policy: TrainedPolicy, source: str = ""):
         raise ExportError(f"only flat Box actions can be exported, the model has {action_space}")
     if sb3_policy.squash_output:
         raise ExportError("policies with squash_output=True are not supported (their actions are tanh-squashed, then unscaled)")
-    if not isinstance(sb3_policy.pi_features_extractor, FlattenExtractor):
-        raise ExportError(f"only MlpPolicy's FlattenExtractor is supported, the model has {type(sb3_policy.pi_features_extractor).__name__}")
+    extractor = sb3_policy.pi_features_extractor
+    if not isinstance(extractor, (FlattenExtractor, CommandGains)):
+        raise ExportError(f"only MlpPolicy's FlattenExtractor and train.features.CommandGains are supported, the model has {type(extractor).__name__}")
 
     nodes, initializers = [], []
 
@@ -91,6 +96,11 @@ def policy_to_onnx(policy: TrainedPolicy, source: str = ""):
         x = node("Clip", [x, constant("obs_clip_low", np.array(-clip)), constant("obs_clip_high", np.array(clip))], "obs_clipped")
         x = node("Cast", [x], "obs_normalised", to=TensorProto.FLOAT)
 
+    if isinstance(extractor, CommandGains):  # the observation, then its products with the command entry
+        k = extractor.command
+        command = node("Slice", [x, constant("command_start", np.array([k])), constant("command_end", np.array([k + 1])),
+                                 constant("command_axis", np.array([1]))], "command")  # fmt: skip
+        x = node("Concat", [x, node("Mul", [x, command], "command_products")], "features", axis=1)
     layers = [*sb3_policy.mlp_extractor.policy_net, sb3_policy.action_net]
     for k, layer in enumerate(layers):
         if isinstance(layer, torch.nn.Linear):

@@ -188,6 +188,9 @@ def resolve_config(args: TrainArgs) -> dict:
     from train.callbacks import zoo_callbacks
 
     zoo_callbacks(hp.get("callback"))  # checked before the run folder is touched
+    policy_kwargs = hp.get("policy_kwargs")
+    if isinstance(policy_kwargs, dict) and isinstance(policy_kwargs.get("features_extractor_class"), str):
+        _features_class(policy_kwargs["features_extractor_class"])  # likewise
     return {
         "env_id": args.env_id,
         "env_kwargs": hp.pop("env_kwargs", None) or {},
@@ -270,7 +273,26 @@ def ppo_kwargs(config: dict) -> dict:
     for key in ("learning_rate", "clip_range", "clip_range_vf"):
         if key in kwargs:
             kwargs[key] = _schedule(kwargs[key])
+    policy_kwargs = kwargs.get("policy_kwargs")
+    if isinstance(policy_kwargs, dict) and isinstance(policy_kwargs.get("features_extractor_class"), str):
+        kwargs["policy_kwargs"] = {**policy_kwargs, "features_extractor_class": _features_class(policy_kwargs["features_extractor_class"])}
     return kwargs
+
+
+def _features_class(path: str) -> type:
+    """The features extractor class named by ``path`` (``"train.features.CommandGains"``); ValueError if it is not one."""
+    import importlib
+
+    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+    module, _, name = path.rpartition(".")
+    try:
+        cls = getattr(importlib.import_module(module), name, None) if module else None
+    except ImportError as e:
+        raise ValueError(f"policy_kwargs.features_extractor_class: cannot import {path!r} ({e})") from e
+    if not (isinstance(cls, type) and issubclass(cls, BaseFeaturesExtractor)):
+        raise ValueError(f"policy_kwargs.features_extractor_class: {path!r} is not an SB3 features extractor class")
+    return cls
 
 
 def _save_atomic(save, path: Path) -> None:
@@ -331,6 +353,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
 
     from leg_env.sb3 import make_sb3_vec_env
     from train.callbacks import (
+        CommandCurriculum,
         ConfigSchedule,
         FrozenActor,
         PeriodicCheckpoint,
@@ -446,6 +469,8 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
     for callback in scheduled:  # the first episodes start under a curriculum's settings (learn resets the env)
         if isinstance(callback, ConfigSchedule):
             callback.set_on(venv, model.num_timesteps)
+        elif isinstance(callback, CommandCurriculum):
+            callback.set_on(venv, getattr(model, "curriculum_level", 0))
     remaining = config["total_timesteps"] - model.num_timesteps
     try:
         if remaining > 0:

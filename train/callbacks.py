@@ -346,7 +346,7 @@ def _schedule_points(field, points) -> tuple[np.ndarray, np.ndarray, bool]:
 def zoo_callbacks(spec) -> list[BaseCallback]:
     """The callbacks of a Zoo ``callback`` entry: a class path, or a list of class paths and ``{class path:
     keyword arguments}`` mappings (``rl_zoo3``'s format). None gives none."""
-    import importlib
+    from train.hyperparameters import class_at
 
     if spec is None:
         return []
@@ -360,13 +360,7 @@ def zoo_callbacks(spec) -> list[BaseCallback]:
             kwargs = kwargs or {}
         else:
             raise ValueError(f"callback: each entry must be a class path or {{class path: arguments}}, got {item!r}")
-        module, _, name = str(path).rpartition(".")
-        try:
-            cls = getattr(importlib.import_module(module), name) if module else None
-        except ImportError as e:
-            raise ValueError(f"callback: cannot import {path!r} ({e})") from e
-        if not (isinstance(cls, type) and issubclass(cls, BaseCallback)):
-            raise ValueError(f"callback: {path!r} is not an SB3 callback class")
+        cls = class_at(path, BaseCallback, "callback", "an SB3 callback class")
         if not isinstance(kwargs, dict):
             raise ValueError(f"callback: the arguments of {path!r} must be a mapping, got {kwargs!r}")
         callbacks.append(cls(**kwargs))
@@ -402,8 +396,7 @@ class CommandCurriculum(BaseCallback):
         if isinstance(min_hops, bool) or not isinstance(min_hops, int) or min_hops < 1:
             raise ValueError(f"CommandCurriculum: min_hops must be a positive int, got {min_hops!r}")
         self.levels, self.max_error, self.min_hops = levels, float(max_error), min_hops
-        self._errors: list[np.ndarray] = []
-        self._count = 0
+        self._errors: list[np.ndarray] = []  # the apex errors of the hops landed on this level
         self._rollout: list[np.ndarray] = []
         self._last_apex: np.ndarray | None = None
         self._applied = None
@@ -443,7 +436,6 @@ class CommandCurriculum(BaseCallback):
             if landed.any():
                 errors = np.abs(apex[landed] - command[landed])
                 self._errors.append(errors)
-                self._count += errors.size
                 self._rollout.append(errors)
         self._last_apex = apex.copy()
         return True
@@ -451,13 +443,13 @@ class CommandCurriculum(BaseCallback):
     def _on_rollout_end(self) -> None:
         if self._rollout:
             self.logger.record("rollout/apex_error", float(np.concatenate(self._rollout).mean()))
-        if self._count >= self.min_hops and self.level < self.levels:
+        if sum(e.size for e in self._errors) >= self.min_hops and self.level < self.levels:
             recent = np.concatenate(self._errors)[-self.min_hops:]
             if recent.mean() <= self.max_error:
                 self.model.curriculum_level = self.level + 1
-                self._errors, self._count = [], 0
+                self._errors = []
             else:
-                self._errors, self._count = [recent], recent.size
+                self._errors = [recent]
         low, high = self.command_range(self.level)
         self.logger.record("curriculum/command_level", self.level)
         self.logger.record("curriculum/command_range_0", low)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import yaml
 
-__all__ = ["DEFAULT_HYPERPARAMS", "ZOO_KEYS", "PPO_KEYS", "parse_override", "load_hyperparams", "display_path"]
+__all__ = ["DEFAULT_HYPERPARAMS", "ZOO_KEYS", "PPO_KEYS", "parse_override", "load_hyperparams", "class_at", "display_path"]
 
 DEFAULT_HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
 
@@ -58,6 +58,21 @@ def load_hyperparams(path: Path, env_id: str, overrides: list[str] = ()) -> dict
     if unknown:
         raise ValueError(f"unknown hyperparameter(s) {sorted(unknown)} for {env_id} in {path}")
     return hp
+
+
+def class_at(path: str, base: type, key: str, kind: str) -> type:
+    """The subclass of ``base`` that the class path ``path`` (``"train.features.CommandGains"``) names, as the file's
+    ``key`` gives it; ``ValueError`` naming ``key`` if it cannot be imported or is not ``kind``."""
+    import importlib
+
+    module, _, name = str(path).rpartition(".")
+    try:
+        cls = getattr(importlib.import_module(module), name, None) if module else None
+    except ImportError as e:
+        raise ValueError(f"{key}: cannot import {path!r} ({e})") from e
+    if not (isinstance(cls, type) and issubclass(cls, base)):
+        raise ValueError(f"{key}: {path!r} is not {kind}")
+    return cls
 
 
 def display_path(path: Path) -> str:

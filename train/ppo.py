@@ -64,7 +64,7 @@ from train.checkpoints import (
     write_text_atomic,
 )
 from train.cli import interrupt, parse_args
-from train.hyperparameters import DEFAULT_HYPERPARAMS, display_path, load_hyperparams, parse_override
+from train.hyperparameters import DEFAULT_HYPERPARAMS, class_at, display_path, load_hyperparams, parse_override
 from train.machine import TANHS, UPDATE_PRECISIONS, cpu_name, native_bfloat16
 from train.runfolder import RunFolderError, prepare_run_folder, run_locked, runnable_command
 
@@ -188,9 +188,7 @@ def resolve_config(args: TrainArgs) -> dict:
     from train.callbacks import zoo_callbacks
 
     zoo_callbacks(hp.get("callback"))  # checked before the run folder is touched
-    policy_kwargs = hp.get("policy_kwargs")
-    if isinstance(policy_kwargs, dict) and isinstance(policy_kwargs.get("features_extractor_class"), str):
-        _features_class(policy_kwargs["features_extractor_class"])  # likewise
+    _policy_kwargs(hp.get("policy_kwargs"))  # likewise
     return {
         "env_id": args.env_id,
         "env_kwargs": hp.pop("env_kwargs", None) or {},
@@ -273,26 +271,21 @@ def ppo_kwargs(config: dict) -> dict:
     for key in ("learning_rate", "clip_range", "clip_range_vf"):
         if key in kwargs:
             kwargs[key] = _schedule(kwargs[key])
-    policy_kwargs = kwargs.get("policy_kwargs")
-    if isinstance(policy_kwargs, dict) and isinstance(policy_kwargs.get("features_extractor_class"), str):
-        kwargs["policy_kwargs"] = {**policy_kwargs, "features_extractor_class": _features_class(policy_kwargs["features_extractor_class"])}
+    if "policy_kwargs" in kwargs:
+        kwargs["policy_kwargs"] = _policy_kwargs(kwargs["policy_kwargs"])
     return kwargs
 
 
-def _features_class(path: str) -> type:
-    """The features extractor class named by ``path`` (``"train.features.CommandGains"``); ValueError if it is not one."""
-    import importlib
-
+def _policy_kwargs(policy_kwargs):
+    """``policy_kwargs`` with a ``features_extractor_class`` given by its class path made the class (ValueError naming
+    it if it is not an SB3 features extractor); anything else as it is."""
+    if not (isinstance(policy_kwargs, dict) and isinstance(policy_kwargs.get("features_extractor_class"), str)):
+        return policy_kwargs
     from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
-    module, _, name = path.rpartition(".")
-    try:
-        cls = getattr(importlib.import_module(module), name, None) if module else None
-    except ImportError as e:
-        raise ValueError(f"policy_kwargs.features_extractor_class: cannot import {path!r} ({e})") from e
-    if not (isinstance(cls, type) and issubclass(cls, BaseFeaturesExtractor)):
-        raise ValueError(f"policy_kwargs.features_extractor_class: {path!r} is not an SB3 features extractor class")
-    return cls
+    cls = class_at(policy_kwargs["features_extractor_class"], BaseFeaturesExtractor, "policy_kwargs.features_extractor_class",
+                   "an SB3 features extractor class")  # fmt: skip
+    return {**policy_kwargs, "features_extractor_class": cls}
 
 
 def _save_atomic(save, path: Path) -> None:

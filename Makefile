@@ -10,6 +10,10 @@ RUN    ?= runs/ppo_push_v1
 TORCH_THREADS ?= 2
 RLLIB_VENV ?= .venv-rllib
 RLLIB_BIN  := $(RLLIB_VENV)/bin
+# pytest-xdist workers for `make test`: one per CPU this process may run on (its affinity, as a container
+# or CI runner sets it); TEST_WORKERS=0 runs the tests in one process
+TEST_WORKERS ?= $(shell $(PYTHON) -c "import os; print(len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count() or 1)")
+PYTEST := -m pytest -q -n $(TEST_WORKERS)
 
 .PHONY: train test test-rllib bench clean
 
@@ -62,13 +66,13 @@ train: $(VENV)/.installed-train $(VENV)/.core
 	$(BIN)/python -m train.evaluate $(RUN) --baseline stepping lqr --episodes 100 --push-curve --gif
 
 test: $(VENV)/.installed-test $(VENV)/.core $(RLLIB_VENV)/.installed
-	$(BIN)/python -m pytest -q
+	$(BIN)/python $(PYTEST)
 	$(MAKE) --no-print-directory test-rllib
 
 # the suite on RLlib's Gymnasium without SB3, and the RLlib tests (tests/rllib/, never collected by a
 # plain `pytest`: pyproject's norecursedirs)
 test-rllib: $(RLLIB_VENV)/.installed $(VENV)/.core
-	$(RLLIB_BIN)/python -m pytest -q $(SB3_MODULES:%=--ignore=tests/%.py) $(SB3_TESTS:%=--deselect=tests/%) tests $(RLLIB_TESTS)
+	$(RLLIB_BIN)/python $(PYTEST) $(SB3_MODULES:%=--ignore=tests/%.py) $(SB3_TESTS:%=--deselect=tests/%) tests $(RLLIB_TESTS)
 
 bench: $(VENV)/.installed-bench $(VENV)/.core
 	$(BIN)/python benchmarks/bench_dynamics.py

@@ -104,6 +104,25 @@ def test_fast_tanh_is_tanh():
     np.testing.assert_allclose(FastTanh()(low).float().numpy(), np.tanh(low.float().numpy()), rtol=0, atol=1e-2)
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16])
+def test_fast_tanh_without_a_gradient_is_the_same_bits_and_leaves_its_input(dtype):
+    def bits(t):
+        return t.detach().view(torch.int16 if dtype == torch.bfloat16 else torch.int32)
+
+    x = torch.cat([torch.linspace(-12.0, 12.0, 4097), torch.tensor([0.0, -0.0, float("inf"), -float("inf"), float("nan")])]).to(dtype)
+    graded = x.clone().requires_grad_(True)
+    with_grad = FastTanh()(graded)
+    assert with_grad.grad_fn is not None  # the autograd function's path
+    kept = x.clone()
+    plain = FastTanh()(x)  # no input needs a gradient: the in-place path
+    with torch.no_grad():
+        under_no_grad = FastTanh()(graded)
+    for y in (plain, under_no_grad):
+        assert y.grad_fn is None and y.dtype == dtype
+        assert torch.equal(bits(y), bits(with_grad))
+    assert torch.equal(bits(x), bits(kept))
+
+
 def test_bfloat16_update_is_close_to_float32():
     """The bfloat16 update moves the parameters as the float32 one does, up to bfloat16's rounding of the hidden
     layers; its logged statistics agree; and the rollouts are float32 (the same actions before the update)."""

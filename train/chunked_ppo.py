@@ -73,10 +73,14 @@ class FastTanh(th.nn.Tanh):
     """``torch.nn.Tanh`` computed as ``2 sigmoid(2x) - 1``: the same function to float32's rounding (within 2e-7),
     its gradient torch's own. torch's CPU ``tanh`` kernel is several times slower than its ``sigmoid`` (2.8 ms
     against 0.44 ms on a 16,384 x 128 float32 array on this project's 2-core machine), and SB3's ``MlpPolicy``
-    spends a quarter of a large-batch update in it."""
+    spends a quarter of a large-batch update in it. Where no gradient is taken (the rollouts, ``predict``) the same
+    operations run in place on one new array, without the autograd function: the same bits, in half the time on the
+    rollouts' 1024 x 128 arrays."""
 
     def forward(self, x: th.Tensor) -> th.Tensor:
-        return _SigmoidTanh.apply(x)
+        if th.is_grad_enabled() and x.requires_grad:
+            return _SigmoidTanh.apply(x)
+        return th.mul(x, 2.0).sigmoid_().mul_(2.0).sub_(1.0)
 
 
 def _check_tanh(tanh) -> None:

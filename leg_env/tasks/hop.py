@@ -107,17 +107,17 @@ command that changes within each episode, commands from high to low, no charge o
 2 epochs per rollout instead of 3, the task's narrow kernel from the first step, a critic twice as wide as the actor,
 a knee free to straighten past its limit early in training, a charge on mean actions beyond the action box, an actor
 half as wide as its critic, a curriculum of commands that widens them only as the training hops meet them
-(``train.callbacks.CommandCurriculum``), a height weight raised to 8 once every command is asked for, and half of the
-training episodes started in the air (0-15 cm above the nominal posture) each moved which seeds hop to the command, or
-how close, not how many. The command's products with the observation in the networks' first layer
-(``train.features.CommandGains``, five seeds on the probes page) came closest: seeds 7 and 8 met every bar of Solved
-and seed 9 the apex bar (1.02-1.29 cm), but seeds 5 and 6, which hop to the command without them, then hopped one
-height (3.21 and 5.09 cm), so the named seed would miss the apex bar and the configuration keeps the observation
-alone. Seeds 7 and 8, which miss it in most probes, settle on a gait of one height (about 5.5 cm whatever the
-command): at the highest commands their hip swings over 0.3 rad, their knee straightens to 0.27-0.29 rad at most and
-their hip torque is at its limit 61-73% of the time, where the shipped seed swings its hip over 1.1 rad and
-straightens its knee to 0.07 rad. The page also has the float32 update, the configuration before the last stage (60M
-steps), the curricula one at a time, and the probes on v1 and v2.
+(``train.callbacks.CommandCurriculum``), a height weight raised to 8 once every command is asked for, half of the
+training episodes started in the air (0-15 cm above the nominal posture), and a hip half as strong early in training
+each moved which seeds hop to the command, or how close, not how many. The command's products with the observation in
+the networks' first layer (``train.features.CommandGains``, five seeds on the probes page) came closest: seeds 7 and 8
+met every bar of Solved and seed 9 the apex bar (1.02-1.29 cm), but seeds 5 and 6, which hop to the command without
+them, then hopped one height (3.21 and 5.09 cm), so the named seed would miss the apex bar and the configuration keeps
+the observation alone. Seeds 7 and 8, which miss it in most probes, settle on a gait of one height (about 5.5 cm
+whatever the command): at the highest commands their hip swings over 0.3 rad, their knee straightens to 0.27-0.29 rad
+at most and their hip torque is at its limit 61-73% of the time, where the shipped seed swings its hip over 1.1 rad
+and straightens its knee to 0.07 rad. The page also has the float32 update, the configuration before the last stage
+(60M steps), the curricula one at a time, and the probes on v1 and v2.
 
 ## Version History
 * v3: the height term pays the last landed hop's apex at every step while the robot keeps hopping

@@ -305,9 +305,14 @@ class ConfigSchedule(BaseCallback):
     def _on_step(self) -> bool:
         return True
 
+    def start_on(self, venv: VecEnv, model) -> None:
+        """Set the values at ``model``'s steps on ``venv``: ``train.ppo`` calls it before ``learn`` (which resets the
+        env), so that the first episodes start under the schedule."""
+        self.set_on(venv, model.num_timesteps)
+
     def set_on(self, venv: VecEnv, steps: int) -> dict:
         """Set the values after ``steps`` env steps on ``venv`` (those that moved since the last call); returns
-        them all. ``train.ppo`` calls it before ``learn``, so that the first episodes start under the schedule."""
+        them all."""
         values = self.values_at(steps)
         moved = {field: value for field, value in values.items() if self._applied.get(field) != value}
         if moved:
@@ -403,11 +408,16 @@ class CommandCurriculum(BaseCallback):
 
     @property
     def level(self) -> int:
-        return int(getattr(self.model, "curriculum_level", 0))
+        return _curriculum_level(self.model)
 
     def command_range(self, level: int) -> tuple[float, float]:
         low, high = self.start + (self.end - self.start) * (level / self.levels)
         return float(low), float(high)
+
+    def start_on(self, venv: VecEnv, model) -> None:
+        """Set the range of ``model``'s level on ``venv``: ``train.ppo`` calls it before ``learn`` (which resets the
+        env), so that the first episodes, of a resumed run too, start on that level."""
+        self.set_on(venv, _curriculum_level(model))
 
     def set_on(self, venv: VecEnv, level: int) -> None:
         value = self.command_range(level)
@@ -454,3 +464,8 @@ class CommandCurriculum(BaseCallback):
         self.logger.record("curriculum/command_level", self.level)
         self.logger.record("curriculum/command_range_0", low)
         self.logger.record("curriculum/command_range_1", high)
+
+
+def _curriculum_level(model) -> int:
+    """The command level a ``CommandCurriculum`` keeps in ``model`` (0 before the first)."""
+    return int(getattr(model, "curriculum_level", 0))

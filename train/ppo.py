@@ -346,8 +346,6 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
 
     from leg_env.sb3 import make_sb3_vec_env
     from train.callbacks import (
-        CommandCurriculum,
-        ConfigSchedule,
         FrozenActor,
         PeriodicCheckpoint,
         PeriodicEvaluation,
@@ -460,10 +458,8 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
     if config.get("critic_warmup"):
         callbacks.append(FrozenActor(config["critic_warmup"]))
     for callback in scheduled:  # the first episodes start under a curriculum's settings (learn resets the env)
-        if isinstance(callback, ConfigSchedule):
-            callback.set_on(venv, model.num_timesteps)
-        elif isinstance(callback, CommandCurriculum):
-            callback.set_on(venv, getattr(model, "curriculum_level", 0))
+        if hasattr(callback, "start_on"):
+            callback.start_on(venv, model)
     remaining = config["total_timesteps"] - model.num_timesteps
     try:
         if remaining > 0:

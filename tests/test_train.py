@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from stable_baselines3.common.callbacks import BaseCallback
 
 from train.evaluate import EvalArgs, PolicyLoadError, evaluate, load_policy, run_episodes
 from train.ppo import ENV_ID, TrainArgs, resolve_config, train
@@ -485,6 +486,36 @@ def test_train_runs_a_curriculum_from_the_hyperparameters(tmp_path):
     with pytest.raises(ValueError, match="ConfigSchedule"):
         train(tiny_args(tmp_path / "bad", params=TINY + ["callback:[{train.callbacks.ConfigSchedule: {schedule: {}}}]"]))
     assert not (tmp_path / "bad").exists()
+
+
+class FirstCommands(BaseCallback):
+    """Records the commands of the episodes a training run starts with (``learn`` has reset the env by then)."""
+
+    seen: list = []
+
+    def _on_training_start(self) -> None:
+        from leg_env.tasks.stance import Obs
+
+        env = self.training_env
+        obs = env.get_original_obs() if hasattr(env, "get_original_obs") else self.model._last_obs
+        FirstCommands.seen.append(np.array(obs[:, Obs.command]))
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def test_a_run_and_its_resume_start_their_episodes_under_the_curriculum(tmp_path):
+    """train.ppo sets a curriculum's value before learn resets the env: the first episodes of a run draw their
+    commands from the schedule's value at step 0, and those of a resumed run from its value at the saved step."""
+    FirstCommands.seen = []
+    recorded = CURRICULUM.replace("}}}]", "}}}, test_train.FirstCommands]")
+    params = TINY + ["env_kwargs:{command_range: [0.02, 0.15]}", recorded]
+    out = tmp_path / "run"
+    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, params=params))
+    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, total_timesteps=2 * STEPS, params=params))
+    first, resumed = FirstCommands.seen
+    assert first.min() >= 0.02 - 1e-7 and first.max() <= 0.03 + 1e-7  # the schedule's value at 0 steps
+    assert resumed.min() >= 0.1 - 1e-7  # its value at 256 steps, past its last point
 
 
 def _normalized_pair(**normalize):

@@ -339,6 +339,17 @@ def test_update_precision_defaults_to_float32_auto_follows_the_cpu_and_it_is_rec
         tiny_args(tmp_path / "bad", update_precision="float16")
 
 
+@pytest.mark.parametrize("native", [True, False])
+def test_a_bfloat16_update_on_a_cpu_that_would_emulate_it_says_so(tmp_path, monkeypatch, capsys, native):
+    import train.ppo as ppo
+
+    monkeypatch.setattr(ppo, "native_bfloat16", lambda: native)
+    train(tiny_args(tmp_path / "bf16", update_precision="bfloat16", eval_freq=0, checkpoint_freq=0, total_timesteps=128))
+    assert (ppo.EMULATED_BFLOAT16 in capsys.readouterr().err) is not native
+    train(tiny_args(tmp_path / "f32", update_precision="float32", eval_freq=0, checkpoint_freq=0, total_timesteps=128))
+    assert ppo.EMULATED_BFLOAT16 not in capsys.readouterr().err
+
+
 def test_update_precision_reaches_the_model_and_a_resume_takes_its_own(tmp_path):
     from train.checkpoints import load_checkpoint
     from train.chunked_ppo import ChunkedPPO

@@ -58,7 +58,9 @@ overshoots its lower limit (0.05 rad) after release, with the torso pitched back
 starts while the foot is still on the ground. Ending the push a little earlier, ``liftoff_knee`` 0.62,
 restores survival (95% / 89%) for a slightly larger apex error (1.78 cm / 1.61 cm): the push's stroke is
 shorter, and the highest commands are undershot more. Larger gains or an earlier release (0.65-0.75) each
-cost either survival or apex accuracy.
+cost either survival or apex accuracy. The falls come at the lowest commands: on 20 fresh episodes per range of
+commands (seeds 30000..30019), the controller survives none at 5-5.5 cm, 15% at 5.5-6 cm, 95% at 6-7 cm and every one
+at 7-8 cm.
 """
 
 from __future__ import annotations

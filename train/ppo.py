@@ -75,8 +75,8 @@ EVAL_SEED = 20_000
 
 EMULATED_BFLOAT16 = (
     "note: --update-precision bfloat16 on a CPU without bfloat16 arithmetic (no avx512_bf16 or amx_bf16 flag): torch "
-    "emulates it, and the update runs several times slower than in float32 (the hop configuration: 6.6k against 46k "
-    "env-steps/s on a 2-core AMD EPYC of the Zen 3 class). --update-precision auto picks float32 on this CPU."
+    "emulates it, and the update runs several times slower than in float32 (figures in docs/training.md). "
+    "--update-precision auto picks float32 on this CPU."
 )
 """What ``train.ppo`` prints (to stderr) when asked for a bfloat16 update on a CPU that would emulate it."""
 

@@ -74,27 +74,27 @@ def test_hopper_is_loaded_for_the_hop_task_and_is_batched():
 def test_hop_tracker_apex_is_the_ballistic_apex():
     """A robot thrown upwards with zero torques: the tracker's apex is the same at every instant of the
     flight and lies above the highest sampled COM height by at most g dt^2 / 8."""
-    env = gym.make("leg_env/PlanarLegHop-v0")
-    env.reset(seed=0)
-    q, _, _ = env.unwrapped.state
-    q = q.copy()
+    envs = gym.make_vec("leg_env/PlanarLegHop-v0", num_envs=1)
+    envs.reset(seed=0)
+    q, _, _ = envs.state
+    q = q[0].copy()
     q[1] += 0.05  # the foot 5 cm above the ground
     qd = np.zeros(5)
     qd[1] = 1.0
-    obs, info = env.reset(seed=0, options={"qpos": q, "qvel": qd})
-    tracker = HopTracker()
-    tracker.start(env, obs, info)
+    obs, info = envs.reset(seed=0, options={"qpos": q, "qvel": qd})
+    tracker = HopTracker(record=0)
+    tracker.start(envs, obs, info)
     heights = []
     while True:
-        obs, _, _, _, info = env.step(np.zeros(2))
-        if info["contact_mode"] != "flight":
+        obs, _, _, _, info = envs.step(np.zeros((1, 2)))
+        if info["contact_mode"][0] != "flight":
             break
-        tracker.step(env, obs, info)
+        tracker.step(envs, obs, np.zeros((1, 2)), info, np.ones(1, dtype=bool))
         heights.append(tracker.series["com_height"][-1])
     apex = np.asarray(tracker.series["apex"])
     assert len(apex) > 10
     np.testing.assert_allclose(apex, apex[0], rtol=0, atol=1e-9)
-    g, dt = env.unwrapped.params.g, env.unwrapped.dt
+    g, dt = envs.params.g, envs.dt
     assert 0.0 <= apex[0] - max(heights) <= g * dt * dt / 8 + 1e-12
     assert tracker.summary()["hops"] == 0  # it started in flight: no lift-off was seen
 

@@ -19,7 +19,6 @@ __all__ = [
     "ConfigSchedule",
     "CommandCurriculum",
     "zoo_callbacks",
-    "run_vec_episodes",
     "evaluate_now",
 ]
 
@@ -77,50 +76,37 @@ def leg_adapter(venv):
     return venv
 
 
-def run_vec_episodes(predict: Callable, venv: VecEnv, seed: int) -> dict:
-    """Run one deterministic episode in each env of ``venv`` (seeded with ``seed``) and summarise them.
+class _Drift:
+    """The squared base drift summed over every step of the episodes (a ``train.episodes.Watcher``)."""
 
-    ``predict`` maps raw observations ``(N, 12)`` to actions. Returns per-episode ``returns``,
-    ``lengths`` and ``survived`` (ended by the time limit, not by a fall), their means, and the RMS
-    base drift over all steps [m].
+    def start(self, envs, obs, info) -> None:
+        self.sum_sq = 0.0
+
+    def step(self, envs, obs, actions, info, active) -> None:
+        d = info["base_drift"][active]
+        self.sum_sq += float(np.dot(d, d))
+
+
+def evaluate_now(policy, envs, seed: int) -> dict:
+    """One deterministic episode of ``policy`` (SB3's ``predict`` on raw observations) in each sub-env of the
+    native batch ``envs``, sub-env ``i`` seeded ``seed + i`` (``train.episodes.run_batch``), summarised.
+
+    Returns per-episode ``returns`` and ``lengths``, their means, the survival rate (episodes ended by the time
+    limit, not by a fall) and the RMS base drift over all steps [m].
     """
-    n = venv.num_envs
-    venv.seed(seed)
-    obs = venv.reset()
-    finished = np.zeros(n, dtype=bool)
-    returns = np.zeros(n)
-    lengths = np.zeros(n, dtype=np.int64)
-    survived = np.zeros(n, dtype=bool)
-    drift_sq = 0.0
-    while not finished.all():
-        obs, rewards, dones, infos = venv.step(predict(obs))
-        active = ~finished
-        returns[active] += rewards[active]
-        lengths[active] += 1
-        drift_sq += sum(infos[i]["base_drift"] ** 2 for i in np.flatnonzero(active))
-        for i in np.flatnonzero(dones & active):
-            survived[i] = bool(infos[i].get("TimeLimit.truncated", False))
-        finished |= dones
+    from train.episodes import policy_predict, run_batch
+
+    drift = _Drift()
+    batch = run_batch(policy_predict(policy), envs, range(seed, seed + envs.num_envs), [drift])
     return {
-        "mean_return": float(returns.mean()),
-        "std_return": float(returns.std()),
-        "mean_length": float(lengths.mean()),
-        "survival_rate": float(survived.mean()),
-        "rms_base_drift": float(np.sqrt(drift_sq / lengths.sum())),
-        "returns": returns.round(4).tolist(),
-        "lengths": lengths.tolist(),
+        "mean_return": float(batch.returns.mean()),
+        "std_return": float(batch.returns.std()),
+        "mean_length": float(batch.lengths.mean()),
+        "survival_rate": batch.survival_rate,
+        "rms_base_drift": float(np.sqrt(drift.sum_sq / batch.lengths.sum())),
+        "returns": batch.returns.round(4).tolist(),
+        "lengths": batch.lengths.tolist(),
     }
-
-
-def evaluate_now(model, vec_normalize: VecNormalize | None, venv: VecEnv, seed: int) -> dict:
-    """Deterministic episodes of ``model`` on ``venv``, observations normalised by ``vec_normalize``."""
-
-    def predict(obs):
-        if vec_normalize is not None:
-            obs = vec_normalize.normalize_obs(obs)
-        return model.predict(obs, deterministic=True)[0]
-
-    return run_vec_episodes(predict, venv, seed)
 
 
 class _Periodic(BaseCallback):
@@ -154,17 +140,18 @@ class _Periodic(BaseCallback):
 
 
 class PeriodicEvaluation(_Periodic):
-    """Every ``eval_freq`` env steps, run ``venv.num_envs`` deterministic episodes and log the results.
+    """Every ``eval_freq`` env steps, run ``envs.num_envs`` deterministic episodes of ``policy`` and log the results.
 
-    The evaluation env's observations are normalised with the training ``VecNormalize``'s current
-    statistics; rewards are the env's own (unnormalised). Each result (with ``timesteps`` and the
-    wall-clock ``time``) is appended to ``history`` and passed to ``on_result``.
+    ``envs`` is a native batch (``train.episodes.make_batch``); ``policy`` has SB3's ``predict`` on raw observations
+    (``train.evaluate.TrainedPolicy`` of the model being trained normalises them with the training
+    ``VecNormalize``'s current statistics); rewards are the env's own (unnormalised). Each result (with
+    ``timesteps`` and the wall-clock ``time``) is appended to ``history`` and passed to ``on_result``.
     """
 
     def __init__(
         self,
-        venv: VecEnv,
-        vec_normalize: VecNormalize | None,
+        envs,
+        policy,
         eval_freq: int,
         seed: int,
         history: list,
@@ -172,8 +159,8 @@ class PeriodicEvaluation(_Periodic):
         clock: Callable[[], float] = time.perf_counter,
     ):
         super().__init__(eval_freq)
-        self.venv = venv
-        self.vec_normalize = vec_normalize
+        self.envs = envs
+        self.policy = policy
         self.seed = seed
         self.history = history
         self.on_result = on_result
@@ -188,7 +175,7 @@ class PeriodicEvaluation(_Periodic):
     def evaluate(self) -> dict:
         """Evaluate now, record and return the result."""
         result = {"timesteps": int(self.num_timesteps)}
-        result.update(evaluate_now(self.model, self.vec_normalize, self.venv, self.seed))
+        result.update(evaluate_now(self.policy, self.envs, self.seed))
         result["time"] = round(self.clock(), 2)
         self.history.append(result)
         for key in ("mean_return", "std_return", "mean_length", "survival_rate", "rms_base_drift"):

@@ -226,13 +226,65 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
     return policy
 
 
+class EpisodeMetrics:
+    """The common metrics of ``run_episodes``, a ``train.episodes.Watcher``: per episode the reward terms and the
+    squared base drift; over every step the torques, torso angle and violations; and the time series (and frames)
+    of the episode of row ``record``."""
+
+    def __init__(self, record: int | None = None, frames: bool = False):
+        self.record, self.frames = record, frames
+        self.series: dict | None = None
+
+    def start(self, envs, obs, info: dict) -> None:
+        n = obs.shape[0]
+        self.limit = np.asarray(envs.config.torque_limit)
+        self.reward_terms = envs.task.reward_terms
+        self.terms = np.zeros((n, len(self.reward_terms)))
+        self.drift_sq = np.zeros(n)
+        self.drift_max, self.torque_sq, self.tilt_sq, self.unilateral, self.friction = 0.0, np.zeros(2), 0.0, 0, 0
+        self.robots = None
+        if "params" in info:  # a drawn robot per episode (randomize)
+            params = info["params"]
+            names = [k for k in params if not k.startswith("_")]
+            self.robots = [{k: float(params[k][i]) for k in names} if params["_" + names[0]][i] else None for i in range(n)]
+        if self.record is not None:
+            self.series = {"base_drift": [], "torso_angle": [], "torque": [], "contact_force": [], "mode": [], "impulse": [], "frames": []}
+            if self.frames:
+                self.series["frames"].append(envs.render()[self.record])
+
+    def step(self, envs, obs, actions, info: dict, active: np.ndarray) -> None:
+        tau = np.clip(actions[active], -1.0, 1.0) * self.limit
+        for k, name in enumerate(self.reward_terms):
+            self.terms[active, k] += info[f"reward_{name}"][active]
+        d = info["base_drift"]
+        self.drift_sq[active] += d[active] * d[active]
+        self.drift_max = max(self.drift_max, float(d[active].max()))
+        self.torque_sq += (tau * tau).sum(axis=0)
+        tilt = obs[active, Obs.th_b].astype(np.float64)
+        self.tilt_sq += float(np.sum(tilt * tilt))
+        self.unilateral += int(np.count_nonzero(info["unilateral_violation"][active]))
+        self.friction += int(np.count_nonzero(info["friction_violation"][active]))
+        r = self.record
+        if r is not None and active[r]:
+            rec = self.series
+            rec["base_drift"].append(float(d[r]))
+            rec["torso_angle"].append(float(obs[r, Obs.th_b]))
+            rec["torque"].append(np.clip(actions[r], -1.0, 1.0) * self.limit)
+            rec["contact_force"].append(np.asarray(info["contact_force"][r], dtype=np.float64))
+            rec["mode"].append(str(info["contact_mode"][r]) if "contact_mode" in info else "stick")
+            rec["impulse"].append(np.asarray(info["impulse"][r], dtype=np.float64) if "impulse" in info else np.zeros(2))
+            if self.frames and len(rec["base_drift"]) % GIF_FRAME_SKIP == 0:
+                rec["frames"].append(envs.render()[r])
+
+
 def run_episodes(
     policy, seeds, env_kwargs: dict | None = None, record: int | None = None, frames: bool = False, env_id: str = ENV_ID
 ):
-    """Run one deterministic episode per seed; return the summary and the recorded episode.
+    """Run one deterministic episode per seed, all in one batch (``train.episodes.run_batch``); return the summary
+    and the recorded episode.
 
     Args:
-        policy: anything with SB3's ``predict``.
+        policy: anything with SB3's ``predict`` (a batch of observations in, a batch of actions out).
         seeds: one seed per episode.
         env_kwargs: keyword arguments of ``gymnasium.make``.
         env_id: the task.
@@ -245,95 +297,57 @@ def run_episodes(
         ``weight`` and ``frames`` (or None); on the unilateral ground also ``mode`` (T,) and ``impulse``
         (T, 2), and on the hop task the ``HopTracker`` series.
     """
-    import gymnasium as gym
-
+    from train.episodes import make_batch, policy_predict, run_batch
     from train.task_metrics import HopTracker
 
     if len(seeds) == 0:
         raise ValueError("run_episodes needs at least one seed")
-    env_kwargs = dict(env_kwargs or {})
-    per_episode = []
-    drift_sq, drift_max, torque_sq, steps, unilateral, friction = 0.0, 0.0, np.zeros(2), 0, 0, 0
-    tilt_sq = 0.0
+    if record is not None and not 0 <= record < len(seeds):
+        raise ValueError(f"record must be the index of one of the {len(seeds)} episodes, got {record}")
+    metrics = EpisodeMetrics(record, frames)
+    hop = HopTracker(record) if env_id.startswith("leg_env/PlanarLegHop-v") else None
+    envs = make_batch(env_id, len(seeds), env_kwargs, record, frames, GIF_SIZE)
+    try:
+        batch = run_batch(policy_predict(policy), envs, seeds, [metrics] if hop is None else [metrics, hop])
+        dt, weight = envs.dt, envs.params.weight
+        robot = metrics.robots[record] if record is not None and metrics.robots is not None else None
+        if robot is not None:  # the recorded episode's own robot
+            weight = (robot["m_b"] + robot["m1"] + robot["m2"]) * robot["g"]
+    finally:
+        envs.close()
+    if hop is not None:
+        hop.end(batch.survived)
     series = None
-    hop = HopTracker() if env_id.startswith("leg_env/PlanarLegHop-v") else None
-    reward_terms = None
-    for i, seed in enumerate(seeds):
-        recording = record == i
-        kwargs = dict(env_kwargs)
-        if recording and frames:
-            kwargs.update(render_mode="rgb_array", width=GIF_SIZE, height=GIF_SIZE)
-        env = gym.make(env_id, **kwargs)
-        limit = np.asarray(env.unwrapped.config.torque_limit)
-        reward_terms = env.unwrapped.task.reward_terms
-        obs, reset_info = env.reset(seed=int(seed))
-        if hasattr(policy, "reset"):
-            policy.reset()
-        if hop is not None:
-            hop.start(env, obs, reset_info)
-        terms = dict.fromkeys(reward_terms, 0.0)
-        ep_return, length, ep_drift_sq = 0.0, 0, 0.0
-        rec = {"base_drift": [], "torso_angle": [], "torque": [], "contact_force": [], "mode": [], "impulse": [], "frames": []} if recording else None
-        if recording and frames:
-            rec["frames"].append(env.render())
-        terminated = truncated = False
-        while not (terminated or truncated):
-            action, _ = policy.predict(obs, deterministic=True)
-            action = np.asarray(action, dtype=np.float64).reshape(2)
-            obs, reward, terminated, truncated, info = env.step(action)
-            tau = np.clip(action, -1.0, 1.0) * limit
-            ep_return += reward
-            length += 1
-            for name in reward_terms:
-                terms[name] += info[f"reward_{name}"]
-            if hop is not None:
-                hop.step(env, obs, info)
-            d = info["base_drift"]
-            ep_drift_sq += d * d
-            drift_max = max(drift_max, d)
-            torque_sq += tau * tau
-            tilt_sq += float(obs[Obs.th_b]) ** 2
-            unilateral += bool(info["unilateral_violation"])
-            friction += bool(info["friction_violation"])
-            if rec is not None:
-                rec["base_drift"].append(d)
-                rec["torso_angle"].append(float(obs[Obs.th_b]))
-                rec["torque"].append(tau)
-                rec["contact_force"].append(np.asarray(info["contact_force"], dtype=np.float64))
-                rec["mode"].append(info.get("contact_mode", "stick"))
-                rec["impulse"].append(np.asarray(info.get("impulse", (0.0, 0.0)), dtype=np.float64))
-                if frames and length % GIF_FRAME_SKIP == 0:
-                    rec["frames"].append(env.render())
-        if rec is not None:
-            series = {
-                "base_drift": np.asarray(rec["base_drift"]),
-                "torso_angle": np.asarray(rec["torso_angle"]),
-                "torque": np.asarray(rec["torque"]),
-                "contact_force": np.asarray(rec["contact_force"]),
-                "weight": env.unwrapped.params.weight,
-                "dt": env.unwrapped.dt,
-                "torque_limit": tuple(limit),
-                "frames": rec["frames"] if frames else None,
-                "mode": rec["mode"],
-                "impulse": np.asarray(rec["impulse"]),
-                "hop": dict(hop.series) if hop is not None else None,
-            }
-        env.close()
-        if hop is not None:
-            hop.end(bool(truncated and not terminated))
-        drift_sq += ep_drift_sq
-        steps += length
+    if record is not None:
+        rec = metrics.series
+        series = {
+            "base_drift": np.asarray(rec["base_drift"]),
+            "torso_angle": np.asarray(rec["torso_angle"]),
+            "torque": np.asarray(rec["torque"]),
+            "contact_force": np.asarray(rec["contact_force"]),
+            "weight": weight,
+            "dt": dt,
+            "torque_limit": tuple(metrics.limit),
+            "frames": rec["frames"] if frames else None,
+            "mode": rec["mode"],
+            "impulse": np.asarray(rec["impulse"]),
+            "hop": dict(hop.series) if hop is not None else None,
+        }
+    per_episode = []
+    for i, seed in enumerate(batch.seeds):
+        length = int(batch.lengths[i])
         per_episode.append(
             {
-                "seed": int(seed),
-                "return": round(ep_return, 4),
+                "seed": seed,
+                "return": round(float(batch.returns[i]), 4),
                 "length": length,
-                "survived": bool(truncated and not terminated),
-                "rms_base_drift": float(np.sqrt(ep_drift_sq / length)),
-                "reward_terms": {k: round(v, 4) for k, v in terms.items()},
-                **({"robot": reset_info["params"]} if "params" in reset_info else {}),
+                "survived": bool(batch.survived[i]),
+                "rms_base_drift": float(np.sqrt(metrics.drift_sq[i] / length)),
+                "reward_terms": {k: round(float(metrics.terms[i, j]), 4) for j, k in enumerate(metrics.reward_terms)},
+                **({"robot": metrics.robots[i]} if metrics.robots is not None and metrics.robots[i] is not None else {}),
             }
         )
+    steps = int(batch.lengths.sum())
     returns = np.array([e["return"] for e in per_episode])
     summary = {
         "episodes": len(per_episode),
@@ -341,14 +355,14 @@ def run_episodes(
         "mean_return": float(returns.mean()),
         "std_return": float(returns.std()),
         "mean_length": float(np.mean([e["length"] for e in per_episode])),
-        "rms_base_drift": float(np.sqrt(drift_sq / steps)),
-        "max_base_drift": float(drift_max),
-        "rms_torso_angle": float(np.sqrt(tilt_sq / steps)),
-        "unilateral_violation_frac": unilateral / steps,
-        "friction_violation_frac": friction / steps,
-        "rms_torque": np.sqrt(torque_sq / steps).round(4).tolist(),
-        "mean_reward_terms": {k: float(np.mean([e["reward_terms"][k] for e in per_episode])) for k in reward_terms},
-        "steps": int(steps),
+        "rms_base_drift": float(np.sqrt(metrics.drift_sq.sum() / steps)),
+        "max_base_drift": float(metrics.drift_max),
+        "rms_torso_angle": float(np.sqrt(metrics.tilt_sq / steps)),
+        "unilateral_violation_frac": metrics.unilateral / steps,
+        "friction_violation_frac": metrics.friction / steps,
+        "rms_torque": np.sqrt(metrics.torque_sq / steps).round(4).tolist(),
+        "mean_reward_terms": {k: float(np.mean([e["reward_terms"][k] for e in per_episode])) for k in metrics.reward_terms},
+        "steps": steps,
         **(hop.summary() if hop is not None else {}),
         "per_episode": per_episode,
     }

@@ -256,6 +256,21 @@ def _with_residual(venv, config: dict):
     return ResidualVecEnv(venv, controller, residual["scale"])
 
 
+def _evaluated_policy(model, vec_normalize, config: dict):
+    """What the periodic evaluation runs: ``model`` on observations normalised by the training statistics of the
+    moment, plus its controller when the run trains a residual (``train.residual``)."""
+    from train.evaluate import TrainedPolicy, load_policy
+
+    policy = TrainedPolicy(model, vec_normalize, config["env_kwargs"], env_id=config["env_id"])
+    if not config.get("residual"):
+        return policy
+    from train.residual import ResidualPolicy
+
+    residual = config["residual"]
+    controller = load_policy(residual["controller"], env_kwargs=config["env_kwargs"], env_id=config["env_id"])
+    return ResidualPolicy(policy, controller, residual["scale"])
+
+
 def warm_start(model, init_from: str, config: dict) -> None:
     """Start ``model`` from ``init_from`` (``TrainArgs.init_from``, ``train.warmstart``)."""
     from train import warmstart
@@ -361,6 +376,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
         zoo_callbacks,
     )
     from train.chunked_ppo import ChunkedPPO
+    from train.episodes import make_batch
     from train.normalize import BatchVecNormalize
     from train.plots import plot_learning_curve
 
@@ -456,12 +472,13 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
             )
 
     eval_cfg = config["eval"]
-    eval_venv = _with_residual(make_sb3_vec_env(eval_cfg["episodes"], seed=eval_cfg["seed"], env_id=config["env_id"], **config["eval_env_kwargs"]), config)
+    eval_envs = make_batch(config["env_id"], eval_cfg["episodes"], config["eval_env_kwargs"])
+    eval_policy = _evaluated_policy(model, vec_normalize, config)
     checkpointer = PeriodicCheckpoint(config["checkpoint_freq"], save)
     callbacks = [
         *scheduled,
-        RewardTermsLogger(eval_venv.unwrapped.env.reward_keys),
-        PeriodicEvaluation(eval_venv, vec_normalize, eval_cfg["freq"], eval_cfg["seed"], history, report, clock),
+        RewardTermsLogger(eval_envs.reward_keys),
+        PeriodicEvaluation(eval_envs, eval_policy, eval_cfg["freq"], eval_cfg["seed"], history, report, clock),
         checkpointer,
     ]
     if config.get("critic_warmup"):
@@ -481,7 +498,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
             )
         if not history or history[-1]["timesteps"] != model.num_timesteps:
             result = {"timesteps": int(model.num_timesteps)}
-            result.update(evaluate_now(model, vec_normalize, eval_venv, eval_cfg["seed"]))
+            result.update(evaluate_now(eval_policy, eval_envs, eval_cfg["seed"]))
             result["time"] = round(clock(), 2)
             history.append(result)
             report(result)
@@ -497,7 +514,7 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
         )
         raise
     finally:
-        eval_venv.close()
+        eval_envs.close()
         venv.close()
 
     save()

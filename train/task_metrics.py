@@ -10,8 +10,8 @@ metrics; these add what a task's own question needs:
   COM's horizontal displacement from the episode's start at its end. ``hops_per_episode`` counts the
   flights of at least ``LONG_FLIGHT`` (50 ms) per episode.
 * **Push** (``push_survival``): episodes of ``PlanarLegPush-v0`` with every push of one magnitude (the
-  range ``push_force`` set to ``(F, F)``; signs and times as the task draws them), run as one native batch
-  per magnitude with the controller's batched ``predict``; survival is reaching the time limit.
+  range ``push_force`` set to ``(F, F)``; signs and times as the task draws them), run as one batch per
+  magnitude (``train.episodes.run_batch``); survival is reaching the time limit.
 """
 
 from __future__ import annotations
@@ -27,66 +27,75 @@ LONG_FLIGHT = 0.05
 
 
 class HopTracker:
-    """Hop metrics of ``PlanarLegHop`` episodes (v0 and v1), fed one step at a time (module docstring).
+    """Hop metrics of ``PlanarLegHop`` episodes, a ``train.episodes.Watcher`` of a batch (module docstring).
 
-    ``start(env, obs)`` after each reset, ``step(env, obs, info)`` after each step, ``summary()`` at the end
-    over every episode. Also keeps, per step of the current episode, the COM height, its target and the
-    apex estimate (``series``) for the plot of a few hops.
+    ``run_batch`` feeds it the batch after the reset and after every step; ``end(survived)`` closes the
+    episodes and ``summary()`` gives the metrics over every hop of every episode. ``series`` keeps, per step of
+    the episode of row ``record`` (None: none), the COM height, its target and the apex estimate, for the plot of
+    a few hops.
     """
 
-    def __init__(self):
+    def __init__(self, record: int | None = None):
+        self.record = record
         self.errors: list[float] = []  # apex error of every hop [m]
         self.periods: list[float] = []  # time between successive lift-offs [s]
         self.landings: list[float] = []  # |impact impulse| at each touchdown [N s]
         self.drifts: list[float] = []  # |x_com(end) - x_com(start)| of each episode that ran to its end [m]
         self.hops_per_episode: list[int] = []
         self.long_hops_per_episode: list[int] = []  # flights of at least LONG_FLIGHT seconds
+        self.series: dict = {}
 
-    def start(self, env, obs, info: dict) -> None:
-        """A new episode from its reset's ``obs`` and ``info`` (the COM comes from ``info``)."""
-        u = env.unwrapped
-        self._p, self._dt, self._g = u.params, u.dt, u.params.g
+    def start(self, envs, obs, info: dict) -> None:
+        """New episodes from the batch's reset ``obs`` ``(N, n)`` and ``info`` (the COM comes from ``info``)."""
         from leg_env.dynamics import com_position
         from leg_env.tasks.stance import nominal_state
 
-        self._standing = float(com_position(nominal_state(u.params, u.config).q, u.params)[1])
-        self._target = self._standing + float(info["command"])
-        self._x0 = float(info["com_position"][0])
-        self._t, self._flying, self._last_liftoff, self._hops = 0.0, obs[Obs.contact] < 0.5, None, 0
-        self._flight_time, self._long = 0.0, 0
-        self.series = {"com_height": [], "target": self._target, "apex": []}
+        params, config = envs.params, envs.config
+        self._dt, self._g = envs.dt, params.g
+        self._standing = float(com_position(nominal_state(params, config).q, params)[1])
+        n = obs.shape[0]
+        self._x0 = np.array(info["com_position"][:, 0], dtype=np.float64)
+        self._x_end = self._x0.copy()
+        self._t = np.zeros(n)
+        self._flying = obs[:, Obs.contact] < 0.5
+        self._last_liftoff = np.full(n, np.nan)
+        self._hops = np.zeros(n, dtype=np.int64)
+        self._flight_time = np.zeros(n)
+        self._long = np.zeros(n, dtype=np.int64)
+        if self.record is not None:
+            self.series = {"com_height": [], "target": self._standing + float(info["command"][self.record]), "apex": []}
 
-    def step(self, env, obs, info) -> None:
-        (x, y), vy = info["com_position"].tolist(), float(info["com_velocity"][1])
-        target = self._standing + float(info["command"])  # the command the observation shows (a schedule changes it)
-        self._t += self._dt
+    def step(self, envs, obs, actions, info: dict, active: np.ndarray) -> None:
+        x, y = info["com_position"][:, 0], info["com_position"][:, 1]
+        vy = info["com_velocity"][:, 1]
+        target = self._standing + info["command"]  # the command the observation shows (a schedule changes it)
+        self._t[active] += self._dt
         flying = info["contact_mode"] == "flight"
-        self._flight_time += float(info["flight_time"])  # this flight's time so far (the step's share of it)
-        if not flying and self._flying:  # a touchdown in this step: the flight is over
-            self._long += self._flight_time >= LONG_FLIGHT
-        if not flying:
-            self._flight_time = 0.0
-        apex = y + vy * vy / (2.0 * self._g) if flying else np.nan
-        if flying and not self._flying:  # a lift-off in this step: one hop, its apex known now
-            self.errors.append(apex - target)
-            self._hops += 1
-            if self._last_liftoff is not None:
-                self.periods.append(self._t - self._last_liftoff)
-            self._last_liftoff = self._t
-        impulse = float(np.hypot(*info["impulse"]))
-        if impulse > 0.0:
-            self.landings.append(impulse)
-        self._flying = flying
-        self._x_end = x
-        self.series["com_height"].append(y)
-        self.series["apex"].append(apex)
+        self._flight_time[active] += info["flight_time"][active]  # this flight's time so far (the step's share of it)
+        landed = active & ~flying & self._flying  # a touchdown in this step: the flight is over
+        self._long[landed] += self._flight_time[landed] >= LONG_FLIGHT
+        self._flight_time[active & ~flying] = 0.0
+        apex = np.where(flying, y + vy * vy / (2.0 * self._g), np.nan)
+        lifted = np.flatnonzero(active & flying & ~self._flying)  # a lift-off in this step: one hop, its apex known now
+        self.errors.extend((apex[lifted] - target[lifted]).tolist())
+        self._hops[lifted] += 1
+        again = lifted[~np.isnan(self._last_liftoff[lifted])]
+        self.periods.extend((self._t[again] - self._last_liftoff[again]).tolist())
+        self._last_liftoff[lifted] = self._t[lifted]
+        impulse = np.hypot(info["impulse"][:, 0], info["impulse"][:, 1])
+        self.landings.extend(impulse[active & (impulse > 0.0)].tolist())
+        self._flying = np.where(active, flying, self._flying)
+        self._x_end = np.where(active, x, self._x_end)
+        r = self.record
+        if r is not None and active[r]:
+            self.series["com_height"].append(float(y[r]))
+            self.series["apex"].append(float(apex[r]))
 
-    def end(self, survived: bool) -> None:
-        """Close the episode (its drift counts when it ran to the time limit)."""
-        self.hops_per_episode.append(self._hops)
-        self.long_hops_per_episode.append(self._long + (self._flying and self._flight_time >= LONG_FLIGHT))
-        if survived:
-            self.drifts.append(abs(self._x_end - self._x0))
+    def end(self, survived: np.ndarray) -> None:
+        """Close the episodes (an episode's drift counts when it ran to the time limit)."""
+        self.hops_per_episode.extend(self._hops.tolist())
+        self.long_hops_per_episode.extend((self._long + (self._flying & (self._flight_time >= LONG_FLIGHT))).tolist())
+        self.drifts.extend(np.abs(self._x_end - self._x0)[np.asarray(survived, dtype=bool)].tolist())
 
     def summary(self) -> dict:
         e = np.asarray(self.errors)
@@ -119,26 +128,18 @@ def push_survival(controller, forces, episodes: int, seed: int, env_kwargs: dict
     push times and signs, at every magnitude and for every controller). Returns one dict per force:
     ``force`` [N], ``impulse`` [N s] (``F`` times the push's duration), ``survival_rate``, ``episodes``.
     """
-    import gymnasium as gym
+    from train.episodes import make_batch, policy_predict, run_batch
 
     rows = []
     for force in forces:
         kwargs = {**(env_kwargs or {}), "push_force": (float(force), float(force))}
-        envs = gym.make_vec(env_id, num_envs=episodes, **kwargs)
+        envs = make_batch(env_id, episodes, kwargs)
         duration = envs.config.push_steps * envs.config.dt
-        obs, _ = envs.reset(seed=seed)
-        alive = np.ones(episodes, dtype=bool)
-        done = np.zeros(episodes, dtype=bool)
-        if hasattr(controller, "reset"):
-            controller.reset()
-        while not done.all():
-            action, _ = controller.predict(obs, deterministic=True)
-            obs, _, terminated, truncated, _ = envs.step(np.asarray(action, dtype=np.float32).reshape(episodes, 2))
-            fresh = ~done  # autoreset starts new episodes after an end: count each sub-env's first only
-            alive &= ~(terminated & fresh)
-            done |= (terminated | truncated) & fresh
-        envs.close()
-        rows.append({"force": float(force), "impulse": float(force) * duration, "survival_rate": float(alive.mean()), "episodes": episodes})
+        try:
+            batch = run_batch(policy_predict(controller), envs, range(seed, seed + episodes))
+        finally:
+            envs.close()
+        rows.append({"force": float(force), "impulse": float(force) * duration, "survival_rate": batch.survival_rate, "episodes": episodes})
     return rows
 
 

@@ -1,0 +1,110 @@
+"""The one batched episode runner: every evaluation of a policy (``train.evaluate``, the push curve, the periodic
+evaluation during training, the learning curves' held-out scores) runs its episodes through ``run_batch``.
+
+One episode per seed, all in one native batch (``gymnasium.make_vec`` of a leg-env id), sub-env ``i`` seeded
+with ``seeds[i]``: the same episode, step for step, as ``gymnasium.make(env_id)`` reset with that seed (the
+batch's rows are the single env's; ``tests/test_episodes.py`` checks it). The policy sees the whole batch at
+every step, with SB3's ``episode_start`` for controllers that keep a state per robot. A sub-env whose episode
+has ended is autoreset by the batch and stepped on with the others, but nothing of it is counted any more.
+
+What an evaluation measures beyond returns, lengths and survival is a ``Watcher``: it gets the batch's
+observations and ``info`` after the reset and after every step, with the mask of the episodes still running.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Protocol, Sequence
+
+import numpy as np
+
+__all__ = ["Batch", "Watcher", "make_batch", "run_batch", "policy_predict"]
+
+
+class Watcher(Protocol):
+    """What an evaluation measures besides returns, lengths and survival (``run_batch`` calls it)."""
+
+    def start(self, envs, obs: np.ndarray, info: dict) -> None:
+        """After the reset: ``obs`` ``(N, n)`` and the reset's ``info`` of the batch ``envs``."""
+
+    def step(self, envs, obs: np.ndarray, actions: np.ndarray, info: dict, active: np.ndarray) -> None:
+        """After a step: its ``obs``, the ``actions`` taken ``(N, 2)``, its ``info``; ``active``: the rows whose
+        episode was running before this step (this step is theirs)."""
+
+
+class Batch:
+    """The episodes of one ``run_batch``: per-episode ``returns``, ``lengths`` and ``survived`` (reached the time
+    limit without a fall), in the order of the seeds."""
+
+    def __init__(self, seeds: Sequence[int], returns: np.ndarray, lengths: np.ndarray, survived: np.ndarray):
+        self.seeds = [int(s) for s in seeds]
+        self.returns, self.lengths, self.survived = returns, lengths, survived
+
+    @property
+    def survival_rate(self) -> float:
+        return float(self.survived.mean())
+
+
+def make_batch(env_id: str, episodes: int, env_kwargs: dict | None = None, record: int | None = None, frames: bool = False,
+               size: int = 320):
+    """The native batch of ``episodes`` sub-envs of ``env_id`` with ``env_kwargs``; with ``frames``, rendering
+    (``rgb_array``, ``size`` pixels square) the sub-envs up to ``record``."""
+    import gymnasium as gym
+
+    kwargs = dict(env_kwargs or {})
+    if frames and record is not None:
+        kwargs.update(render_mode="rgb_array", width=size, height=size, render_envs=record + 1)
+    return gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point", **kwargs)
+
+
+def policy_predict(policy) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``(obs, episode_start) -> actions`` of anything with SB3's ``predict``, deterministic; a policy with a
+    ``reset()`` (a controller keeping a state per robot) is reset by the first call."""
+    first = [True]
+
+    def predict(obs, episode_start):
+        if first[0] and hasattr(policy, "reset"):
+            policy.reset()
+        first[0] = False
+        action, _ = policy.predict(obs, episode_start=episode_start, deterministic=True)
+        return action
+
+    return predict
+
+
+def run_batch(predict: Callable[[np.ndarray, np.ndarray], np.ndarray], envs, seeds: Sequence[int],
+              watchers: Sequence[Watcher] = ()) -> Batch:
+    """Run one episode per seed in the native batch ``envs`` (``len(seeds)`` sub-envs) to its end.
+
+    Args:
+        predict: ``(obs (N, n), episode_start (N,) bool) -> actions (N, 2)`` (``policy_predict`` makes one).
+        envs: a leg-env batch (``make_batch``), autoreset on the next step (its default).
+        seeds: sub-env ``i``'s seed.
+        watchers: further measurements (``Watcher``).
+
+    Returns:
+        The ``Batch`` of returns, lengths and survival.
+    """
+    n = envs.num_envs
+    if len(seeds) != n:
+        raise ValueError(f"run_batch needs one seed per sub-env: {n} sub-envs, {len(seeds)} seeds")
+    obs, info = envs.reset(seed=[int(s) for s in seeds])
+    for watcher in watchers:
+        watcher.start(envs, obs, info)
+    done = np.zeros(n, dtype=bool)
+    starts = np.ones(n, dtype=bool)
+    returns = np.zeros(n)
+    lengths = np.zeros(n, dtype=np.int64)
+    survived = np.zeros(n, dtype=bool)
+    while not done.all():
+        actions = np.asarray(predict(obs, starts), dtype=np.float64).reshape(n, 2)
+        obs, reward, terminated, truncated, info = envs.step(actions)
+        active = ~done
+        returns[active] += reward[active]
+        lengths[active] += 1
+        for watcher in watchers:
+            watcher.step(envs, obs, actions, info, active)
+        ended = (terminated | truncated) & active
+        survived[ended] = truncated[ended] & ~terminated[ended]
+        done |= ended
+        starts = terminated | truncated
+    return Batch(seeds, returns, lengths, survived)

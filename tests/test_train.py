@@ -435,6 +435,38 @@ def test_bad_schedules_are_value_errors(schedule):
         ConfigSchedule(schedule)
 
 
+def test_a_discount_schedule_sets_the_returns_discount_of_each_rollout():
+    """DiscountSchedule under PPO: each rollout's returns and advantages are discounted by the schedule's value at its
+    start (the rollout buffer's gamma, which computes them, and the model's), from the first rollout on; a bad
+    schedule is a ValueError naming the discount."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from leg_env.sb3 import make_sb3_vec_env
+    from train.callbacks import DiscountSchedule
+
+    schedule = DiscountSchedule([[512, 0.99], [1536, 0.95]])
+    assert schedule.value_at(0) == 0.99 and schedule.value_at(1024) == pytest.approx(0.97) and schedule.value_at(10**9) == 0.95
+    seen = []
+
+    class Watch(BaseCallback):
+        def _on_rollout_end(self) -> None:
+            seen.append((self.num_timesteps, self.model.gamma, self.model.rollout_buffer.gamma))
+
+        def _on_step(self) -> bool:
+            return True
+
+    model = PPO("MlpPolicy", make_sb3_vec_env(4, seed=0), n_steps=64, batch_size=256, n_epochs=1, gamma=0.5, device="cpu", seed=0)
+    model.learn(2048, callback=[schedule, Watch()])
+    assert len(seen) == 8
+    for steps, gamma, buffer_gamma in seen:
+        assert gamma == buffer_gamma == pytest.approx(schedule.value_at(steps - 256)), steps  # the rollout's start
+    assert seen[0][1] == 0.99 and seen[-1][1] == 0.95
+    for bad in ([], [[0, 1.5]], [[0, 0.0]], [[10, 0.99], [5, 0.9]], [[0, [0.9, 0.99]]], "0.99"):
+        with pytest.raises(ValueError, match="gamma"):
+            DiscountSchedule(bad)
+
+
 def test_zoo_callback_entries():
     from train.callbacks import ConfigSchedule, FrozenActor, zoo_callbacks
 

@@ -17,6 +17,7 @@ __all__ = [
     "PeriodicCheckpoint",
     "FrozenActor",
     "ConfigSchedule",
+    "DiscountSchedule",
     "CommandCurriculum",
     "zoo_callbacks",
     "evaluate_now",
@@ -315,6 +316,51 @@ class ConfigSchedule(BaseCallback):
                     self.logger.record(f"curriculum/{field}_{j}", v)
             else:
                 self.logger.record(f"curriculum/{field}", value)
+
+
+class DiscountSchedule(BaseCallback):
+    """A schedule of PPO's discount ``gamma`` over the env steps done: ``points`` ``[[steps, gamma], ...]`` (steps
+    increasing), the first point's value before it, the last point's after it, linear in between (as
+    ``ConfigSchedule``). At the start of training (a resumed run too) and of every rollout, the model's ``gamma`` and
+    its rollout buffer's (which computes the returns and advantages) are set. In ``train/hyperparams/ppo.yml``::
+
+        callback:
+          - train.callbacks.DiscountSchedule:
+              points: [[36000000, 0.998], [45000000, 0.995]]
+
+    TensorBoard key: ``train/gamma``.
+    """
+
+    def __init__(self, points, verbose: int = 0):
+        super().__init__(verbose)
+        at, values, scalar = _schedule_points("gamma", points)
+        if not scalar or not np.all((values > 0.0) & (values <= 1.0)):
+            raise ValueError(f"DiscountSchedule: every gamma must be a number in (0, 1], got {points!r}")
+        self.at, self.values = at, values[:, 0]
+
+    def value_at(self, steps: int) -> float:
+        """The discount after ``steps`` env steps."""
+        return float(np.interp(steps, self.at, self.values))
+
+    def start_on(self, venv: VecEnv, model) -> None:
+        """Set the discount at ``model``'s steps before ``learn`` (``train.ppo`` calls it, as for ``ConfigSchedule``)."""
+        self._set(model)
+
+    def _set(self, model) -> None:
+        gamma = self.value_at(model.num_timesteps)
+        model.gamma = gamma
+        if getattr(model, "rollout_buffer", None) is not None:
+            model.rollout_buffer.gamma = gamma
+
+    def _on_training_start(self) -> None:
+        self._set(self.model)
+
+    def _on_rollout_start(self) -> None:
+        self._set(self.model)
+        self.logger.record("train/gamma", self.model.gamma)
+
+    def _on_step(self) -> bool:
+        return True
 
 
 def _schedule_points(field, points) -> tuple[np.ndarray, np.ndarray, bool]:

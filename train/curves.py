@@ -451,7 +451,7 @@ def _rank_key(scores: dict) -> tuple:
 
 def sweep(args: CurvesArgs, command: str | None = None) -> Path:
     """Train every seed, evaluate them and write the results page; returns its folder."""
-    from train.evaluate import load_policy
+    from train.policy_loading import load_policy
 
     command = command or shlex.join(["python", "-m", "train.curves", *sys.argv[1:]])  # quoted: the page's command can be pasted
     header = describe()

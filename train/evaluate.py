@@ -14,8 +14,9 @@ push tasks), ``hopper`` (``policies.hopper``, the hop task), ``stepping`` (``pol
 the observed push is large; the push task) or ``gated`` (``policies.gated``: a backward hop
 from a start whose capture point is behind the foot, then the LQR; the unilateral balance tasks). The task is the policy's own (its
 ``config.yaml``'s ``env_id``), else ``--env-id`` (default ``leg_env/PlanarLegStance-v0``). Episode ``i`` is seeded ``seed + i``
-(default 10_000 + i: training uses small seeds, in-training evaluation 20_000 + i) and runs in the
-single env from ``gymnasium.make`` with its 1000-step time limit. Results go to ``<policy>/eval/``
+(default 10_000 + i: training uses small seeds, in-training evaluation 20_000 + i); the episodes run as one batch
+(``train.episodes.run_batch``), each the episode of the single env from ``gymnasium.make`` with its 1000-step time
+limit. Policies load through ``train.policy_loading.load_policy`` (re-exported here). Results go to ``<policy>/eval/``
 (or ``--out``): one JSON per controller, ``table.md`` with the side-by-side table that is also
 printed, ``timeseries.png`` (base drift, torques and contact force of the first episode), for a run
 folder ``learning_curve.png`` (the run's curve with the baseline's level drawn in) and with ``--gif``
@@ -41,7 +42,6 @@ impulse for every controller on the same seeds (``train.task_metrics.push_surviv
 from __future__ import annotations
 
 import json
-import pickle
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,6 +50,7 @@ import numpy as np
 from leg_env import ENV_ID  # importing leg_env registers the env
 from leg_env.tasks.stance import Obs
 from train.cli import parse_args
+from train.policy_loading import BASELINES, PolicyLoadError, PolicyNotFoundError, TrainedPolicy, load_policy
 
 __all__ = [
     "EvalArgs",
@@ -65,165 +66,6 @@ __all__ = [
 EVAL_SEED = 10_000
 GIF_FRAME_SKIP = 4  # one frame per 4 control steps: 25 frames per simulated second at dt = 0.01 s
 GIF_SIZE = 320  # pixels
-
-
-class PolicyNotFoundError(FileNotFoundError):
-    """The policy folder or one of its files is missing; the message names the path."""
-
-
-class PolicyLoadError(ValueError):
-    """A policy file exists but cannot be read as what it should be; the message names the file."""
-
-
-class TrainedPolicy:
-    """A trained SB3 model with the observation normalisation it was trained with.
-
-    ``predict`` has SB3's signature and takes raw env observations of its task, one ``(n,)`` or a batch ``(N, n)``.
-    """
-
-    def __init__(self, model, vec_normalize=None, env_kwargs: dict | None = None, path: Path | None = None, env_id: str | None = None):
-        self.model = model
-        self.vec_normalize = vec_normalize
-        self.env_kwargs = dict(env_kwargs or {})
-        self.path = path
-        self.env_id = env_id  # the task it was trained on (its config.yaml's env_id), None if unknown
-
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        obs = np.asarray(observation, dtype=np.float32)
-        if self.vec_normalize is not None:
-            obs = self.vec_normalize.normalize_obs(obs)
-        return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
-
-
-def _read_config(folder: Path) -> dict:
-    path = folder / "config.yaml"
-    if not path.is_file():
-        return {}
-    import yaml
-
-    try:
-        config = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise PolicyLoadError(f"cannot read the run configuration {path}: {e}") from e
-    if not isinstance(config, dict):
-        raise PolicyLoadError(f"the run configuration {path} is not a mapping")
-    return config
-
-
-def _lqr(params, config):
-    from policies.lqr import LQRController
-
-    return LQRController(params, config)
-
-
-def _hopper(params, config):
-    from policies.hopper import HopperController
-
-    return HopperController(params, config)
-
-
-def _gated(params, config):
-    from policies.gated import GatedController
-
-    return GatedController(params, config)
-
-
-def _stepping(params, config):
-    from policies.stepping import SteppingController
-
-    return SteppingController(params, config)
-
-
-BASELINES = {"lqr": _lqr, "hopper": _hopper, "gated": _gated, "stepping": _stepping}
-"""The model-based controllers by name: ``(params, config) -> controller`` with ``predict``."""
-
-
-def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None):
-    """A policy with ``predict(obs)`` from a run/policy folder (or its ``model.zip``), or a baseline's name.
-
-    A folder written by ``python -m train.rllib``, or one of its checkpoints, loads as a
-    ``train.rllib.RLlibPolicy`` (needs the ``rllib`` extra).
-
-    A baseline (``BASELINES``: ``"lqr"``, ``"hopper"``, ``"gated"``, ``"stepping"``) is built for the env ``env_id`` made with ``env_kwargs``. For a folder,
-    ``env_kwargs`` (default: the run's ``eval_env_kwargs``) are kept as the policy's ``env_kwargs``,
-    the evaluation env's arguments.
-
-    Raises:
-        PolicyNotFoundError: the folder, ``model.zip`` or (when the run normalised) ``vecnormalize.pkl``
-            is missing; the message names the path (a ``FileNotFoundError``).
-        PolicyLoadError: a file exists but is corrupt or of the wrong kind; the message names it.
-    """
-    if isinstance(path, str) and path.lower() in BASELINES:
-        import gymnasium as gym
-
-        kwargs = {k: v for k, v in (env_kwargs or {}).items() if k not in ("render_mode", "width", "height")}
-        env = gym.make(env_id or ENV_ID, **kwargs).unwrapped  # the task's params and config, checked
-        return BASELINES[path.lower()](env.params, env.config)
-
-    from train.rllib import RLlibPolicy, is_rllib_checkpoint, is_rllib_run
-
-    path = Path(path)
-    if is_rllib_run(path) or is_rllib_checkpoint(path):  # python -m train.rllib's run folder or checkpoint
-        try:
-            policy = RLlibPolicy.load(path)
-        except FileNotFoundError as e:
-            raise PolicyNotFoundError(str(e)) from e
-        except ValueError as e:
-            raise PolicyLoadError(str(e)) from e
-        if env_kwargs is not None:
-            policy.env_kwargs = dict(env_kwargs)
-        return policy
-
-    import torch
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import VecNormalize
-
-    torch.set_num_threads(1)
-    folder = path.parent if path.suffix == ".zip" else path
-    model_file = path if path.suffix == ".zip" else folder / "model.zip"
-    if not folder.is_dir():
-        raise PolicyNotFoundError(f"policy folder not found: {folder}")
-    if not model_file.is_file():
-        raise PolicyNotFoundError(f"model file not found: {model_file}")
-    config = _read_config(folder)
-    try:
-        model = PPO.load(model_file, device="cpu")
-    except Exception as e:  # SB3 raises zipfile, pickle, torch or key errors on a bad archive
-        raise PolicyLoadError(f"cannot load the model file {model_file}: {type(e).__name__}: {e}") from e
-
-    vec_normalize = None
-    stats_file = folder / "vecnormalize.pkl"
-    if config.get("normalize", True) is not False or stats_file.exists():
-        if not stats_file.is_file():
-            raise PolicyNotFoundError(f"normalisation statistics not found: {stats_file}")
-        try:
-            with open(stats_file, "rb") as f:
-                vec_normalize = pickle.load(f)
-        except Exception as e:
-            raise PolicyLoadError(f"cannot load the normalisation statistics {stats_file}: {type(e).__name__}: {e}") from e
-        if not isinstance(vec_normalize, VecNormalize):
-            raise PolicyLoadError(f"{stats_file} does not hold VecNormalize statistics (got {type(vec_normalize).__name__})")
-        vec_normalize.training = False
-        vec_normalize.norm_reward = False
-        if not vec_normalize.norm_obs:
-            vec_normalize = None  # only returns were normalised: the policy reads raw observations
-        elif vec_normalize.obs_rms.mean.shape != model.observation_space.shape:
-            raise PolicyLoadError(
-                f"{stats_file} has statistics for observations of shape {vec_normalize.obs_rms.mean.shape}, "
-                f"the model in {model_file} expects {model.observation_space.shape}"
-            )
-    if env_kwargs is None:
-        env_kwargs = config.get("eval_env_kwargs", config.get("env_kwargs")) or {}
-    policy = TrainedPolicy(model, vec_normalize, env_kwargs, folder, env_id=config.get("env_id"))
-    residual = config.get("residual")
-    if residual:  # a residual on a model-based controller (train.residual): the policy is their sum
-        from train.residual import ResidualPolicy
-
-        if not isinstance(residual, dict) or residual.get("controller") not in BASELINES:
-            raise PolicyLoadError(f"the run configuration {folder / 'config.yaml'} has an unknown residual {residual!r}")
-        controller = load_policy(residual["controller"], env_kwargs=config.get("env_kwargs") or {}, env_id=policy.env_id)
-        return ResidualPolicy(policy, controller, residual["scale"])
-    return policy
 
 
 class EpisodeMetrics:

@@ -37,7 +37,7 @@ import numpy as np
 
 from leg_env import ENV_ID, __version__
 from train.cli import parse_args
-from train.evaluate import PolicyLoadError, TrainedPolicy, load_policy
+from train.policy_loading import PolicyLoadError, TrainedPolicy, load_policy
 
 __all__ = ["ExportArgs", "ExportError", "export_onnx", "policy_to_onnx"]
 

@@ -100,7 +100,7 @@ class TrainArgs:
     seed: int = 0
     """Seed of the training envs, the network initialisation and the sampling."""
     residual: str | None = None
-    """Train a residual on a model-based controller ('lqr', 'hopper', 'gated', 'stepping': train.evaluate.BASELINES): the
+    """Train a residual on a model-based controller ('lqr', 'hopper', 'gated', 'stepping': train.policy_loading.BASELINES): the
     robots get the controller's action plus residual_scale times the network's (train/residual.py); the
     shipped policy is that sum."""
     residual_scale: float = 0.3
@@ -172,8 +172,8 @@ class TrainArgs:
 
 
 def _controllers() -> tuple:
-    """The names of the model-based controllers (``train.evaluate.BASELINES``)."""
-    from train.evaluate import BASELINES
+    """The names of the model-based controllers (``train.policy_loading.BASELINES``)."""
+    from train.policy_loading import BASELINES
 
     return tuple(BASELINES)
 
@@ -248,7 +248,7 @@ def _with_residual(venv, config: dict):
     """``venv`` as seen by a residual policy (``train.residual``) when the run trains one, else itself."""
     if not config.get("residual"):
         return venv
-    from train.evaluate import load_policy
+    from train.policy_loading import load_policy
     from train.residual import ResidualVecEnv
 
     residual = config["residual"]
@@ -259,7 +259,7 @@ def _with_residual(venv, config: dict):
 def _evaluated_policy(model, vec_normalize, config: dict):
     """What the periodic evaluation runs: ``model`` on observations normalised by the training statistics of the
     moment, plus its controller when the run trains a residual (``train.residual``)."""
-    from train.evaluate import TrainedPolicy, load_policy
+    from train.policy_loading import TrainedPolicy, load_policy
 
     policy = TrainedPolicy(model, vec_normalize, config["env_kwargs"], env_id=config["env_id"])
     if not config.get("residual"):
@@ -276,7 +276,7 @@ def warm_start(model, init_from: str, config: dict) -> None:
     from train import warmstart
 
     if init_from.lower() in ("lqr", "hopper"):
-        from train.evaluate import load_policy
+        from train.policy_loading import load_policy
 
         controller = load_policy(init_from.lower(), env_kwargs=config["env_kwargs"], env_id=config["env_id"])
         rms = warmstart.clone_controller(model, controller, config["env_id"], config["env_kwargs"], config["seed"])

@@ -2,7 +2,7 @@
 
 ``python -m train.ppo --residual hopper --residual-scale 0.3`` trains PPO on the env as seen through
 ``ResidualVecEnv``: the action applied to the robots is ``clip(a_base(obs) + scale * clip(a, -1, 1), -1, 1)``,
-where ``a_base`` is the controller's (``lqr``, ``hopper``: ``train.evaluate.BASELINES``) at the same
+where ``a_base`` is the controller's (``lqr``, ``hopper``: ``train.policy_loading.BASELINES``) at the same
 observation and ``a`` the network's. SB3's initial actor outputs about 0 (its action layer is initialised
 with gain 0.01), so training starts from the controller itself and explores around it. The shipped policy is
 ``ResidualPolicy``: the same sum at evaluation (``train.evaluate.load_policy`` builds it from the run's

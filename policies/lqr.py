@@ -40,6 +40,7 @@ from leg_env.integrate import project_stance
 from leg_env.params import LegParams
 from leg_env.task import StanceConfig, nominal_state
 from leg_env.tasks.stance import Obs
+from policies.base import BatchedController
 
 __all__ = ["LQRController", "linearize", "discretize", "base_jacobian", "STATE_INDEX"]
 
@@ -102,7 +103,7 @@ def base_jacobian(p: LegParams, x_eq: np.ndarray, eps: float = 1.0e-6) -> np.nda
     return C
 
 
-class LQRController:
+class LQRController(BatchedController):
     """Discrete LQR balance controller for ``PlanarLegStance-v0`` with SB3's ``predict`` interface.
 
     Args:
@@ -115,11 +116,18 @@ class LQRController:
         joint_weight: weight added on the diagonal of the default ``Q`` [1/rad^2, s^2/rad^2].
         r_scale: factor on the reward's control cost in the default ``R``.
 
+    It keeps no state between calls; ``predict`` is the batched base's (``policies.base``), on one observation
+    (12,) or a batch (N, 12) (pinned), (18,) / (N, 18) on the unilateral ground, (19,) / (N, 19) on ``PlanarLegPush-v1``.
+
     Attributes:
         K: (2, 6) gain, ``u = -K x``.
         Ad, Bd: the discrete model; A, B: the continuous one.
         x_eq, tau_eq: the equilibrium in minimal coordinates and its holding torques [N m].
     """
+
+    widths = (12, 18, 19)
+    task = "the balance and push tasks: 12 entries pinned, 18 on the unilateral ground, 19 on PlanarLegPush-v1"
+    dtype = np.float64
 
     def __init__(
         self,
@@ -168,19 +176,11 @@ class LQRController:
         x = obs[..., STATE_INDEX] - self.x_eq
         return self.tau_eq - x @ self.K.T
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        """SB3-style ``predict``: actions in [-1, 1] for one observation (12,) or a batch (N, 12).
+    def act(self, batch: np.ndarray) -> np.ndarray:
+        """Actions ``(N, 2)`` float32 in [-1, 1] for observations ``batch`` ``(N, 12)``, ``(N, 18)`` or ``(N, 19)``.
 
         On the unilateral ground (18 entries: ``PlanarLegBalance-v0``, ``PlanarLegPush-v0``; 19 on
         ``PlanarLegPush-v1``) the same entries 2-4 and 7-9 are read; the gain is the stance model's whatever the
-        contact mode.
-
-        Returns:
-            ``(action, None)`` with ``action`` float32 of shape (2,) or (N, 2).
+        contact mode. ``predict`` (``policies.base.BatchedController``) takes one observation or a batch.
         """
-        obs = np.asarray(observation)
-        if obs.shape[-1:] not in ((12,), (18,), (19,)) or obs.ndim not in (1, 2):
-            raise ValueError(f"observation must have shape (12,) or (N, 12) (pinned), (18,) or (N, 18) (unilateral), "
-                             f"(19,) or (N, 19) (PlanarLegPush-v1), got {obs.shape}")
-        action = np.clip(self.torque(obs) / self.torque_limit, -1.0, 1.0).astype(np.float32)
-        return action, None
+        return np.clip(self.torque(batch) / self.torque_limit, -1.0, 1.0).astype(np.float32)

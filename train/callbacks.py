@@ -144,7 +144,7 @@ class PeriodicEvaluation(_Periodic):
     """Every ``eval_freq`` env steps, run ``envs.num_envs`` deterministic episodes of ``policy`` and log the results.
 
     ``envs`` is a native batch (``train.episodes.make_batch``); ``policy`` has SB3's ``predict`` on raw observations
-    (``train.evaluate.TrainedPolicy`` of the model being trained normalises them with the training
+    (``train.policy_loading.TrainedPolicy`` of the model being trained normalises them with the training
     ``VecNormalize``'s current statistics); rewards are the env's own (unnormalised). Each result (with
     ``timesteps`` and the wall-clock ``time``) is appended to ``history`` and passed to ``on_result``.
     """

@@ -58,13 +58,11 @@ def make_batch(env_id: str, episodes: int, env_kwargs: dict | None = None, recor
 
 def policy_predict(policy) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     """``(obs, episode_start) -> actions`` of anything with SB3's ``predict``, deterministic; a policy with a
-    ``reset()`` (a controller keeping a state per robot) is reset by the first call."""
-    first = [True]
+    ``reset()`` (a controller keeping a state per robot) is reset here, before its first call."""
+    if hasattr(policy, "reset"):
+        policy.reset()
 
     def predict(obs, episode_start):
-        if first[0] and hasattr(policy, "reset"):
-            policy.reset()
-        first[0] = False
         action, _ = policy.predict(obs, episode_start=episode_start, deterministic=True)
         return action
 

@@ -167,10 +167,16 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
     policy = TrainedPolicy(model, vec_normalize, env_kwargs, folder, env_id=config.get("env_id"))
     residual = config.get("residual")
     if residual:  # a residual on a model-based controller (train.residual): the policy is their sum
-        from train.residual import ResidualPolicy
-
         if not isinstance(residual, dict) or residual.get("controller") not in BASELINES:
             raise PolicyLoadError(f"the run configuration {folder / 'config.yaml'} has an unknown residual {residual!r}")
-        controller = load_policy(residual["controller"], env_kwargs=config.get("env_kwargs") or {}, env_id=policy.env_id)
-        return ResidualPolicy(policy, controller, residual["scale"])
+        return with_controller(policy, residual, config.get("env_kwargs") or {}, policy.env_id)
     return policy
+
+
+def with_controller(network, residual: dict, env_kwargs: dict, env_id: str | None):
+    """``network`` as a residual on its controller (``train.residual.ResidualPolicy``): ``residual`` is a run
+    configuration's ``{"controller": name, "scale": s}``, the controller built for ``env_id`` with ``env_kwargs``."""
+    from train.residual import ResidualPolicy
+
+    controller = load_policy(residual["controller"], env_kwargs=env_kwargs, env_id=env_id)
+    return ResidualPolicy(network, controller, residual["scale"])

@@ -259,16 +259,10 @@ def _with_residual(venv, config: dict):
 def _evaluated_policy(model, vec_normalize, config: dict):
     """What the periodic evaluation runs: ``model`` on observations normalised by the training statistics of the
     moment, plus its controller when the run trains a residual (``train.residual``)."""
-    from train.policy_loading import TrainedPolicy, load_policy
+    from train.policy_loading import TrainedPolicy, with_controller
 
     policy = TrainedPolicy(model, vec_normalize, config["env_kwargs"], env_id=config["env_id"])
-    if not config.get("residual"):
-        return policy
-    from train.residual import ResidualPolicy
-
-    residual = config["residual"]
-    controller = load_policy(residual["controller"], env_kwargs=config["env_kwargs"], env_id=config["env_id"])
-    return ResidualPolicy(policy, controller, residual["scale"])
+    return with_controller(policy, config["residual"], config["env_kwargs"], config["env_id"]) if config.get("residual") else policy
 
 
 def warm_start(model, init_from: str, config: dict) -> None:
@@ -472,8 +466,8 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
             )
 
     eval_cfg = config["eval"]
-    eval_envs = make_batch(config["env_id"], eval_cfg["episodes"], config["eval_env_kwargs"])
     eval_policy = _evaluated_policy(model, vec_normalize, config)
+    eval_envs = make_batch(config["env_id"], eval_cfg["episodes"], config["eval_env_kwargs"])
     checkpointer = PeriodicCheckpoint(config["checkpoint_freq"], save)
     callbacks = [
         *scheduled,

@@ -162,6 +162,26 @@ def test_a_sweep_passes_its_update_precision_and_selection_to_each_seed_and_can_
     assert "The seed to ship, named before training: 0 (not shipped" in page and "| PPO seed 0 (named) |" in page and "(shipped)" not in page
 
 
+def test_a_sweep_trains_every_seed_on_the_entry_of_its_hyperparameter_file(tmp_path):
+    import yaml
+
+    from train.hyperparameters import DEFAULT_HYPERPARAMS
+
+    entry = yaml.safe_load(DEFAULT_HYPERPARAMS.read_text())["leg_env/PlanarLegBalance-v0"]
+    entry["gamma"] = 0.97  # the file's own value, which no override sets
+    hyperparams = tmp_path / "probe.yml"
+    hyperparams.write_text(yaml.safe_dump({"leg_env/PlanarLegBalance-v0": entry}))
+    main(["--env-id", "leg_env/PlanarLegBalance-v0", "--total-timesteps", "256", "--eval-freq", "128", "--eval-episodes", "2",
+          "--episodes", "2", "--seeds", "1", "--hyperparams", str(hyperparams), "--params", *TINY,
+          "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "page")])  # fmt: skip
+    folder = tmp_path / "runs" / "seed_0"
+    config = yaml.safe_load((folder / "config.yaml").read_text())
+    assert config["ppo"]["gamma"] == 0.97 and Path(config["hyperparams_file"]).name == "probe.yml"
+    assert f"--hyperparams {hyperparams}" in (folder / "command.txt").read_text()
+    assert "probe.yml" in json.loads((tmp_path / "page" / "plan.json").read_text())["hyperparams"]
+    assert f"entry of `{hyperparams}`" in (tmp_path / "page" / "README.md").read_text()
+
+
 def _alive(pid: int) -> bool:
     """Whether process ``pid`` runs (a zombie, dead but not yet reaped by its new parent, does not)."""
     try:

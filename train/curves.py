@@ -4,8 +4,8 @@ summarised as RL results should be (Agarwal et al. 2021, the ``rliable`` package
     python -m train.curves --env-id leg_env/PlanarLegHop-v3 --seeds 5
     python -m train.curves --env-id leg_env/PlanarLegBalance-v0 --seeds 5 --baseline gated --jobs 2
 
-Seed ``s`` trains ``python -m train.ppo --seed s`` (the task's entry in ``train/hyperparams/ppo.yml``, the
-same for every seed) into ``<runs>/seed_<s>``, evaluated during training on the same fixed episodes
+Seed ``s`` trains ``python -m train.ppo --seed s`` (the task's entry in ``train/hyperparams/ppo.yml``, or in the
+file of ``--hyperparams``, the same for every seed) into ``<runs>/seed_<s>``, evaluated during training on the same fixed episodes
 (seeds 20000+) for every seed. A finished seed is not trained again and an interrupted one resumes from its
 checkpoint, so rerunning the command after a stop finishes the sweep. With ``--jobs k`` the seeds train k at a
 time in worker processes; a Ctrl-C or a ``kill`` of the command stops every worker at a checkpoint (as
@@ -46,6 +46,7 @@ import numpy as np
 import yaml
 
 from train.cli import interrupt, parse_args
+from train.hyperparameters import DEFAULT_HYPERPARAMS, display_path
 from train.machine import TANHS, UPDATE_PRECISIONS, describe
 
 __all__ = ["CurvesArgs", "iqm_interval", "sweep", "main"]
@@ -78,6 +79,8 @@ class CurvesArgs:
     configuration, whose page names that seed as chosen before training, not as shipped)."""
     total_timesteps: int | None = None
     """Environment steps per seed (None: the file's n_timesteps)."""
+    hyperparams: Path = DEFAULT_HYPERPARAMS
+    """Hyperparameter YAML in RL Zoo format whose env_id entry every seed trains (train.ppo's --hyperparams)."""
     params: list[str] = field(default_factory=list)
     """Hyperparameter overrides for every seed, as train.ppo's --params."""
     eval_freq: int = 2_000_000
@@ -173,6 +176,7 @@ def _train_seed(args: CurvesArgs, seed: int) -> Path:
         TrainArgs(
             out=folder,
             env_id=args.env_id,
+            hyperparams=args.hyperparams,
             params=list(args.params),
             total_timesteps=args.total_timesteps,
             seed=seed,
@@ -252,6 +256,8 @@ def seed_command(args: CurvesArgs, seed: int) -> str:
 
     argv = ["python", "-m", "train.ppo", "--env-id", args.env_id, "--seed", str(seed), "--out", str(args.runs / f"seed_{seed}"),
             "--eval-freq", str(args.eval_freq), "--eval-episodes", str(args.eval_episodes), "--torch-threads", str(args.torch_threads)]
+    if Path(args.hyperparams).resolve() != Path(DEFAULT_HYPERPARAMS).resolve():
+        argv += ["--hyperparams", str(args.hyperparams)]
     if args.update_precision != "float32":
         argv += ["--update-precision", args.update_precision]
     if args.tanh != "fast":
@@ -394,7 +400,7 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
         f"Machine: {header}",
         "",
         f"Plain PPO from scratch (SB3 `MlpPolicy`, random initialisation, no controller, no demonstrations), the "
-        f"`{args.env_id}` entry of `train/hyperparams/ppo.yml`{' with ' + ' '.join(args.params) if args.params else ''}, "
+        f"`{args.env_id}` entry of `{display_path(args.hyperparams)}`{' with ' + ' '.join(args.params) if args.params else ''}, "
         f"{len(seeds)} training seeds ({seeds[0]}..{seeds[-1]}). {_named(args)}. "
         f"PPO's update: {_precisions(final.get('precision', {}))} (`train.ppo --update-precision`).",
         "",
@@ -457,7 +463,8 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
     header = describe()
     args.out.mkdir(parents=True, exist_ok=True)
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
-    plan = {"env_id": args.env_id, "seeds": seeds, "shipped_seed": args.shipped_seed, "params": list(args.params), "command": command}
+    plan = {"env_id": args.env_id, "seeds": seeds, "shipped_seed": args.shipped_seed, "hyperparams": display_path(args.hyperparams),
+            "params": list(args.params), "command": command}
     (args.out / "plan.json").write_text(json.dumps(plan, indent=2) + "\n")  # the shipped seed, on record before training
     histories, final = {}, {"per_seed": {}}
     if args.jobs > 1 and len(seeds) > 1:  # train in parallel processes; the loop below then finds every seed finished

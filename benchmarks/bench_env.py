@@ -4,9 +4,10 @@
     .venv/bin/python benchmarks/bench_env.py --ppo    # and PPO fps, 50,000 steps each (a few minutes)
 
 MuJoCo comes from the ``bench`` extra (``pip install -e '.[bench]'``). One thread for BLAS/OpenMP
-and torch. Every number is the median over ``REPEATS`` timed repeats (``time.perf_counter``), each
-timing a loop of steps and dividing; the rows are timed round-robin, repeat by repeat, so that a
-change in machine load hits every row alike; random actions are sampled before timing (uniform over the
+and torch. Every rate is the median over ``REPEATS`` timed repeats (``time.perf_counter``), each
+timing a loop of steps and dividing; the rows are timed round-robin, repeat by repeat, and every ratio
+is the median over the repeats of the two rows' ratio within one repeat, so that a change in machine
+load between repeats cancels; random actions are sampled before timing (uniform over the
 action space, seeded) because sampling costs more than a leg-env step. Episodes end as they do in
 training, and their resets are part of the time: the single envs are reset by the loop, the vector
 envs autoreset themselves.
@@ -123,6 +124,19 @@ class Runner:
     @property
     def rate(self) -> float:
         return statistics.median(self.rates)
+
+
+class Rates(dict):
+    """The rows' median rates by key, and ``ratio(a, b)``: the median over the repeats of row a's rate over row b's in
+    the same repeat. The rows are timed round-robin, so both rates of a pair come from one round and a change in
+    machine load between rounds cancels in their ratio, where a ratio of the two medians would take it in."""
+
+    def __init__(self, runners: dict):
+        super().__init__({key: runner.rate for key, runner in runners.items()})
+        self.repeats = {key: runner.rates for key, runner in runners.items()}
+
+    def ratio(self, a, b) -> float:
+        return statistics.median(x / y for x, y in zip(self.repeats[a], self.repeats[b], strict=True))
 
 
 def single_env_runner(env_id: str, **kwargs) -> Runner:
@@ -367,6 +381,8 @@ def env_table() -> dict:
 
     runners = {("single", env_id): single_env_runner(env_id) for env_id in (LEG, HOPPER, PENDULUM)}
     runners["single", "unilateral"] = single_env_runner(LEG, **UNILATERAL)
+    # the pinned batches just before the unilateral batch compared with them, so that the two are timed close together in each round
+    runners.update({("vector", n): vector_env_runner(gym.make_vec(LEG, num_envs=n)) for n in VECTOR_SIZES})
     n = max(VECTOR_SIZES)
     runners["vector", "unilateral"] = vector_env_runner(gym.make_vec(LEG, num_envs=n, **UNILATERAL))
     runners["balance", "pinned"] = vector_env_runner(gym.make_vec(LEG, num_envs=n), balance=True)
@@ -380,7 +396,6 @@ def env_table() -> dict:
     runners["sync", HOPPER] = vector_env_runner(
         gym.make_vec(HOPPER, num_envs=REFERENCE_ENVS, vectorization_mode="sync"), REFERENCE_CALLS
     )
-    runners.update({("vector", n): vector_env_runner(gym.make_vec(LEG, num_envs=n)) for n in VECTOR_SIZES})
     threads = os.cpu_count() or 1
     if threads > 1:
         n = max(VECTOR_SIZES)
@@ -388,35 +403,35 @@ def env_table() -> dict:
     runners["dummy", HOPPER] = sb3_runner(make_vec_env(HOPPER, n_envs=REFERENCE_ENVS), REFERENCE_CALLS)
     runners.update({("sb3", n): sb3_runner(make_sb3_vec_env(n)) for n in SB3_SIZES})
     time_all(runners)
-    rate = {key: runner.rate for key, runner in runners.items()}
+    rate = Rates(runners)
 
     rows = []
     for env_id in (LEG, HOPPER, PENDULUM):
         r = rate["single", env_id]
-        rows.append(("`gym.make` `env.step`", env_id, 1, r, r / rate["single", HOPPER]))
+        rows.append(("`gym.make` `env.step`", env_id, 1, r, rate.ratio(("single", env_id), ("single", HOPPER))))
     r = rate["single", "unilateral"]
-    rows.append(("`gym.make` `env.step`, unilateral", LEG, 1, r, r / rate["single", HOPPER]))
+    rows.append(("`gym.make` `env.step`, unilateral", LEG, 1, r, rate.ratio(("single", "unilateral"), ("single", HOPPER))))
     for n in VECTOR_SIZES:
-        rows.append(("`gym.make_vec` (native)", LEG, n, rate["vector", n], rate["vector", n] / rate["sync", HOPPER]))
+        rows.append(("`gym.make_vec` (native)", LEG, n, rate["vector", n], rate.ratio(("vector", n), ("sync", HOPPER))))
     for (kind, n), r in rate.items():
         if kind == "threaded":
-            rows.append((f"`gym.make_vec` (native, {threads} threads)", LEG, n, r, r / rate["sync", HOPPER]))
+            rows.append((f"`gym.make_vec` (native, {threads} threads)", LEG, n, r, rate.ratio((kind, n), ("sync", HOPPER))))
     rows.append(("`gym.make_vec` (`SyncVectorEnv`)", HOPPER, REFERENCE_ENVS, rate["sync", HOPPER], 1.0))
     big = max(VECTOR_SIZES)
-    rows.append(("`gym.make_vec`, unilateral, random (ratio: to pinned)", LEG, big, rate["vector", "unilateral"], rate["vector", "unilateral"] / rate["vector", big]))
+    rows.append(("`gym.make_vec`, unilateral, random (ratio: to pinned)", LEG, big, rate["vector", "unilateral"], rate.ratio(("vector", "unilateral"), ("vector", big))))
     rows.append(("`gym.make_vec`, pinned, balancing", LEG, big, rate["balance", "pinned"], 1.0))
-    rows.append(("`gym.make_vec`, unilateral, balancing (ratio: to pinned)", LEG, big, rate["balance", "unilateral"], rate["balance", "unilateral"] / rate["balance", "pinned"]))
+    rows.append(("`gym.make_vec`, unilateral, balancing (ratio: to pinned)", LEG, big, rate["balance", "unilateral"], rate.ratio(("balance", "unilateral"), ("balance", "pinned"))))
     for env_id in TASK_IDS:
         r = rate["task", env_id]
-        rows.append(("`gym.make_vec`, random (ratio: to unilateral stance)", env_id, big, r, r / rate["vector", "unilateral"]))
+        rows.append(("`gym.make_vec`, random (ratio: to unilateral stance)", env_id, big, r, rate.ratio(("task", env_id), ("vector", "unilateral"))))
         r = rate["task balance", env_id]
-        rows.append(("`gym.make_vec`, balancing (ratio: to unilateral stance)", env_id, big, r, r / rate["balance", "unilateral"]))
+        rows.append(("`gym.make_vec`, balancing (ratio: to unilateral stance)", env_id, big, r, rate.ratio(("task balance", env_id), ("balance", "unilateral"))))
     for name in RANDOMISED:
         for kind, reference in _RANDOMISED_REFERENCE[name]:
             what = "random" if kind == "randomised" else "balancing"
-            rows.append((f"`gym.make_vec`, {name}, {what}, `randomize=True` (ratio: to nominal)", LEG, big, rate[kind, name], rate[kind, name] / rate[reference]))
+            rows.append((f"`gym.make_vec`, {name}, {what}, `randomize=True` (ratio: to nominal)", LEG, big, rate[kind, name], rate.ratio((kind, name), reference)))
     for n in SB3_SIZES:
-        rows.append(("SB3 `VecEnv` (`leg_env.sb3`)", LEG, n, rate["sb3", n], rate["sb3", n] / rate["dummy", HOPPER]))
+        rows.append(("SB3 `VecEnv` (`leg_env.sb3`)", LEG, n, rate["sb3", n], rate.ratio(("sb3", n), ("dummy", HOPPER))))
     rows.append(("SB3 `DummyVecEnv`", HOPPER, REFERENCE_ENVS, rate["dummy", HOPPER], 1.0))
 
     limit = arithmetic_limit()
@@ -424,7 +439,8 @@ def env_table() -> dict:
         rows.append((f"physical limit: the compiled control step alone ({name}; ratio: to the native batch)", LEG, LIMIT_ROBOTS, 1.0 / seconds,
                      (1.0 / seconds) / rate["vector", big] if name == "pinned" else (1.0 / seconds) / rate["balance", "unilateral"]))
     lines = [
-        f"Environment speed, median of {REPEATS} round-robin repeats, random actions, resets included.",
+        f"Environment speed, median of {REPEATS} round-robin repeats (a ratio: the median of its ratio within each repeat), "
+        "random actions, resets included.",
         "ratio: (a) vs Hopper-v5 `env.step`; (b) vs `SyncVectorEnv(Hopper-v5, 8)`; (c) vs `DummyVecEnv(Hopper-v5, 8)`; "
         "(d) as the row says. The physical-limit rows time the compiled control step of one robot (RK4, 2 substeps) over "
         f"{LIMIT_ROBOTS:,} robots in one call, near the nominal posture: the arithmetic an env step cannot go below.",
@@ -470,8 +486,8 @@ def env_table() -> dict:
 
 def check_targets(rate: dict) -> bool:
     n = max(VECTOR_SIZES)
-    single_ratio = rate["single", LEG] / rate["single", HOPPER]
-    vector_ratio = rate["vector", n] / rate["sync", HOPPER]
+    single_ratio = rate.ratio(("single", LEG), ("single", HOPPER))
+    vector_ratio = rate.ratio(("vector", n), ("sync", HOPPER))
     checks = [
         (f"`gym.make` env.step vs Hopper-v5 >= {TARGET_SINGLE_RATIO:.0f}x", f"{single_ratio:.1f}x", single_ratio >= TARGET_SINGLE_RATIO),
         (
@@ -485,9 +501,10 @@ def check_targets(rate: dict) -> bool:
             rate["vector", n] >= TARGET_VECTOR_RATE,
         ),
     ]
-    uni_single = rate["single", "unilateral"] / rate["single", HOPPER]
+    uni_single = rate.ratio(("single", "unilateral"), ("single", HOPPER))
     uni_random = rate["vector", "unilateral"]
-    uni_balance = rate["balance", "unilateral"] / rate["balance", "pinned"]
+    uni_random_share = rate.ratio(("vector", "unilateral"), ("vector", n))
+    uni_balance = rate.ratio(("balance", "unilateral"), ("balance", "pinned"))
     checks += [
         (f"unilateral `env.step` vs Hopper-v5 >= {TARGET_SINGLE_UNILATERAL_RATIO:.0f}x", f"{uni_single:.1f}x", uni_single >= TARGET_SINGLE_UNILATERAL_RATIO),
         (
@@ -497,8 +514,8 @@ def check_targets(rate: dict) -> bool:
         ),
         (
             f"unilateral vs pinned `gym.make_vec` N={n}, random actions >= {TARGET_UNILATERAL_RANDOM:.0%}",
-            f"{uni_random / rate['vector', n]:.0%}",
-            uni_random / rate["vector", n] >= TARGET_UNILATERAL_RANDOM,
+            f"{uni_random_share:.0%}",
+            uni_random_share >= TARGET_UNILATERAL_RANDOM,
         ),
         (
             f"unilateral vs pinned `gym.make_vec` N={n}, balancing >= {TARGET_UNILATERAL_BALANCE:.0%}",
@@ -508,7 +525,7 @@ def check_targets(rate: dict) -> bool:
     ]
     for env_id in TASK_IDS:
         for kind, reference in (("task", ("vector", "unilateral")), ("task balance", ("balance", "unilateral"))):
-            share = rate[kind, env_id] / rate[reference]
+            share = rate.ratio((kind, env_id), reference)
             checks.append(
                 (
                     f"{env_id} `gym.make_vec` N={n}, {'random actions' if kind == 'task' else 'balancing'} vs unilateral stance >= {TARGET_TASK_SHARE:.0%}",
@@ -518,11 +535,11 @@ def check_targets(rate: dict) -> bool:
             )
     for name in RANDOMISED:
         for kind, reference in _RANDOMISED_REFERENCE[name]:
-            share = rate[kind, name] / rate[reference]
+            share = rate.ratio((kind, name), reference)
             what = "random actions" if kind == "randomised" else "balancing"
             checks.append((f"{name} `gym.make_vec` N={n}, {what}, randomised vs nominal >= {TARGET_RANDOMISED_SHARE:.0%}", f"{share:.0%}", share >= TARGET_RANDOMISED_SHARE))
     if ("threaded", n) in rate:
-        threaded_ratio = rate["threaded", n] / rate["sync", HOPPER]
+        threaded_ratio = rate.ratio(("threaded", n), ("sync", HOPPER))
         checks.append(
             (
                 f"`gym.make_vec` N={n} on {os.cpu_count()} threads vs SyncVectorEnv(Hopper-v5, {REFERENCE_ENVS}) >= {TARGET_VECTOR_RATIO:.0f}x",

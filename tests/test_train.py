@@ -467,6 +467,20 @@ def test_a_discount_schedule_sets_the_returns_discount_of_each_rollout():
             DiscountSchedule(bad)
 
 
+def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
+    """``train/hyperparams/probes/hop_v3_rising_discount.yml``, the configuration of the hop task's rising-discount
+    learning page, is ppo.yml's ``PlanarLegHop-v3`` entry with one callback more, and the page records that file."""
+    from train.hyperparameters import load_hyperparams
+
+    env_id = "leg_env/PlanarLegHop-v3"
+    shipped = load_hyperparams(ROOT / "train" / "hyperparams" / "ppo.yml", env_id)
+    probe = load_hyperparams(ROOT / "train" / "hyperparams" / "probes" / "hop_v3_rising_discount.yml", env_id)
+    assert probe["callback"] == [*shipped["callback"], {"train.callbacks.DiscountSchedule": {"points": [[36_000_000, 0.995], [45_000_000, 0.998]]}}]
+    assert {k: v for k, v in probe.items() if k != "callback"} == {k: v for k, v in shipped.items() if k != "callback"}
+    plan = json.loads((ROOT / "benchmarks" / "results" / "learning" / "PlanarLegHop-v3-rising-discount" / "plan.json").read_text())
+    assert plan["hyperparams"] == "train/hyperparams/probes/hop_v3_rising_discount.yml" and plan["shipped_seed"] == 5
+
+
 def test_zoo_callback_entries():
     from train.callbacks import ConfigSchedule, FrozenActor, zoo_callbacks
 

@@ -295,46 +295,79 @@ typedef struct {
     int rk4_steps; /* RK4 steps integrated so far: counted in this local, not through the tally's pointer */
 } leg_progress;
 
-/* Substeps in `mode` while no witness of it is negative at a substep's end. A substep that ends with
- * one negative is not taken: the general loop of hybrid_control_step redoes it from the same state and
- * locates the event (handing the substep over to that loop saves one RK4 step per event, but measured about 6%
- * slower while balancing, where there are none). Called with `mode` a constant, so that the compiler specialises
- * the RK4 stages. */
-LEG_INLINE void steady(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
-                          leg_tally *rec)
+/* A substep that ended with a watched witness below zero, not taken: its length, end state, the derivative there
+ * (flight: not formed, the touchdown witness needs none) and sums, and which witnesses were watched. */
+typedef struct {
+    double h;
+    leg_x X1;
+    leg_accel k1;
+    leg_sums sums;
+    int watch_a, watch_b;
+} leg_crossing;
+
+/* Substeps in `mode` from g, booked, until the control step ends (returns 0) or a substep ends with a watched
+ * witness below zero (returns 1, that substep left untaken in *c for locate()). w0a, w0b: the witnesses at g's
+ * state, kept up to date. A witness is watched while the transition is (watched()) and the witness is at or above
+ * zero at the substep's start; a foot that leaves the ground within LEG_GROUND_TOL below it (round-off of a contact
+ * projection) is on it, so its touchdown is watched from there, or a fall back within the step would go
+ * unlocated. Called with `mode` a constant (advance_in()), so that the compiler specialises the RK4 stages. */
+LEG_INLINE int advance(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
+                       double *w0a, double *w0b, int settled, int events, leg_tally *rec, leg_crossing *c)
 {
+    int kind_a, kind_b;
+    event_kinds(mode, &kind_a, &kind_b);
+    const int can_a = watched(kind_a, settled, events), can_b = watched(kind_b, settled, events);
     while (g->n_left > 0) {
         const double h = g->t_left / g->n_left;
         leg_sums sums = {0.0, 0.0, 0.0};
         const leg_x X1 = rk4_substep(mode, M, u, anchor, &g->X, &g->k, h, &sums);
         g->rk4_steps += 1;
-        if (mode == LEG_FLIGHT) {
-            /* the touchdown witness needs no derivative: X1's is taken only if another substep follows (the
-             * step's last derivative is never read in flight) */
-            double w1a, w1b;
-            witnesses(mode, M, u, &X1, &g->k, anchor, &w1a, &w1b);
-            if (w1a < 0.0)
-                break;
-            book(mode, M, h, &g->X, &X1, &sums, rec);
-            g->X = X1;
-            g->t += h;
-            g->t_left -= h;
-            g->n_left -= 1;
-            if (g->n_left > 0)
-                g->k = derivative(mode, M, u, &X1);
-            continue;
-        }
-        const leg_accel k1 = derivative(mode, M, u, &X1);
+        /* in flight the end state's derivative is formed only if another substep follows: the touchdown witness
+         * needs none, and the step's last derivative is never read in flight */
+        leg_accel k1 = g->k;
+        if (mode != LEG_FLIGHT)
+            k1 = derivative(mode, M, u, &X1);
         double w1a, w1b;
         witnesses(mode, M, u, &X1, &k1, anchor, &w1a, &w1b);
-        if (w1a < 0.0 || w1b < 0.0)
-            break;
+        const int watch_a = can_a && (*w0a >= 0.0 || (kind_a == LEG_TOUCHDOWN && *w0a >= -LEG_GROUND_TOL));
+        const int watch_b = can_b && *w0b >= 0.0;
+        if ((watch_a && w1a < 0.0) || (watch_b && w1b < 0.0)) {
+            c->h = h;
+            c->X1 = X1;
+            c->k1 = k1;
+            c->sums = sums;
+            c->watch_a = watch_a;
+            c->watch_b = watch_b;
+            return 1;
+        }
         book(mode, M, h, &g->X, &X1, &sums, rec);
         g->X = X1;
-        g->k = k1;
         g->t += h;
         g->t_left -= h;
         g->n_left -= 1;
+        *w0a = w1a;
+        *w0b = w1b;
+        if (mode != LEG_FLIGHT)
+            g->k = k1;
+        else if (g->n_left > 0)
+            g->k = derivative(mode, M, u, &X1);
+    }
+    return 0;
+}
+
+/* advance() in the mode `mode`, each mode a constant. */
+static inline int advance_in(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
+                             double *w0a, double *w0b, int settled, int events, leg_tally *rec, leg_crossing *c)
+{
+    switch (mode) {
+    case LEG_STICK:
+        return advance(LEG_STICK, M, u, anchor, g, w0a, w0b, settled, events, rec, c);
+    case LEG_FLIGHT:
+        return advance(LEG_FLIGHT, M, u, anchor, g, w0a, w0b, settled, events, rec, c);
+    case LEG_SLIP_FORWARD:
+        return advance(LEG_SLIP_FORWARD, M, u, anchor, g, w0a, w0b, settled, events, rec, c);
+    default:
+        return advance(LEG_SLIP_BACKWARD, M, u, anchor, g, w0a, w0b, settled, events, rec, c);
     }
 }
 
@@ -372,41 +405,12 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
     g.t_left = dt;
     g.rk4_steps = 0;
     g.n_left = substeps_for_rates(g.X.va, g.X.vb, g.X.vc, dt, substeps, max_angle);
-    /* the common cases (a stick while balancing, a flight) with the mode a constant; the general loop
-     * below goes on from where they stop */
-    if (mode == LEG_STICK)
-        steady(LEG_STICK, M, u, anchor, &g, rec);
-    else if (mode == LEG_FLIGHT)
-        steady(LEG_FLIGHT, M, u, anchor, &g, rec);
-    int kind_a, kind_b;
     double w0a, w0b;
-    event_kinds(mode, &kind_a, &kind_b);
     witnesses(mode, M, u, &g.X, &g.k, anchor, &w0a, &w0b);
-    while (g.n_left > 0) {
-        const double h = g.t_left / g.n_left;
-        leg_sums sums = {0.0, 0.0, 0.0};
-        const leg_x X1 = rk4_substep(mode, M, u, anchor, &g.X, &g.k, h, &sums);
-        g.rk4_steps += 1;
-        const leg_accel k1 = derivative(mode, M, u, &X1);
-        double w1a, w1b;
-        witnesses(mode, M, u, &X1, &k1, anchor, &w1a, &w1b);
-        /* a foot that leaves the ground within LEG_GROUND_TOL below it (round-off of a contact projection) is on
-         * it: its touchdown is watched from there, or a fall back within the step would go unlocated */
-        const int watch_a = watched(kind_a, settled, events) && (w0a >= 0.0 || (kind_a == LEG_TOUCHDOWN && w0a >= -LEG_GROUND_TOL));
-        const int watch_b = watched(kind_b, settled, events) && w0b >= 0.0;
-        if (!((watch_a && w1a < 0.0) || (watch_b && w1b < 0.0))) {
-            book(mode, M, h, &g.X, &X1, &sums, rec);
-            g.X = X1;
-            g.k = k1;
-            w0a = w1a;
-            w0b = w1b;
-            g.t += h;
-            g.t_left -= h;
-            g.n_left -= 1;
-            continue;
-        }
+    leg_crossing c;
+    while (advance_in(mode, M, u, anchor, &g, &w0a, &w0b, settled, events, rec, &c)) {
         leg_located at;
-        const int kind = locate(mode, M, u, anchor, &g.X, &g.k, h, &X1, &k1, &sums, watch_a, watch_b, &at);
+        const int kind = locate(mode, M, u, anchor, &g.X, &g.k, c.h, &c.X1, &c.k1, &c.sums, c.watch_a, c.watch_b, &at);
         book(mode, M, at.s, &g.X, &at.X, &at.sums, rec);
         g.rk4_steps += at.rk4_steps;
         g.t += at.s;
@@ -427,7 +431,6 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
         if (n_rule > g.n_left)
             g.n_left = n_rule;
         g.k = derivative(mode, M, u, &g.X);
-        event_kinds(mode, &kind_a, &kind_b);
         witnesses(mode, M, u, &g.X, &g.k, anchor, &w0a, &w0b);
     }
     if (mode != LEG_STICK)

@@ -6,6 +6,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import zipfile
 from pathlib import Path
@@ -465,6 +466,66 @@ def test_a_discount_schedule_sets_the_returns_discount_of_each_rollout():
     for bad in ([], [[0, 1.5]], [[0, 0.0]], [[10, 0.99], [5, 0.9]], [[0, [0.9, 0.99]]], "0.99"):
         with pytest.raises(ValueError, match="gamma"):
             DiscountSchedule(bad)
+
+
+def test_a_learning_rate_schedule_sets_the_rate_of_each_update_and_survives_a_save():
+    """LearningRateSchedule under PPO: every update's optimiser runs at the schedule's value at its rollout's start,
+    from the first rollout on (whatever ``learning_rate`` says); a saved model saves, and a loaded one (which SB3 gives
+    the schedule of its ``learning_rate``) gets the schedule's value at its steps from ``start_on``, as a resumed run
+    does; a bad schedule is a ValueError naming the learning rate."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from leg_env.sb3 import make_sb3_vec_env
+    from train.callbacks import LearningRateSchedule
+
+    schedule = LearningRateSchedule([[512, 1e-3], [1536, 1e-4]])
+    assert schedule.value_at(0) == 1e-3 and schedule.value_at(1024) == pytest.approx(5.5e-4) and schedule.value_at(10**9) == 1e-4
+    seen = []
+
+    class Watch(BaseCallback):
+        def _on_rollout_end(self) -> None:
+            seen.append(self.num_timesteps)
+
+        def _on_step(self) -> bool:
+            return True
+
+    rates = []
+
+    class Recording(PPO):
+        def train(self) -> None:
+            super().train()
+            rates.append([group["lr"] for group in self.policy.optimizer.param_groups])
+
+    model = Recording("MlpPolicy", make_sb3_vec_env(4, seed=0), n_steps=64, batch_size=256, n_epochs=1, learning_rate=0.5,
+                      device="cpu", seed=0)
+    model.learn(2048, callback=[schedule, Watch()])
+    assert len(rates) == len(seen) == 8
+    for steps, groups in zip(seen, rates):
+        assert groups == [pytest.approx(schedule.value_at(steps - 256))] * len(groups), steps  # the rollout's start
+    assert rates[0][0] == 1e-3 and rates[-1][0] == pytest.approx(1e-4)
+    with tempfile.TemporaryDirectory() as tmp:
+        model.save(Path(tmp) / "model")
+        loaded = PPO.load(Path(tmp) / "model", device="cpu")
+    schedule.start_on(None, loaded)
+    assert loaded.num_timesteps == 2048 and loaded.lr_schedule(1.0) == pytest.approx(1e-4)
+    for bad in ([], [[0, -1e-4]], [[0, 0.0]], [[10, 1e-4], [5, 1e-5]], [[0, [1e-4, 1e-5]]], "1e-4"):
+        with pytest.raises(ValueError, match="learning rate"):
+            LearningRateSchedule(bad)
+
+
+def test_the_decaying_rate_probe_is_the_rising_discount_probe_with_a_learning_rate_schedule():
+    """``train/hyperparams/probes/hop_v3_rising_discount_decay.yml`` is the rising-discount probe's entry with one
+    callback more, a learning rate that decays from 45M steps."""
+    from train.hyperparameters import load_hyperparams
+
+    env_id = "leg_env/PlanarLegHop-v3"
+    rising = load_hyperparams(ROOT / "train" / "hyperparams" / "probes" / "hop_v3_rising_discount.yml", env_id)
+    probe = load_hyperparams(ROOT / "train" / "hyperparams" / "probes" / "hop_v3_rising_discount_decay.yml", env_id)
+    schedule = {"train.callbacks.LearningRateSchedule": {"points": [[45_000_000, 3.0e-4], [63_000_000, 3.0e-5]]}}
+    assert probe["callback"] == [*rising["callback"], schedule]
+    assert {k: v for k, v in probe.items() if k != "callback"} == {k: v for k, v in rising.items() if k != "callback"}
+    assert probe["learning_rate"] == 3.0e-4  # the schedule's first value: the runs are the rising discount's until 45M
 
 
 def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():

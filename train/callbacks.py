@@ -18,6 +18,7 @@ __all__ = [
     "FrozenActor",
     "ConfigSchedule",
     "DiscountSchedule",
+    "LearningRateSchedule",
     "CommandCurriculum",
     "zoo_callbacks",
     "evaluate_now",
@@ -318,7 +319,44 @@ class ConfigSchedule(BaseCallback):
                 self.logger.record(f"curriculum/{field}", value)
 
 
-class DiscountSchedule(BaseCallback):
+class _ModelSchedule(BaseCallback):
+    """A schedule of one of the model's hyperparameters over the env steps done: ``points`` ``[[steps, value], ...]``
+    (steps increasing), the first point's value before it, the last point's after it, linear in between (as
+    ``ConfigSchedule``), set on the model at the start of training (a resumed run too: ``start_on``) and of every
+    rollout. A subclass names the value (``name``, in errors), checks it (``valid``) and sets it (``_put``)."""
+
+    name = "value"
+    log_key = ""
+
+    def __init__(self, points, verbose: int = 0):
+        super().__init__(verbose)
+        at, values, scalar = _schedule_points(self.name, points)
+        if not scalar or not np.all(self.valid(values)):
+            raise ValueError(f"{type(self).__name__}: every {self.name} must be {self.valid_text}, got {points!r}")
+        self.at, self.values = at, values[:, 0]
+
+    def value_at(self, steps: int) -> float:
+        """The value after ``steps`` env steps."""
+        return float(np.interp(steps, self.at, self.values))
+
+    def start_on(self, venv: VecEnv, model) -> None:
+        """Set the value at ``model``'s steps before ``learn`` (``train.ppo`` calls it, as for ``ConfigSchedule``)."""
+        self._put(model, self.value_at(model.num_timesteps))
+
+    def _on_training_start(self) -> None:
+        self._put(self.model, self.value_at(self.model.num_timesteps))
+
+    def _on_rollout_start(self) -> None:
+        value = self.value_at(self.model.num_timesteps)
+        self._put(self.model, value)
+        if self.log_key:
+            self.logger.record(self.log_key, value)
+
+    def _on_step(self) -> bool:
+        return True
+
+
+class DiscountSchedule(_ModelSchedule):
     """A schedule of PPO's discount ``gamma`` over the env steps done: ``points`` ``[[steps, gamma], ...]`` (steps
     increasing), the first point's value before it, the last point's after it, linear in between (as
     ``ConfigSchedule``). At the start of training (a resumed run too) and of every rollout, the model's ``gamma`` and
@@ -331,36 +369,53 @@ class DiscountSchedule(BaseCallback):
     TensorBoard key: ``train/gamma``.
     """
 
-    def __init__(self, points, verbose: int = 0):
-        super().__init__(verbose)
-        at, values, scalar = _schedule_points("gamma", points)
-        if not scalar or not np.all((values > 0.0) & (values <= 1.0)):
-            raise ValueError(f"DiscountSchedule: every gamma must be a number in (0, 1], got {points!r}")
-        self.at, self.values = at, values[:, 0]
+    name, log_key, valid_text = "gamma", "train/gamma", "a number in (0, 1]"
 
-    def value_at(self, steps: int) -> float:
-        """The discount after ``steps`` env steps."""
-        return float(np.interp(steps, self.at, self.values))
+    @staticmethod
+    def valid(values: np.ndarray) -> np.ndarray:
+        return (values > 0.0) & (values <= 1.0)
 
-    def start_on(self, venv: VecEnv, model) -> None:
-        """Set the discount at ``model``'s steps before ``learn`` (``train.ppo`` calls it, as for ``ConfigSchedule``)."""
-        self._set(model)
-
-    def _set(self, model) -> None:
-        gamma = self.value_at(model.num_timesteps)
+    @staticmethod
+    def _put(model, gamma: float) -> None:
         model.gamma = gamma
         if getattr(model, "rollout_buffer", None) is not None:
             model.rollout_buffer.gamma = gamma
 
-    def _on_training_start(self) -> None:
-        self._set(self.model)
 
-    def _on_rollout_start(self) -> None:
-        self._set(self.model)
-        self.logger.record("train/gamma", self.model.gamma)
+class LearningRateSchedule(_ModelSchedule):
+    """A schedule of the optimiser's learning rate over the env steps done: ``points`` ``[[steps, rate], ...]``
+    (steps increasing), the first point's value before it, the last point's after it, linear in between (as
+    ``ConfigSchedule``). At the start of training (a resumed run too) and of every rollout, the model's learning-rate
+    schedule (``lr_schedule``, which SB3 applies to the optimiser at each update and logs as
+    ``train/learning_rate``) becomes that value, whatever ``learning_rate`` says: SB3's own schedules are functions of
+    the share of ``n_timesteps`` left, which a run continued past its planned length (or resumed with another) moves,
+    where this one is tied to the env steps. In ``train/hyperparams/ppo.yml``::
 
-    def _on_step(self) -> bool:
-        return True
+        callback:
+          - train.callbacks.LearningRateSchedule:
+              points: [[45000000, 3.0e-4], [72000000, 3.0e-5]]
+    """
+
+    name, valid_text = "learning rate", "a finite number above 0"  # SB3 logs it: train/learning_rate
+
+    @staticmethod
+    def valid(values: np.ndarray) -> np.ndarray:
+        return values > 0.0
+
+    @staticmethod
+    def _put(model, rate: float) -> None:
+        model.lr_schedule = _Constant(rate)
+
+
+class _Constant:
+    """A constant learning-rate schedule that pickles (a model is saved with its ``lr_schedule``; loading gives it
+    SB3's schedule of its ``learning_rate``, which ``start_on`` replaces in a resumed run)."""
+
+    def __init__(self, value: float):
+        self.value = float(value)
+
+    def __call__(self, progress_remaining: float) -> float:
+        return self.value
 
 
 def _schedule_points(field, points) -> tuple[np.ndarray, np.ndarray, bool]:

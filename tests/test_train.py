@@ -526,6 +526,8 @@ def test_the_decaying_rate_probe_is_the_rising_discount_probe_with_a_learning_ra
     assert probe["callback"] == [*rising["callback"], schedule]
     assert {k: v for k, v in probe.items() if k != "callback"} == {k: v for k, v in rising.items() if k != "callback"}
     assert probe["learning_rate"] == 3.0e-4  # the schedule's first value: the runs are the rising discount's until 45M
+    plan = json.loads((ROOT / "benchmarks" / "results" / "learning" / "PlanarLegHop-v3-rising-discount-decay" / "plan.json").read_text())
+    assert plan["hyperparams"] == "train/hyperparams/probes/hop_v3_rising_discount_decay.yml" and plan["shipped_seed"] == 5
 
 
 def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():

@@ -530,6 +530,24 @@ def test_the_decaying_rate_probe_is_the_rising_discount_probe_with_a_learning_ra
     assert plan["hyperparams"] == "train/hyperparams/probes/hop_v3_rising_discount_decay.yml" and plan["shipped_seed"] == 5
 
 
+def test_the_earlier_alive_bonus_probe_is_the_rising_discount_probe_with_its_bonus_raised_at_45m():
+    """``train/hyperparams/probes/hop_v3_rising_discount_alive45.yml`` is the rising-discount probe's entry with the
+    alive bonus's rise moved from 60M steps to 45M, every other schedule and setting the same."""
+    from train.hyperparameters import load_hyperparams
+
+    env_id = "leg_env/PlanarLegHop-v3"
+    rising = load_hyperparams(ROOT / "train" / "hyperparams" / "probes" / "hop_v3_rising_discount.yml", env_id)
+    probe = load_hyperparams(ROOT / "train" / "hyperparams" / "probes" / "hop_v3_rising_discount_alive45.yml", env_id)
+    (config, *others), (rising_config, *rising_others) = probe["callback"], rising["callback"]
+    assert others == rising_others
+    schedule = dict(config["train.callbacks.ConfigSchedule"]["schedule"])
+    assert schedule.pop("alive_bonus") == [[45_000_000, 1.0], [46_000_000, 2.0]]
+    rising_schedule = dict(rising_config["train.callbacks.ConfigSchedule"]["schedule"])
+    assert rising_schedule.pop("alive_bonus") == [[60_000_000, 1.0], [61_000_000, 2.0]]
+    assert schedule == rising_schedule
+    assert {k: v for k, v in probe.items() if k != "callback"} == {k: v for k, v in rising.items() if k != "callback"}
+
+
 def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
     """``train/hyperparams/probes/hop_v3_rising_discount.yml``, the configuration of the hop task's rising-discount
     learning page, is ppo.yml's ``PlanarLegHop-v3`` entry with one callback more, and the page records that file."""

@@ -97,7 +97,11 @@ their 60,030,976-step checkpoints: a run from scratch draws other episodes after
 minutes (median) on one core of a 2-core AMD EPYC beside another seed, evaluations included. The shipped policy's
 command run from scratch on both cores (torch on two threads, so a run apart from the one-thread seed 5 from its
 first update) took 13.8 minutes and kept a policy that survives 78% of the held-out episodes, with 70 hops, an apex
-error of 3.75 cm and a drift of 3.39 cm: the configuration met every bar on one run of six.
+error of 3.75 cm and a drift of 3.39 cm. On a 2-core AMD EPYC of the Zen 5 class (AVX-512 with bfloat16
+arithmetic) that command gave the same scores in 9.5 minutes, and seeds 5-9 of it, one after another, took 9.1-10.2
+minutes each, all surviving 78-100% of the held-out episodes with drifts of 2.08-4.10 cm but none within the apex bar
+(2.35-7.91 cm; ``benchmarks/results/learning/PlanarLegHop-v3-bfloat16-2threads``): the configuration met every bar
+on one run of ten.
 
 What was tried, each a probe of plain PPO from scratch with one change (the numbers are on the documentation's page
 "The hop task from scratch: what was tried", ``docs/hop_probes.md``). The shipped configuration learns to hop and to

@@ -514,30 +514,41 @@ def test_a_learning_rate_schedule_sets_the_rate_of_each_update_and_survives_a_sa
             LearningRateSchedule(bad)
 
 
+def _hop_entry(path: str) -> dict:
+    """The ``leg_env/PlanarLegHop-v3`` entry of the hyperparameter file at ``path`` (relative to the repository)."""
+    from train.hyperparameters import load_hyperparams
+
+    return load_hyperparams(ROOT / path, "leg_env/PlanarLegHop-v3")
+
+
+def _without_callbacks(entry: dict) -> dict:
+    return {k: v for k, v in entry.items() if k != "callback"}
+
+
+def _assert_page_trains(page: str, hyperparams: str) -> None:
+    """The learning page ``page`` records ``hyperparams`` as its file and seed 5 as the seed named before training."""
+    plan = json.loads((ROOT / "benchmarks" / "results" / "learning" / page / "plan.json").read_text())
+    assert plan["hyperparams"] == hyperparams and plan["shipped_seed"] == 5
+
+
+RISING = "train/hyperparams/probes/hop_v3_rising_discount.yml"
+
+
 def test_the_decaying_rate_probe_is_the_rising_discount_probe_with_a_learning_rate_schedule():
     """``train/hyperparams/probes/hop_v3_rising_discount_decay.yml`` is the rising-discount probe's entry with one
     callback more, a learning rate that decays from 45M steps."""
-    from train.hyperparameters import load_hyperparams
-
-    env_id = "leg_env/PlanarLegHop-v3"
-    rising = load_hyperparams(ROOT / "train" / "hyperparams" / "probes" / "hop_v3_rising_discount.yml", env_id)
-    probe = load_hyperparams(ROOT / "train" / "hyperparams" / "probes" / "hop_v3_rising_discount_decay.yml", env_id)
+    rising, probe = _hop_entry(RISING), _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_decay.yml")
     schedule = {"train.callbacks.LearningRateSchedule": {"points": [[45_000_000, 3.0e-4], [63_000_000, 3.0e-5]]}}
     assert probe["callback"] == [*rising["callback"], schedule]
-    assert {k: v for k, v in probe.items() if k != "callback"} == {k: v for k, v in rising.items() if k != "callback"}
+    assert _without_callbacks(probe) == _without_callbacks(rising)
     assert probe["learning_rate"] == 3.0e-4  # the schedule's first value: the runs are the rising discount's until 45M
-    plan = json.loads((ROOT / "benchmarks" / "results" / "learning" / "PlanarLegHop-v3-rising-discount-decay" / "plan.json").read_text())
-    assert plan["hyperparams"] == "train/hyperparams/probes/hop_v3_rising_discount_decay.yml" and plan["shipped_seed"] == 5
+    _assert_page_trains("PlanarLegHop-v3-rising-discount-decay", "train/hyperparams/probes/hop_v3_rising_discount_decay.yml")
 
 
 def test_the_earlier_alive_bonus_probe_is_the_rising_discount_probe_with_its_bonus_raised_at_45m():
     """``train/hyperparams/probes/hop_v3_rising_discount_alive45.yml`` is the rising-discount probe's entry with the
     alive bonus's rise moved from 60M steps to 45M, every other schedule and setting the same."""
-    from train.hyperparameters import load_hyperparams
-
-    env_id = "leg_env/PlanarLegHop-v3"
-    rising = load_hyperparams(ROOT / "train" / "hyperparams" / "probes" / "hop_v3_rising_discount.yml", env_id)
-    probe = load_hyperparams(ROOT / "train" / "hyperparams" / "probes" / "hop_v3_rising_discount_alive45.yml", env_id)
+    rising, probe = _hop_entry(RISING), _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_alive45.yml")
     (config, *others), (rising_config, *rising_others) = probe["callback"], rising["callback"]
     assert others == rising_others
     schedule = dict(config["train.callbacks.ConfigSchedule"]["schedule"])
@@ -545,21 +556,16 @@ def test_the_earlier_alive_bonus_probe_is_the_rising_discount_probe_with_its_bon
     rising_schedule = dict(rising_config["train.callbacks.ConfigSchedule"]["schedule"])
     assert rising_schedule.pop("alive_bonus") == [[60_000_000, 1.0], [61_000_000, 2.0]]
     assert schedule == rising_schedule
-    assert {k: v for k, v in probe.items() if k != "callback"} == {k: v for k, v in rising.items() if k != "callback"}
+    assert _without_callbacks(probe) == _without_callbacks(rising)
 
 
 def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
     """``train/hyperparams/probes/hop_v3_rising_discount.yml``, the configuration of the hop task's rising-discount
     learning page, is ppo.yml's ``PlanarLegHop-v3`` entry with one callback more, and the page records that file."""
-    from train.hyperparameters import load_hyperparams
-
-    env_id = "leg_env/PlanarLegHop-v3"
-    shipped = load_hyperparams(ROOT / "train" / "hyperparams" / "ppo.yml", env_id)
-    probe = load_hyperparams(ROOT / "train" / "hyperparams" / "probes" / "hop_v3_rising_discount.yml", env_id)
+    shipped, probe = _hop_entry("train/hyperparams/ppo.yml"), _hop_entry(RISING)
     assert probe["callback"] == [*shipped["callback"], {"train.callbacks.DiscountSchedule": {"points": [[36_000_000, 0.995], [45_000_000, 0.998]]}}]
-    assert {k: v for k, v in probe.items() if k != "callback"} == {k: v for k, v in shipped.items() if k != "callback"}
-    plan = json.loads((ROOT / "benchmarks" / "results" / "learning" / "PlanarLegHop-v3-rising-discount" / "plan.json").read_text())
-    assert plan["hyperparams"] == "train/hyperparams/probes/hop_v3_rising_discount.yml" and plan["shipped_seed"] == 5
+    assert _without_callbacks(probe) == _without_callbacks(shipped)
+    _assert_page_trains("PlanarLegHop-v3-rising-discount", RISING)
 
 
 def test_zoo_callback_entries():

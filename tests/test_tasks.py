@@ -645,6 +645,40 @@ def test_hop_landing_impulse_is_charged():
     assert info["reward_impact"] == pytest.approx(-env.config.impact_weight * (P @ P) / m**2, rel=1e-12)
 
 
+def test_hop_drift_scale_saturates_the_drift_charge_and_changes_nothing_else():
+    """With ``drift_scale = s`` the drift term is ``-w s^2 (1 - exp(-(dx/s)^2))`` of the COM's x from its start
+    ``dx`` (read from the quadratic charge of the same episode, ``-w_0 dx^2``): about ``-w dx^2`` near the start and
+    never below ``-w s^2``; the motion, the observation and every other term are those of the registered task."""
+    quadratic = gym.make("leg_env/PlanarLegHop-v3").unwrapped
+    assert quadratic.config.drift_scale == 0.0
+    s, w = 0.05, 400.0
+    bounded = gym.make("leg_env/PlanarLegHop-v3", drift_scale=s, drift_com_weight=w).unwrapped
+    q, qd = quadratic.nominal.q.copy(), np.zeros(5)
+    q[1] += 0.001
+    qd[0], qd[1] = 1.5, 1.0  # thrown up and forward: the COM leaves its start by more than 2 s
+    hold = (quadratic.nominal.tau / np.asarray(quadratic.config.torque_limit)).astype(np.float32)
+    far = near = 0
+    for options in ({"qpos": q, "qvel": qd}, None):  # the throw, then standing from a noisy start
+        for env in (quadratic, bounded):
+            env.reset(seed=3, options=options)
+        for k in range(200):
+            o0, r0, t0, _, i0 = quadratic.step(hold)
+            o1, r1, t1, _, i1 = bounded.step(hold)
+            assert np.array_equal(o0, o1) and t0 == t1
+            assert all(i0[key] == i1[key] for key in i0 if key.startswith("reward_") and key != "reward_drift")
+            assert r1 - i1["reward_drift"] == pytest.approx(r0 - i0["reward_drift"], rel=1e-12, abs=1e-12)
+            dx2 = -i0["reward_drift"] / quadratic.config.drift_com_weight
+            assert i1["reward_drift"] == pytest.approx(-w * s * s * -np.expm1(-dx2 / (s * s)), rel=1e-9, abs=1e-15)
+            assert -w * s * s <= i1["reward_drift"] <= 0.0
+            if dx2 < (0.1 * s) ** 2:
+                near += 1
+                assert i1["reward_drift"] == pytest.approx(-w * dx2, rel=0.011)
+            far += dx2 > (2 * s) ** 2
+            if t0:
+                break
+    assert far > 0 and near > 0
+
+
 def test_push_reward_charges_the_com_leaving_the_start():
     env = gym.make("leg_env/PlanarLegPush-v0", com_weight=3.0, reset_noise_scale=0.0).unwrapped
     env.reset(seed=0)

@@ -232,6 +232,18 @@ static double height_kernel(double de, double weight, double scale, double fine)
     return exp(-err * err);
 }
 
+/* The hop's drift charge per unit of its weight, of the COM's x from its start dx [m]: dx^2, or with a scale s > 0
+ * s^2 (1 - exp(-(dx/s)^2)), which is dx^2 near the start and never more than s^2 a step (a charge that can outgrow
+ * the alive bonus makes a fall worth more than staying up). */
+static double drift_charge(double dx, double scale)
+{
+    if (scale > 0.0) {
+        const double u = dx / scale;
+        return -scale * scale * expm1(-u * u);
+    }
+    return dx * dx;
+}
+
 /* A command schedule (command_steps > 0): once the command has held for command_steps control steps, the
  * next of next_commands takes over from the next step on, and the observation shows it (after the last of
  * them, the command holds). A step is judged by the command it was taken under. */
@@ -322,7 +334,7 @@ static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inerti
     }
     if (c->task.hop.observe_apex)
         b->obs[i * b->obs_cols + OBS_LAST_APEX] = (float)t->apex;
-    terms[2] = -b->settings->task.hop.w_drift * dx * dx;
+    terms[2] = -b->settings->task.hop.w_drift * drift_charge(dx, b->settings->task.hop.drift_scale);
     terms[3] = -b->settings->task.hop.w_tilt * s->q[2] * s->q[2];
     terms[4] = -b->settings->task.hop.w_impact * (px * px + py * py) / (m * m);
     terms[5] = -b->settings->task.hop.w_slip * o->tally.slip_distance / b->settings->dt;

@@ -147,7 +147,7 @@ def test_evaluate_on_held_out_robots_lists_every_robot(tmp_path):
     assert lqr["env_kwargs"] == {"randomize": True}
 
 
-@pytest.mark.parametrize("module", ["train.ppo", "train.evaluate", "train.rllib"])
+@pytest.mark.parametrize("module", ["train.ppo", "train.evaluate", "train.rllib", "train.falls"])
 def test_every_command_prints_its_help(module):
     """Every field's docstring is a help text (a '%' in one once made argparse crash on --help)."""
     done = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=120)

@@ -14,7 +14,7 @@ import numpy as np
 
 from leg_env import ENV_ID  # importing leg_env registers the env
 
-__all__ = ["BASELINES", "PolicyNotFoundError", "PolicyLoadError", "TrainedPolicy", "load_policy"]
+__all__ = ["BASELINES", "PolicyNotFoundError", "PolicyLoadError", "TrainedPolicy", "load_policy", "read_run_config"]
 
 
 class PolicyNotFoundError(FileNotFoundError):
@@ -45,7 +45,8 @@ class TrainedPolicy:
         return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
 
 
-def _read_config(folder: Path) -> dict:
+def read_run_config(folder: Path) -> dict:
+    """A run folder's ``config.yaml`` as a mapping ({} if it has none); ``PolicyLoadError`` if it is not one."""
     path = folder / "config.yaml"
     if not path.is_file():
         return {}
@@ -135,7 +136,7 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
         raise PolicyNotFoundError(f"policy folder not found: {folder}")
     if not model_file.is_file():
         raise PolicyNotFoundError(f"model file not found: {model_file}")
-    config = _read_config(folder)
+    config = read_run_config(folder)
     try:
         model = PPO.load(model_file, device="cpu")
     except Exception as e:  # SB3 raises zipfile, pickle, torch or key errors on a bad archive

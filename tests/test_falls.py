@@ -1,0 +1,92 @@
+"""``train.falls``: a policy run as it is trained, and what its episodes are paid before they end."""
+
+import json
+
+import numpy as np
+import pytest
+
+from train.episodes import make_batch, policy_predict, run_batch
+from train.falls import FallsArgs, audit, format_report, main, training_env_kwargs
+from train.policy_loading import load_policy
+from train.ppo import TrainArgs, train
+
+SCHEDULE = "callback:[{train.callbacks.ConfigSchedule: {schedule: {drift_com_weight: [[128, 10.0], [256, 400.0]], alive_bonus: [[0, 1.0], [256, 3.0]]}}}]"
+
+
+@pytest.fixture(scope="module")
+def hop_run(tmp_path_factory):
+    """A tiny hop run whose training env is scheduled (the drift charge and the alive bonus)."""
+    out = tmp_path_factory.mktemp("falls") / "run"
+    return train(TrainArgs(out=out, env_id="leg_env/PlanarLegHop-v3", total_timesteps=256, eval_freq=0, checkpoint_freq=0,
+                           progress_bar=False, verbose=0,
+                           params=["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1", "env_kwargs:{height_weight: 4.0}", SCHEDULE]))  # fmt: skip
+
+
+def test_the_training_env_is_the_runs_env_kwargs_with_each_schedule_at_the_step_asked():
+    config = {
+        "total_timesteps": 300,
+        "env_kwargs": {"height_weight": 4.0, "alive_bonus": 5.0},
+        "callback": [{"train.callbacks.DiscountSchedule": {"points": [[0, 0.99]]}},
+                     {"train.callbacks.ConfigSchedule": {"schedule": {"drift_com_weight": [[100, 10.0], [200, 30.0]], "command_range": [[0, [0.02, 0.06]], [200, [0.06, 0.10]]]}}}],  # fmt: skip
+    }
+    assert training_env_kwargs(config) == {"height_weight": 4.0, "alive_bonus": 5.0, "drift_com_weight": 30.0, "command_range": (0.06, 0.10)}
+    middle = training_env_kwargs(config, at_steps=150)
+    assert middle["drift_com_weight"] == pytest.approx(20.0) and middle["command_range"] == pytest.approx((0.05, 0.09))
+    assert training_env_kwargs({"env_kwargs": {"height_weight": 2.0}}, at_steps=10) == {"height_weight": 2.0}
+
+
+def test_the_terms_sum_to_the_returns_of_the_evaluation_runner_and_the_window_averages_the_last_steps(hop_run):
+    """With the policy's mean action the audit's episodes are ``train.episodes.run_batch``'s on the same env and
+    seeds: each episode's terms sum to its return. A window longer than every episode averages the whole of it."""
+    args = FallsArgs(policy=hop_run, training_env=True, episodes=6, seed=30_000, window=1000, sample=False)
+    report = audit(args)
+    assert report.env_kwargs == {"height_weight": 4.0, "drift_com_weight": 400.0, "alive_bonus": 3.0}
+    batch = run_batch(policy_predict(load_policy(hop_run)), make_batch("leg_env/PlanarLegHop-v3", 6, report.env_kwargs), report.seeds)
+    np.testing.assert_allclose(sum(report.terms.values()), batch.returns, rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(report.lengths, batch.lengths)
+    np.testing.assert_array_equal(report.survived, batch.survived)
+    assert set(report.terms) == {f"reward_{k}" for k in ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl")}
+    for key, values in report.terms.items():
+        np.testing.assert_allclose(report.last[key], values / report.lengths, rtol=1e-12, atol=1e-15)
+    assert report.last["reward_alive"][~report.survived].max() <= 3.0  # the scheduled bonus, 0 on the falling step
+    groups = report.groups()
+    assert sum(g["episodes"] for g in groups.values()) == 6 and "fell" in groups  # an untrained policy falls
+
+
+def test_sampled_actions_repeat_with_the_seed_and_differ_from_the_mean(hop_run):
+    first, again = (audit(FallsArgs(policy=hop_run, episodes=4, window=5)) for _ in range(2))
+    mean = audit(FallsArgs(policy=hop_run, episodes=4, window=5, sample=False))
+    for key in first.terms:
+        np.testing.assert_array_equal(first.terms[key], again.terms[key])
+    assert any(not np.array_equal(first.terms[k], mean.terms[k]) for k in first.terms)
+    assert first.env_kwargs == {}  # without --training-env: the task as registered
+
+
+def test_the_command_prints_the_table_and_writes_the_json(hop_run, tmp_path, capsys):
+    main([str(hop_run / "last"), "--training-env", "--at-steps", "128", "--episodes", "3", "--window", "10",
+          "--env-kwargs", "tilt_weight:2.0", "--out", str(tmp_path / "falls.json")])  # fmt: skip
+    printed = capsys.readouterr().out
+    assert "| last 10 steps, per step |" in printed and "| fell |" in printed
+    saved = json.loads((tmp_path / "falls.json").read_text())
+    assert saved["env_kwargs"] == {"height_weight": 4.0, "drift_com_weight": 10.0, "alive_bonus": 2.0, "tilt_weight": 2.0}
+    assert saved["seeds"] == [30_000, 30_002] and saved["last_steps"]["fell"]["episodes"] + saved["last_steps"].get("survived", {}).get("episodes", 0) == 3
+    assert format_report(audit(FallsArgs(policy=hop_run, episodes=2))).count("\n") > 5
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--at-steps", "5"], "needs --training-env"),
+    (["--episodes", "0"], "episodes must be >= 1"),
+    (["--window", "0"], "window must be >= 1"),
+    (["--env-kwargs", "nonsense"], "env_kwargs"),
+])  # fmt: skip
+def test_bad_arguments_exit_with_the_field_named(hop_run, argv, message, capsys):
+    with pytest.raises(SystemExit) as stop:
+        main([str(hop_run), *argv])
+    assert stop.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_a_missing_policy_names_the_folder(tmp_path):
+    from train.policy_loading import PolicyNotFoundError
+
+    with pytest.raises(PolicyNotFoundError, match="nowhere"):
+        audit(FallsArgs(policy=tmp_path / "nowhere"))

@@ -645,38 +645,40 @@ def test_hop_landing_impulse_is_charged():
     assert info["reward_impact"] == pytest.approx(-env.config.impact_weight * (P @ P) / m**2, rel=1e-12)
 
 
-def test_hop_drift_scale_saturates_the_drift_charge_and_changes_nothing_else():
-    """With ``drift_scale = s`` the drift term is ``-w s^2 (1 - exp(-(dx/s)^2))`` of the COM's x from its start
+def test_hop_drift_cap_saturates_the_drift_charge_and_changes_nothing_else():
+    """With a finite ``drift_cap = c`` the drift term is ``-c (1 - exp(-w dx^2 / c))`` of the COM's x from its start
     ``dx`` (read from the quadratic charge of the same episode, ``-w_0 dx^2``): about ``-w dx^2`` near the start and
-    never below ``-w s^2``; the motion, the observation and every other term are those of the registered task."""
+    never below ``-c``; the motion, the observation and every other term are those of the registered task."""
     quadratic = gym.make("leg_env/PlanarLegHop-v3").unwrapped
-    assert quadratic.config.drift_scale == 0.0
-    s, w = 0.05, 400.0
-    bounded = gym.make("leg_env/PlanarLegHop-v3", drift_scale=s, drift_com_weight=w).unwrapped
+    assert quadratic.config.drift_cap == float("inf")
+    cap, w = 1.0, 400.0
+    capped = gym.make("leg_env/PlanarLegHop-v3", drift_cap=cap, drift_com_weight=w).unwrapped
     q, qd = quadratic.nominal.q.copy(), np.zeros(5)
     q[1] += 0.001
-    qd[0], qd[1] = 1.5, 1.0  # thrown up and forward: the COM leaves its start by more than 2 s
+    qd[0], qd[1] = 1.5, 1.0  # thrown up and forward: the COM leaves its start far enough to saturate the charge
     hold = (quadratic.nominal.tau / np.asarray(quadratic.config.torque_limit)).astype(np.float32)
     far = near = 0
     for options in ({"qpos": q, "qvel": qd}, None):  # the throw, then standing from a noisy start
-        for env in (quadratic, bounded):
+        for env in (quadratic, capped):
             env.reset(seed=3, options=options)
         for k in range(200):
             o0, r0, t0, _, i0 = quadratic.step(hold)
-            o1, r1, t1, _, i1 = bounded.step(hold)
+            o1, r1, t1, _, i1 = capped.step(hold)
             assert np.array_equal(o0, o1) and t0 == t1
             assert all(i0[key] == i1[key] for key in i0 if key.startswith("reward_") and key != "reward_drift")
             assert r1 - i1["reward_drift"] == pytest.approx(r0 - i0["reward_drift"], rel=1e-12, abs=1e-12)
             dx2 = -i0["reward_drift"] / quadratic.config.drift_com_weight
-            assert i1["reward_drift"] == pytest.approx(-w * s * s * -np.expm1(-dx2 / (s * s)), rel=1e-9, abs=1e-15)
-            assert -w * s * s <= i1["reward_drift"] <= 0.0
-            if dx2 < (0.1 * s) ** 2:
+            assert i1["reward_drift"] == pytest.approx(cap * np.expm1(-w * dx2 / cap), rel=1e-9, abs=1e-15)
+            assert -cap <= i1["reward_drift"] <= 0.0
+            if w * dx2 < 0.02 * cap:
                 near += 1
                 assert i1["reward_drift"] == pytest.approx(-w * dx2, rel=0.011)
-            far += dx2 > (2 * s) ** 2
+            far += w * dx2 > 3.0 * cap  # within 5% of the cap
             if t0:
                 break
     assert far > 0 and near > 0
+    with pytest.raises(ValueError, match="drift_cap"):
+        gym.make("leg_env/PlanarLegHop-v3", drift_cap=0.0)
 
 
 def test_push_reward_charges_the_com_leaving_the_start():

@@ -94,7 +94,7 @@ typedef struct {
         struct {
             double w_height, height_scale, w_drift, w_tilt, w_impact, w_slip;
             double height_scale_fine; /* > 0: the height kernel is the sum of the height_scale one and this one [m] */
-            double drift_scale;       /* > 0: the drift charge saturates, w_drift s^2 (1 - exp(-(dx/s)^2)) [m] (0: w_drift dx^2) */
+            double drift_cap;         /* finite: the drift charge saturates, cap (1 - exp(-w_drift dx^2 / cap)) (inf: w_drift dx^2) */
             double min_flight;        /* a flight at least this long is a hop [s] */
             double max_ground_time;   /* the alive bonus stops after this long without a hop [s] (inf: never) */
             uint8_t flight_height;    /* the height term is paid in flight only (else at every step) */

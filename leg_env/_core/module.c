@@ -834,7 +834,7 @@ static const field SETTINGS_HOP_FIELDS[] = {
     TASK(env_settings, task.hop.w_drift, "w_drift", "f8", 1), TASK(env_settings, task.hop.w_tilt, "w_tilt", "f8", 1),
     TASK(env_settings, task.hop.w_impact, "w_impact", "f8", 1), TASK(env_settings, task.hop.w_slip, "w_slip", "f8", 1),
     TASK(env_settings, task.hop.height_scale_fine, "height_scale_fine", "f8", 1),
-    TASK(env_settings, task.hop.drift_scale, "drift_scale", "f8", 1),
+    TASK(env_settings, task.hop.drift_cap, "drift_cap", "f8", 1),
     TASK(env_settings, task.hop.min_flight, "min_flight", "f8", 1),
     TASK(env_settings, task.hop.max_ground_time, "max_ground_time", "f8", 1),
     TASK(env_settings, task.hop.flight_height, "flight_height", "?", 1),

@@ -232,16 +232,15 @@ static double height_kernel(double de, double weight, double scale, double fine)
     return exp(-err * err);
 }
 
-/* The hop's drift charge per unit of its weight, of the COM's x from its start dx [m]: dx^2, or with a scale s > 0
- * s^2 (1 - exp(-(dx/s)^2)), which is dx^2 near the start and never more than s^2 a step (a charge that can outgrow
- * the alive bonus makes a fall worth more than staying up). */
-static double drift_charge(double dx, double scale)
+/* The hop's drift charge of the COM's x from its start dx [m], its weight w per m^2: w dx^2, or with a finite cap
+ * cap (1 - exp(-w dx^2 / cap)), which is w dx^2 near the start and never more than cap a step (a charge that can
+ * outgrow the alive bonus makes a fall worth more than staying up). */
+static double drift_charge(double dx, double w, double cap)
 {
-    if (scale > 0.0) {
-        const double u = dx / scale;
-        return -scale * scale * expm1(-u * u);
-    }
-    return dx * dx;
+    const double quadratic = w * dx * dx;
+    if (isinf(cap))
+        return quadratic;
+    return -cap * expm1(-quadratic / cap);
 }
 
 /* A command schedule (command_steps > 0): once the command has held for command_steps control steps, the
@@ -334,7 +333,7 @@ static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inerti
     }
     if (c->task.hop.observe_apex)
         b->obs[i * b->obs_cols + OBS_LAST_APEX] = (float)t->apex;
-    terms[2] = -b->settings->task.hop.w_drift * drift_charge(dx, b->settings->task.hop.drift_scale);
+    terms[2] = -drift_charge(dx, b->settings->task.hop.w_drift, b->settings->task.hop.drift_cap);
     terms[3] = -b->settings->task.hop.w_tilt * s->q[2] * s->q[2];
     terms[4] = -b->settings->task.hop.w_impact * (px * px + py * py) / (m * m);
     terms[5] = -b->settings->task.hop.w_slip * o->tally.slip_distance / b->settings->dt;

@@ -90,3 +90,5 @@ def test_a_missing_policy_names_the_folder(tmp_path):
 
     with pytest.raises(PolicyNotFoundError, match="nowhere"):
         audit(FallsArgs(policy=tmp_path / "nowhere"))
+    with pytest.raises(SystemExit, match="python -m train.falls: error: policy folder not found: .*nowhere"):
+        main([str(tmp_path / "nowhere")])

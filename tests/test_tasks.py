@@ -645,40 +645,46 @@ def test_hop_landing_impulse_is_charged():
     assert info["reward_impact"] == pytest.approx(-env.config.impact_weight * (P @ P) / m**2, rel=1e-12)
 
 
-def test_hop_drift_cap_saturates_the_drift_charge_and_changes_nothing_else():
-    """With a finite ``drift_cap = c`` the drift term is ``-c (1 - exp(-w dx^2 / c))`` of the COM's x from its start
-    ``dx`` (read from the quadratic charge of the same episode, ``-w_0 dx^2``): about ``-w dx^2`` near the start and
-    never below ``-c``; the motion, the observation and every other term are those of the registered task."""
+def test_hop_near_drift_charge_is_capped_and_changes_nothing_else():
+    """``drift_near_weight = w`` with ``drift_near_cap = c`` adds ``-c (1 - exp(-w dx^2 / c))`` to the quadratic drift
+    term, ``dx`` the COM's x from its start (read from the quadratic charge of the same episode, ``-w_0 dx^2``): about
+    ``-w dx^2`` near the start, never below ``-c``; with ``c`` infinite, ``-w dx^2``. The motion, the observation and
+    every other term are those of the registered task."""
     quadratic = gym.make("leg_env/PlanarLegHop-v3").unwrapped
-    assert quadratic.config.drift_cap == float("inf")
-    cap, w = 1.0, 400.0
-    capped = gym.make("leg_env/PlanarLegHop-v3", drift_cap=cap, drift_com_weight=w).unwrapped
+    assert quadratic.config.drift_near_weight == 0.0 and quadratic.config.drift_near_cap == float("inf")
+    w0, w, cap = quadratic.config.drift_com_weight, 390.0, 1.0
+    capped = gym.make("leg_env/PlanarLegHop-v3", drift_near_weight=w, drift_near_cap=cap).unwrapped
+    uncapped = gym.make("leg_env/PlanarLegHop-v3", drift_near_weight=w).unwrapped
     q, qd = quadratic.nominal.q.copy(), np.zeros(5)
     q[1] += 0.001
     qd[0], qd[1] = 1.5, 1.0  # thrown up and forward: the COM leaves its start far enough to saturate the charge
     hold = (quadratic.nominal.tau / np.asarray(quadratic.config.torque_limit)).astype(np.float32)
     far = near = 0
     for options in ({"qpos": q, "qvel": qd}, None):  # the throw, then standing from a noisy start
-        for env in (quadratic, capped):
+        for env in (quadratic, capped, uncapped):
             env.reset(seed=3, options=options)
         for k in range(200):
             o0, r0, t0, _, i0 = quadratic.step(hold)
             o1, r1, t1, _, i1 = capped.step(hold)
-            assert np.array_equal(o0, o1) and t0 == t1
-            assert all(i0[key] == i1[key] for key in i0 if key.startswith("reward_") and key != "reward_drift")
+            o2, r2, t2, _, i2 = uncapped.step(hold)
+            assert np.array_equal(o0, o1) and np.array_equal(o0, o2) and t0 == t1 == t2
+            assert all(i0[key] == i1[key] == i2[key] for key in i0 if key.startswith("reward_") and key != "reward_drift")
             assert r1 - i1["reward_drift"] == pytest.approx(r0 - i0["reward_drift"], rel=1e-12, abs=1e-12)
-            dx2 = -i0["reward_drift"] / quadratic.config.drift_com_weight
-            assert i1["reward_drift"] == pytest.approx(cap * np.expm1(-w * dx2 / cap), rel=1e-9, abs=1e-15)
-            assert -cap <= i1["reward_drift"] <= 0.0
+            dx2 = -i0["reward_drift"] / w0
+            near_charge = i1["reward_drift"] - i0["reward_drift"]
+            assert near_charge == pytest.approx(cap * np.expm1(-w * dx2 / cap), rel=1e-9, abs=1e-14)
+            assert -cap - 1e-15 <= near_charge <= 0.0
+            assert i2["reward_drift"] == pytest.approx(-(w0 + w) * dx2, rel=1e-12, abs=1e-15)
             if w * dx2 < 0.02 * cap:
                 near += 1
-                assert i1["reward_drift"] == pytest.approx(-w * dx2, rel=0.011)
+                assert near_charge == pytest.approx(-w * dx2, rel=0.011, abs=1e-15)
             far += w * dx2 > 3.0 * cap  # within 5% of the cap
             if t0:
                 break
     assert far > 0 and near > 0
-    with pytest.raises(ValueError, match="drift_cap"):
-        gym.make("leg_env/PlanarLegHop-v3", drift_cap=0.0)
+    for field, value in (("drift_near_cap", 0.0), ("drift_near_weight", -1.0)):
+        with pytest.raises(ValueError, match=field):
+            gym.make("leg_env/PlanarLegHop-v3", **{field: value})
 
 
 def test_push_reward_charges_the_com_leaving_the_start():

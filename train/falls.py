@@ -219,8 +219,13 @@ def main(argv: list[str] | None = None) -> None:
     import torch
 
     args = parse_args(FallsArgs, argv, positional=("policy",), prog="python -m train.falls")
+    from train.policy_loading import PolicyLoadError, PolicyNotFoundError
+
     torch.set_num_threads(1)
-    report = audit(args)
+    try:
+        report = audit(args)
+    except (PolicyNotFoundError, PolicyLoadError, ValueError) as e:
+        raise SystemExit(f"python -m train.falls: error: {e}") from None
     print(format_report(report))
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)

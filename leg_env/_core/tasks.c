@@ -232,10 +232,10 @@ static double height_kernel(double de, double weight, double scale, double fine)
     return exp(-err * err);
 }
 
-/* The hop's drift charge of the COM's x from its start dx [m], its weight w per m^2: w dx^2, or with a finite cap
- * cap (1 - exp(-w dx^2 / cap)), which is w dx^2 near the start and never more than cap a step (a charge that can
- * outgrow the alive bonus makes a fall worth more than staying up). */
-static double drift_charge(double dx, double w, double cap)
+/* The hop's near-start drift charge of the COM's x from its start dx [m], its weight w per m^2: w dx^2, or with a
+ * finite cap cap (1 - exp(-w dx^2 / cap)), which is w dx^2 near the start and never more than cap a step (a strong
+ * charge that could outgrow the alive bonus would make a fall worth more than staying up). */
+static double near_drift_charge(double dx, double w, double cap)
 {
     const double quadratic = w * dx * dx;
     if (isinf(cap))
@@ -333,7 +333,8 @@ static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inerti
     }
     if (c->task.hop.observe_apex)
         b->obs[i * b->obs_cols + OBS_LAST_APEX] = (float)t->apex;
-    terms[2] = -drift_charge(dx, b->settings->task.hop.w_drift, b->settings->task.hop.drift_cap);
+    terms[2] = -b->settings->task.hop.w_drift * dx * dx
+               - near_drift_charge(dx, b->settings->task.hop.w_drift_near, b->settings->task.hop.drift_near_cap);
     terms[3] = -b->settings->task.hop.w_tilt * s->q[2] * s->q[2];
     terms[4] = -b->settings->task.hop.w_impact * (px * px + py * py) / (m * m);
     terms[5] = -b->settings->task.hop.w_slip * o->tally.slip_distance / b->settings->dt;

@@ -44,10 +44,12 @@ first hop).
   ``max_ground_time`` (the same rule as the alive bonus); ``f = 1``. A hop's apex is paid from its landing until
   the next hop lands, so the term no longer depends on how much of the time the robot spends in the air or how
   often it hops, only on how close its hops come to the command. The apex it pays is observation entry 21.
-- ``reward_drift = -drift_com_weight (x_com - x_com,0)^2`` (10 per m^2): the COM stays over its start. With a
-  finite ``drift_cap = c`` (a training setting; infinite in every registered version) the charge saturates
-  instead, ``-c (1 - exp(-drift_com_weight (x_com - x_com,0)^2 / c))``: the same near the start, never more than
-  ``c`` a step, so that a strong drift charge cannot make a fall pay more than staying up.
+- ``reward_drift = -drift_com_weight (x_com - x_com,0)^2`` (10 per m^2): the COM stays over its start. A
+  second charge for training, ``-c (1 - exp(-drift_near_weight (x_com - x_com,0)^2 / c))`` with
+  ``c = drift_near_cap``, adds a strong pull near the start that never takes more than ``c`` a step (a strong
+  quadratic charge outgrows the alive bonus once the COM is a few cm away, and then a fall pays more than staying
+  up), while the quadratic term keeps the pull back from afar; ``drift_near_weight`` is 0 in every registered
+  version (with ``c`` infinite the second charge is quadratic too).
 - ``reward_tilt = -tilt_weight th_b^2`` (1 per rad^2).
 - ``reward_impact = -impact_weight (|P| / m)^2`` (0.5 per (m/s)^2): ``P`` the step's impact impulses on
   the foot, so hard landings cost the velocity change they impose on the robot.
@@ -222,7 +224,8 @@ class HopConfig(StanceConfig):
     height_scale: float = 0.05  # [m] of apex height error at which the height term is 1/e of its peak
     height_scale_fine: float = 0.0  # [m] > 0: the height kernel is the sum of the height_scale one and this one (v1: 0.01)
     drift_com_weight: float = 10.0  # per m^2 of COM x from the start
-    drift_cap: float = float("inf")  # finite: the drift charge saturates smoothly at this much a step (inf: quadratic)
+    drift_near_weight: float = 0.0  # per m^2 of COM x from the start: a second drift charge, capped by drift_near_cap
+    drift_near_cap: float = float("inf")  # the most drift_near_weight's charge takes a step (inf: no cap, quadratic)
     tilt_weight: float = 1.0  # per rad^2
     impact_weight: float = 0.5  # per (m/s)^2 of |P| / m
     slip_weight: float = 1.0  # per m/s of mean slip speed
@@ -252,7 +255,8 @@ class HopConfig(StanceConfig):
             object.__setattr__(self, name, checks.boolean(f"HopConfig.{name}", getattr(self, name)))
         object.__setattr__(self, "min_flight", checks.real("HopConfig.min_flight", self.min_flight, 0.0, _BIG, unit="s"))
         object.__setattr__(self, "height_scale_fine", checks.real("HopConfig.height_scale_fine", self.height_scale_fine, 0.0, _BIG, unit="m"))
-        object.__setattr__(self, "drift_cap", checks.real("HopConfig.drift_cap", self.drift_cap, 0.0, float("inf"), lo_open=True))
+        object.__setattr__(self, "drift_near_weight", checks.real("HopConfig.drift_near_weight", self.drift_near_weight, 0.0, _BIG))
+        object.__setattr__(self, "drift_near_cap", checks.real("HopConfig.drift_near_cap", self.drift_near_cap, 0.0, float("inf"), lo_open=True))
         for name in ("pay_hops_only", "pay_on_next_hop"):
             if getattr(self, name) and not self.pay_on_landing:
                 raise ValueError(f"HopConfig.{name} needs pay_on_landing=True (it changes what a flight's landing pays)")
@@ -275,7 +279,7 @@ class HopConfig(StanceConfig):
         row["flight_height"], row["observe_progress"] = self.flight_height, self.observe_progress
         row["min_flight"], row["max_ground_time"] = self.min_flight, self.max_ground_time
         row["height_scale_fine"], row["pay_on_landing"] = self.height_scale_fine, self.pay_on_landing
-        row["drift_cap"] = self.drift_cap
+        row["w_drift_near"], row["drift_near_cap"] = self.drift_near_weight, self.drift_near_cap
         row["pay_hops_only"], row["pay_on_next_hop"] = self.pay_hops_only, self.pay_on_next_hop
         row["hold_height"], row["observe_apex"] = self.hold_height, self.observe_apex
         row["command_steps"] = command_steps(self)

@@ -559,6 +559,26 @@ def test_the_earlier_alive_bonus_probe_is_the_rising_discount_probe_with_its_bon
     assert _without_callbacks(probe) == _without_callbacks(rising)
 
 
+def test_the_capped_drift_probe_moves_the_drift_charges_rise_to_a_capped_near_start_charge():
+    """``hop_v3_rising_discount_drift_cap.yml`` is the rising-discount probe's entry with the drift weight's schedule
+    replaced by a near-start charge of the same rise above the task's 10 per m^2 (so that near the start the charge is
+    the rising discount's), capped at 1 a step; ``..._drift_cap_kl.yml`` is that with PPO's ``target_kl``."""
+    rising, probe = _hop_entry(RISING), _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap.yml")
+    (config, *others), (rising_config, *rising_others) = probe["callback"], rising["callback"]
+    assert others == rising_others
+    schedule = dict(config["train.callbacks.ConfigSchedule"]["schedule"])
+    rising_schedule = dict(rising_config["train.callbacks.ConfigSchedule"]["schedule"])
+    near, total = schedule.pop("drift_near_weight"), rising_schedule.pop("drift_com_weight")
+    assert [at for at, _ in near] == [at for at, _ in total] and all(w + 10.0 == t for (_, w), (_, t) in zip(near, total))
+    assert schedule == rising_schedule
+    env_kwargs = dict(probe["env_kwargs"])
+    assert env_kwargs.pop("drift_near_cap") == 1.0 and env_kwargs == rising["env_kwargs"]
+    assert "drift_com_weight" not in env_kwargs  # the task's 10 per m^2
+    assert {k: v for k, v in probe.items() if k not in ("callback", "env_kwargs")} == {k: v for k, v in rising.items() if k not in ("callback", "env_kwargs")}
+    kl = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap_kl.yml")
+    assert kl.pop("target_kl") == 0.01 and kl == probe
+
+
 def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
     """``train/hyperparams/probes/hop_v3_rising_discount.yml``, the configuration of the hop task's rising-discount
     learning page, is ppo.yml's ``PlanarLegHop-v3`` entry with one callback more, and the page records that file."""

@@ -687,6 +687,43 @@ def test_hop_near_drift_charge_is_capped_and_changes_nothing_else():
             gym.make("leg_env/PlanarLegHop-v3", **{field: value})
 
 
+def test_hop_limit_charge_is_the_squared_depth_inside_the_ranges_margins_and_changes_nothing_else():
+    """With ``limit_weight = w`` the term ``reward_limit`` is ``-w`` times the squared depth of the hip and of the knee
+    inside the last ``limit_margin`` of their ranges (0 elsewhere), from the state after the step; registered, it is
+    0. The motion, the observation and every other term are those of the registered task. Random torques with knee
+    kicks, which take the knee to both ends of its range."""
+    plain = gym.make("leg_env/PlanarLegHop-v3").unwrapped
+    assert plain.config.limit_weight == 0.0
+    w, margin = 400.0, 0.2
+    charged = gym.make("leg_env/PlanarLegHop-v3", limit_weight=w, limit_margin=margin).unwrapped
+    cfg = plain.config
+    inside, outside = set(), 0
+    for seed in range(6):
+        for env in (plain, charged):
+            env.reset(seed=seed)
+        for k, a in enumerate(actions(300, 1, seed=seed)[:, 0]):
+            a = a if k % 40 < 25 else np.float32([0.0, -1.0]) if k % 40 < 32 else np.float32([1.0, 1.0])
+            o0, r0, t0, _, i0 = plain.step(a)
+            o1, r1, t1, _, i1 = charged.step(a)
+            assert np.array_equal(o0, o1) and t0 == t1 and i0["reward_limit"] == 0.0
+            assert all(i0[key] == i1[key] for key in i0 if key.startswith("reward_") and key != "reward_limit")
+            q = charged.state[0]
+            expected = 0.0
+            for j, (lo, hi) in ((3, cfg.hip_range), (4, cfg.knee_range)):
+                depth = max(lo + margin - q[j], q[j] - (hi - margin), 0.0)
+                expected += depth * depth
+                if depth > 0.0:
+                    inside.add((j, q[j] > 0.5 * (lo + hi)))
+            outside += expected == 0.0
+            assert i1["reward_limit"] == pytest.approx(-w * expected, rel=1e-12, abs=1e-15)
+            assert r1 == pytest.approx(r0 + i1["reward_limit"], rel=1e-12, abs=1e-12)
+            if t0:
+                break
+    assert {(4, False), (4, True)} <= inside and outside > 0  # the knee in both margins, and steps in neither
+    with pytest.raises(ValueError, match="limit_margin"):
+        gym.make("leg_env/PlanarLegHop-v3", limit_margin=-0.1)
+
+
 def test_push_reward_charges_the_com_leaving_the_start():
     env = gym.make("leg_env/PlanarLegPush-v0", com_weight=3.0, reset_noise_scale=0.0).unwrapped
     env.reset(seed=0)

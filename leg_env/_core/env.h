@@ -96,6 +96,8 @@ typedef struct {
             double height_scale_fine; /* > 0: the height kernel is the sum of the height_scale one and this one [m] */
             double w_drift_near;      /* a second drift charge, near the start: w_drift_near dx^2, or with a finite */
             double drift_near_cap;    /* drift_near_cap, cap (1 - exp(-w_drift_near dx^2 / cap)), at most cap a step */
+            double w_limit;           /* per rad^2 of the hip and the knee inside the last limit_margin of their ranges */
+            double limit_margin;      /* [rad] */
             double min_flight;        /* a flight at least this long is a hop [s] */
             double max_ground_time;   /* the alive bonus stops after this long without a hop [s] (inf: never) */
             uint8_t flight_height;    /* the height term is paid in flight only (else at every step) */

@@ -836,6 +836,7 @@ static const field SETTINGS_HOP_FIELDS[] = {
     TASK(env_settings, task.hop.height_scale_fine, "height_scale_fine", "f8", 1),
     TASK(env_settings, task.hop.w_drift_near, "w_drift_near", "f8", 1),
     TASK(env_settings, task.hop.drift_near_cap, "drift_near_cap", "f8", 1),
+    TASK(env_settings, task.hop.w_limit, "w_limit", "f8", 1), TASK(env_settings, task.hop.limit_margin, "limit_margin", "f8", 1),
     TASK(env_settings, task.hop.min_flight, "min_flight", "f8", 1),
     TASK(env_settings, task.hop.max_ground_time, "max_ground_time", "f8", 1),
     TASK(env_settings, task.hop.flight_height, "flight_height", "?", 1),

@@ -9,7 +9,7 @@
 
 #define STANCE_TERMS 5 /* alive, drift, unilateral, friction, ctrl */
 #define PUSH_TERMS 6   /* the balance task's and com */
-#define HOP_TERMS 7    /* alive, height, drift, tilt, impact, slip, ctrl */
+#define HOP_TERMS 8    /* alive, height, drift, tilt, impact, slip, ctrl, limit */
 
 /* m g of the robot, or 1 without gravity (the observed force is then in newtons). */
 static inline double weight_of(const leg_params *P)
@@ -243,6 +243,22 @@ static double near_drift_charge(double dx, double w, double cap)
     return -cap * expm1(-quadratic / cap);
 }
 
+/* The squared distances [rad^2] of the hip and the knee inside the last `margin` of their ranges (an episode ends
+ * past a range's end), summed: 0 while both are at least `margin` from their ends. */
+static double limit_excess(const double *q, const env_settings *c, double margin)
+{
+    double sum = 0.0;
+    const double *ranges[2] = {c->hip_range, c->knee_range};
+    for (int j = 0; j < 2; j++) {
+        const double below = ranges[j][0] + margin - q[3 + j], above = q[3 + j] - (ranges[j][1] - margin);
+        if (below > 0.0)
+            sum += below * below;
+        if (above > 0.0)
+            sum += above * above;
+    }
+    return sum;
+}
+
 /* A command schedule (command_steps > 0): once the command has held for command_steps control steps, the
  * next of next_commands takes over from the next step on, and the observation shows it (after the last of
  * them, the command holds). A step is judged by the command it was taken under. */
@@ -339,6 +355,7 @@ static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inerti
     terms[4] = -b->settings->task.hop.w_impact * (px * px + py * py) / (m * m);
     terms[5] = -b->settings->task.hop.w_slip * o->tally.slip_distance / b->settings->dt;
     terms[6] = stance_terms[4]; /* ctrl */
+    terms[7] = -b->settings->task.hop.w_limit * limit_excess(s->q, b->settings, b->settings->task.hop.limit_margin);
     if (o->terminated) /* terminated: nothing but the penalties */
         terms[1] = 0.0;
     next_hop_command(b, i, t);

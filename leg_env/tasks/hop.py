@@ -21,7 +21,7 @@ first hop).
 
 ## Rewards
 ``reward = reward_alive + reward_height + reward_drift + reward_tilt + reward_impact + reward_slip
-+ reward_ctrl``, each in ``info``:
++ reward_ctrl + reward_limit``, each in ``info``:
 
 - ``reward_alive = alive_bonus`` (1) on a healthy step; from v1 on only while the ground time is at most
   ``max_ground_time`` (1 s): the robot must keep hopping (v0: ``max_ground_time = inf``).
@@ -55,6 +55,10 @@ first hop).
   the foot, so hard landings cost the velocity change they impose on the robot.
 - ``reward_slip = -slip_weight slip_distance / dt`` (1 per m/s of mean slip speed).
 - ``reward_ctrl = -ctrl_cost_weight |a|^2`` (0.01).
+- ``reward_limit = -limit_weight (e_hip^2 + e_knee^2)``, ``e`` how far a joint is inside the last ``limit_margin``
+  (0.05 rad) of its range (``hip_range``, ``knee_range``; an episode ends past either end), 0 elsewhere: a
+  training setting, ``limit_weight`` 0 in every registered version, which warns of the range's end before the episode
+  ends there.
 
 Flight is the task, so it is not charged. **Unilateral violation** here means what it means on the
 unilateral ground of ``PlanarLegStance``: ``info["unilateral_violation"]`` (``lam_y < 0``) and
@@ -204,7 +208,7 @@ from .stance import OBS_DIM_UNILATERAL, StanceConfig, observation_space as _stan
 
 __all__ = ["HopConfig", "TASK", "REWARD_TERMS", "OBS_DIM"]
 
-REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl")
+REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl", "limit")
 N_TERMS = len(REWARD_TERMS)
 OBS_DIM = OBS_DIM_UNILATERAL + 1  # 19 (v0); 21 with observe_progress (v1)
 _BIG = 1.0e6
@@ -226,6 +230,8 @@ class HopConfig(StanceConfig):
     drift_com_weight: float = 10.0  # per m^2 of COM x from the start
     drift_near_weight: float = 0.0  # per m^2 of COM x from the start: a second drift charge, capped by drift_near_cap
     drift_near_cap: float = float("inf")  # the most drift_near_weight's charge takes a step (inf: no cap, quadratic)
+    limit_weight: float = 0.0  # per rad^2 of the hip and the knee inside the last limit_margin of their ranges
+    limit_margin: float = 0.05  # [rad] from each end of hip_range and knee_range
     tilt_weight: float = 1.0  # per rad^2
     impact_weight: float = 0.5  # per (m/s)^2 of |P| / m
     slip_weight: float = 1.0  # per m/s of mean slip speed
@@ -256,6 +262,8 @@ class HopConfig(StanceConfig):
         object.__setattr__(self, "min_flight", checks.real("HopConfig.min_flight", self.min_flight, 0.0, _BIG, unit="s"))
         object.__setattr__(self, "height_scale_fine", checks.real("HopConfig.height_scale_fine", self.height_scale_fine, 0.0, _BIG, unit="m"))
         object.__setattr__(self, "drift_near_weight", checks.real("HopConfig.drift_near_weight", self.drift_near_weight, 0.0, _BIG))
+        object.__setattr__(self, "limit_weight", checks.real("HopConfig.limit_weight", self.limit_weight, 0.0, _BIG))
+        object.__setattr__(self, "limit_margin", checks.real("HopConfig.limit_margin", self.limit_margin, 0.0, _BIG, unit="rad"))
         object.__setattr__(self, "drift_near_cap", checks.real("HopConfig.drift_near_cap", self.drift_near_cap, 0.0, float("inf"), lo_open=True))
         for name in ("pay_hops_only", "pay_on_next_hop"):
             if getattr(self, name) and not self.pay_on_landing:
@@ -280,6 +288,7 @@ class HopConfig(StanceConfig):
         row["min_flight"], row["max_ground_time"] = self.min_flight, self.max_ground_time
         row["height_scale_fine"], row["pay_on_landing"] = self.height_scale_fine, self.pay_on_landing
         row["w_drift_near"], row["drift_near_cap"] = self.drift_near_weight, self.drift_near_cap
+        row["w_limit"], row["limit_margin"] = self.limit_weight, self.limit_margin
         row["pay_hops_only"], row["pay_on_next_hop"] = self.pay_hops_only, self.pay_on_next_hop
         row["hold_height"], row["observe_apex"] = self.hold_height, self.observe_apex
         row["command_steps"] = command_steps(self)

@@ -11,7 +11,8 @@ this runs the policy as it is trained, its actions drawn from its Gaussian (``--
 training env's settings (``--training-env``: the run's ``env_kwargs`` with every ``train.callbacks.ConfigSchedule``
 field at its value after ``--at-steps``, default the run's last step) or on ``--env-kwargs``. For the episodes that
 fall and for those that survive, it prints each reward term per step over their last ``--window`` steps, and the
-share of them whose reward over that window is below 0. Episode ``i`` is seeded ``seed + i`` (default 30000 + i, the
+share of them whose reward over that window is below 0, and how the falls ended (the torso's tilt, the base's height,
+a joint past an end of its range), in flight or in contact. Episode ``i`` is seeded ``seed + i`` (default 30000 + i, the
 fresh episodes, which neither training nor selection uses); the sampled actions come from torch's generator seeded
 with ``seed``, so that a run prints the same figures again.
 """
@@ -26,7 +27,7 @@ import numpy as np
 
 from train.cli import parse_args
 
-__all__ = ["FallsArgs", "FallsReport", "training_env_kwargs", "audit", "format_report", "main"]
+__all__ = ["FallsArgs", "FallsReport", "ENDINGS", "ending", "training_env_kwargs", "audit", "format_report", "main"]
 
 FRESH_SEED = 30_000
 
@@ -107,6 +108,17 @@ class FallsReport:
     lengths: np.ndarray
     terms: dict[str, np.ndarray]
     last: dict[str, np.ndarray]
+    ends: list[str | None] = field(default_factory=list)
+    in_flight: np.ndarray | None = None
+
+    def ends_table(self) -> dict[str, dict[str, int]]:
+        """For each way an episode ended early (``ending``), how many ended so in flight and in contact."""
+        out: dict[str, dict[str, int]] = {}
+        for end, flight in zip(self.ends, self.in_flight if self.in_flight is not None else []):
+            if end is not None:
+                row = out.setdefault(end, {"in flight": 0, "in contact": 0})
+                row["in flight" if flight else "in contact"] += 1
+        return out
 
     def groups(self) -> dict[str, dict]:
         """For the episodes that fell and those that survived: their number, each term's mean per step over the last
@@ -134,7 +146,28 @@ class FallsReport:
             "mean_length": float(self.lengths.mean()),
             "mean_reward_terms": {key: float(values.mean()) for key, values in self.terms.items()},
             "last_steps": self.groups(),
+            "ends": self.ends_table(),
         }
+
+
+ENDINGS = ("torso angle", "base height", "hip below its range", "hip above its range", "knee below its range",
+           "knee above its range", "other")
+"""How an episode of a unilateral task ends early (``ending``), in the order checked."""
+
+
+def ending(q: np.ndarray, anchor: np.ndarray, config) -> str:
+    """How an episode that ended at the state ``q`` (its foot's ``anchor``) ended, by the task's limits (``config``):
+    the first of ``ENDINGS`` that holds; "other" for the knee above the base or a numerical failure."""
+    hip, knee = config.hip_range, config.knee_range
+    checks = (
+        abs(q[2]) > config.max_torso_angle,
+        q[1] - anchor[1] < config.min_base_height,
+        q[3] < hip[0],
+        q[3] > hip[1],
+        q[4] < knee[0],
+        q[4] > knee[1],
+    )
+    return next((name for name, hit in zip(ENDINGS, checks) if hit), "other")
 
 
 def audit(args: FallsArgs) -> FallsReport:
@@ -166,6 +199,9 @@ def audit(args: FallsArgs) -> FallsReport:
     terms: dict[str, np.ndarray] = {}
     recent: dict[str, list] = {}  # each term's last `window` steps, (window, n), oldest first
     last: dict[str, np.ndarray] = {}
+    ends: list[str | None] = [None] * n
+    in_flight = np.zeros(n, bool)
+    config = envs.unwrapped.config
     while not done.all():
         actions, _ = policy.predict(obs, episode_start=starts, deterministic=not args.sample)
         obs, _, terminated, truncated, info = envs.step(np.asarray(actions, dtype=np.float64).reshape(n, -1))
@@ -184,10 +220,15 @@ def audit(args: FallsArgs) -> FallsReport:
             window = np.asarray(recent[key])
             mean = window.sum(axis=0) / np.minimum(lengths, args.window)
             last.setdefault(key, np.zeros(n))[ended] = mean[ended]
+        if (ended & terminated).any():
+            q, _, anchor = envs.unwrapped.state  # the state the step ended in (the reset comes with the next step)
+            for i in np.flatnonzero(ended & terminated):
+                ends[i] = ending(q[i], anchor[i], config)
+                in_flight[i] = info["contact_mode"][i] == "flight"
         done |= ended
         starts = terminated | truncated
     envs.close()
-    return FallsReport(env_id, kwargs, args.sample, args.window, seeds, survived, lengths, terms, last)
+    return FallsReport(env_id, kwargs, args.sample, args.window, seeds, survived, lengths, terms, last, ends, in_flight)
 
 
 def format_report(report: FallsReport) -> str:
@@ -212,6 +253,10 @@ def format_report(report: FallsReport) -> str:
             f"| {name} | {group['episodes']} | {group['reward']:.2f} | {group['negative_share']:.0%} | "
             + " | ".join(f"{group[key]:.2f}" for key in keys) + " |"
         )
+    table = report.ends_table()
+    if table:
+        lines += ["", "| how the falls ended | in flight | in contact |", "|---|---:|---:|"]
+        lines += [f"| {end} | {table[end]['in flight']} | {table[end]['in contact']} |" for end in ENDINGS if end in table]
     return "\n".join(lines)
 
 

@@ -577,6 +577,17 @@ def test_the_capped_drift_probe_moves_the_drift_charges_rise_to_a_capped_near_st
     assert {k: v for k, v in probe.items() if k not in ("callback", "env_kwargs")} == {k: v for k, v in rising.items() if k not in ("callback", "env_kwargs")}
     kl = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap_kl.yml")
     assert kl.pop("target_kl") == 0.01 and kl == probe
+    cap2 = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap2.yml")
+    assert cap2["env_kwargs"].pop("drift_near_cap") == 2.0
+    probe["env_kwargs"].pop("drift_near_cap")
+    assert cap2 == probe
+
+
+def test_the_joint_limit_probe_is_the_rising_discount_probe_with_a_charge_near_the_ranges_ends():
+    rising, probe = _hop_entry(RISING), _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_limits.yml")
+    env_kwargs = dict(probe.pop("env_kwargs"))
+    assert env_kwargs.pop("limit_weight") == 400.0 and env_kwargs.pop("limit_margin") == 0.05
+    assert env_kwargs == rising.pop("env_kwargs") and probe == rising
 
 
 def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():

@@ -41,7 +41,7 @@ $(RLLIB_VENV)/.installed: pyproject.toml setup.py constraints.txt | $(RLLIB_BIN)
 
 # The tests that need Stable-Baselines3, which the RLlib venv does not have: left out of its run by
 # name (a new SB3 test missing here fails there with ModuleNotFoundError, it is never skipped)
-SB3_MODULES := test_sb3 test_chunked_ppo test_curves test_train test_train_hardening test_export test_task_training test_ppo_hop test_ppo_push test_ppo_scratch
+SB3_MODULES := test_sb3 test_chunked_ppo test_curves test_train test_train_hardening test_export test_task_training test_ppo_hop test_ppo_push test_ppo_scratch test_falls
 SB3_TESTS   := test_env.py::test_sb3_check_env test_unilateral.py::test_sb3_checker_passes \
                test_unilateral.py::test_sb3_adapter_carries_the_contact_keys \
                test_video.py::test_vec_video_recorder_on_the_sb3_adapter \

@@ -134,8 +134,8 @@ every bar. The alive bonus of 2 from 45M steps instead of 60M (seeds 5 and 9, fr
 named seed standing (100%, but a drift of 6.24 cm) and seed 9 at 53%. In bfloat16 with torch on two threads, seeds 5-7 of
 the rising discount alone survived 57%, 94% and 82%, none within every bar. Its late falls are ones the reward asks
 for: the drift charge of 400 per m^2 outgrows the alive bonus a few cm from the start, and the falls come after
-steps paid less than nothing (``train.falls``); nearly all of them end with a joint past an end of its range, the
-torso up, most in flight. A near-start charge capped at 1 a step beside the task's quadratic one
+steps paid less than nothing (``train.falls``); most of them end with a joint past an end of its range, the torso
+up, most in flight. A near-start charge capped at 1 a step beside the task's quadratic one
 (``drift_near_weight``, ``drift_near_cap``) removed the falls' pay and kept seeds 5 and 6 standing longer, but both
 came apart after 63M steps (kept policies: 93% and 100% survival, apex errors of 1.84 and 1.47 cm, drifts of 3.09
 and 14.1 cm; capped at 2, seed 6 fell in every in-training episode from 66M steps, at rewards above 4 a step); with PPO's ``target_kl`` of 0.01 as well, seed 6 survived 81%; a charge on the joints near the ends of

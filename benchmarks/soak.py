@@ -51,6 +51,7 @@ CASES = {  # name: (env id, keyword arguments)
     "hop v2 randomised": ("leg_env/PlanarLegHop-v2", {"randomize": True}),
     "hop v3 randomised": ("leg_env/PlanarLegHop-v3", {"randomize": True}),
     "hop v3 command schedule": ("leg_env/PlanarLegHop-v3", {"command_period": 0.5}),  # the training setting
+    "hop v3 training charges": ("leg_env/PlanarLegHop-v3", {"drift_near_weight": 390.0, "drift_near_cap": 1.0, "limit_weight": 400.0}),
 }
 ACTIONS = ("random", "bang_bang")
 TORQUE_LIMIT = 500.0  # ten times the default 50 N m

@@ -1,4 +1,4 @@
-"""The soak of issue 13 in CI: 10^5 env-steps per case and action kind (``benchmarks/soak.py``).
+"""The soak in CI: 10^5 env-steps per case and action kind (``benchmarks/soak.py``).
 
 The script runs 10^7 per combination at N = 4096; this runs the same function, smaller.
 """

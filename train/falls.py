@@ -20,6 +20,7 @@ with ``seed``, so that a run prints the same figures again.
 from __future__ import annotations
 
 import json
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -193,12 +194,12 @@ def audit(args: FallsArgs) -> FallsReport:
     envs = make_batch(env_id, n, kwargs)
     seeds = list(range(args.seed, args.seed + n))
     obs, _ = envs.reset(seed=seeds)
-    keys = list(envs.unwrapped.task.reward_keys) if hasattr(envs.unwrapped, "task") else None
+    keys = list(envs.unwrapped.reward_keys)
     done, starts = np.zeros(n, bool), np.ones(n, bool)
     lengths, survived = np.zeros(n, np.int64), np.zeros(n, bool)
-    terms: dict[str, np.ndarray] = {}
-    recent: dict[str, list] = {}  # each term's last `window` steps, (window, n), oldest first
-    last: dict[str, np.ndarray] = {}
+    terms = {key: np.zeros(n) for key in keys}
+    last = {key: np.zeros(n) for key in keys}
+    recent = {key: deque(maxlen=args.window) for key in keys}  # each term's last `window` steps, oldest first
     ends: list[str | None] = [None] * n
     in_flight = np.zeros(n, bool)
     config = envs.unwrapped.config
@@ -206,20 +207,16 @@ def audit(args: FallsArgs) -> FallsReport:
         actions, _ = policy.predict(obs, episode_start=starts, deterministic=not args.sample)
         obs, _, terminated, truncated, info = envs.step(np.asarray(actions, dtype=np.float64).reshape(n, -1))
         active = ~done
-        keys = keys or [key for key in info if key.startswith("reward_")]
         for key in keys:
             value = np.where(active, np.asarray(info[key], dtype=np.float64), 0.0)
-            terms[key] = terms.get(key, np.zeros(n)) + value
-            recent.setdefault(key, []).append(value)
-            if len(recent[key]) > args.window:
-                recent[key].pop(0)
+            terms[key] += value
+            recent[key].append(value)
         lengths[active] += 1
         ended = (terminated | truncated) & active
         survived[ended] = truncated[ended] & ~terminated[ended]
-        for key in keys:
-            window = np.asarray(recent[key])
-            mean = window.sum(axis=0) / np.minimum(lengths, args.window)
-            last.setdefault(key, np.zeros(n))[ended] = mean[ended]
+        if ended.any():
+            for key in keys:
+                last[key][ended] = np.sum(recent[key], axis=0)[ended] / np.minimum(lengths[ended], args.window)
         if (ended & terminated).any():
             q, _, anchor = envs.unwrapped.state  # the state the step ended in (the reset comes with the next step)
             for i in np.flatnonzero(ended & terminated):

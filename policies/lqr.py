@@ -174,7 +174,12 @@ class LQRController(BatchedController):
         """Unclipped joint torques ``tau_eq - K x`` [N m] for observations ``(..., 12)``, ``(..., 18)`` or ``(..., 19)``."""
         obs = np.asarray(obs, dtype=np.float64)
         x = obs[..., STATE_INDEX] - self.x_eq
-        return self.tau_eq - x @ self.K.T
+        # K x summed entry by entry in a fixed order: each row's torque is then the same, bit for bit, whatever the
+        # batch it comes in (a matrix product's BLAS kernel, and with it the rounding, depends on the batch's shape)
+        Kx = x[..., 0:1] * self.K[:, 0]
+        for j in range(1, self.K.shape[1]):
+            Kx = Kx + x[..., j : j + 1] * self.K[:, j]
+        return self.tau_eq - Kx
 
     def act(self, batch: np.ndarray) -> np.ndarray:
         """Actions ``(N, 2)`` float32 in [-1, 1] for observations ``batch`` ``(N, 12)``, ``(N, 18)`` or ``(N, 19)``.

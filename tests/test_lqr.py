@@ -91,6 +91,20 @@ def test_predict_single_and_batch(controller):
         controller.predict(np.zeros(11))
 
 
+@pytest.mark.parametrize("rows", [1, 2, 7, 64, 1000])
+def test_a_rows_torque_does_not_depend_on_its_batch(controller, rows):
+    """Each row's torque is the same, bit for bit, alone or in a batch of any size (so that a batched evaluation is
+    the single env's episode, bit for bit, on any CPU), and is ``tau_eq - K x``."""
+    rng = np.random.default_rng(rows)
+    batch = rng.standard_normal((rows, 12))
+    torques = controller.torque(batch)
+    for i in range(rows):
+        np.testing.assert_array_equal(controller.torque(batch[i]), torques[i])
+        np.testing.assert_array_equal(controller.torque(batch[i : i + 1])[0], torques[i])
+    x = batch[:, STATE_INDEX] - controller.x_eq
+    np.testing.assert_allclose(torques, controller.tau_eq - x @ controller.K.T, rtol=0, atol=1e-9)
+
+
 def test_nominal_observation_gives_holding_torque(controller):
     env = gym.make(leg_env.ENV_ID, reset_noise_scale=0.0)
     obs, _ = env.reset(seed=0)

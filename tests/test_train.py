@@ -514,6 +514,55 @@ def test_a_learning_rate_schedule_sets_the_rate_of_each_update_and_survives_a_sa
             LearningRateSchedule(bad)
 
 
+def test_a_noise_floor_holds_up_the_policys_noise_at_every_rollout():
+    """NoiseFloor under PPO: every rollout starts with each entry of the policy's log_std at least the log of the
+    schedule's value at its start (the entries above it untouched), where without the floor the learnt noise falls
+    below it; a policy without a log_std, or a bad schedule, is a ValueError naming the floor."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from leg_env.sb3 import make_sb3_vec_env
+    from train.callbacks import NoiseFloor
+
+    floor = NoiseFloor([[512, 0.4], [1536, 0.3]])
+    assert floor.value_at(0) == 0.4 and floor.value_at(1024) == pytest.approx(0.35) and floor.value_at(10**9) == 0.3
+
+    def run(callbacks):
+        starts = []
+
+        class Watch(BaseCallback):
+            def _on_rollout_start(self) -> None:
+                starts.append((self.num_timesteps, self.model.policy.log_std.detach().clone()))
+
+            def _on_step(self) -> bool:
+                return True
+
+        # ent_coef < 0 rewards a narrower policy: its log_std falls at every update, fast
+        model = PPO("MlpPolicy", make_sb3_vec_env(4, seed=0), n_steps=64, batch_size=256, n_epochs=4, learning_rate=3e-2,
+                    ent_coef=-1.0, policy_kwargs={"log_std_init": np.log(0.5)}, device="cpu", seed=0)
+        with torch.no_grad():
+            model.policy.log_std[0] = np.log(2.0)  # one entry far above the floor
+        model.learn(2048, callback=[*callbacks, Watch()])
+        return starts
+
+    free, held = run([]), run([floor])
+    assert len(held) == len(free) == 8
+    assert float(free[-1][1][1:].exp().max()) < 0.3  # without the floor the noise falls below it
+    for steps, log_std in held:
+        assert float(log_std[1:].exp().min()) >= floor.value_at(steps) * (1 - 1e-6), steps
+        assert float(log_std[0].exp()) > floor.value_at(steps), steps
+    assert any(float(log_std[1:].exp().min()) == pytest.approx(floor.value_at(steps)) for steps, log_std in held)  # it binds
+
+    model = PPO("MlpPolicy", make_sb3_vec_env(2, seed=0), n_steps=8, batch_size=16, device="cpu", seed=0)
+    del model.policy.log_std
+    with pytest.raises(ValueError, match="NoiseFloor"):
+        NoiseFloor([[0, 0.1]]).start_on(None, model)
+    for bad in ([], [[0, -0.1]], [[0, 0.0]], [[10, 0.1], [5, 0.2]], [[0, [0.1, 0.2]]], "0.1"):
+        with pytest.raises(ValueError, match="noise floor"):
+            NoiseFloor(bad)
+
+
 def _hop_entry(path: str) -> dict:
     """The ``leg_env/PlanarLegHop-v3`` entry of the hyperparameter file at ``path`` (relative to the repository)."""
     from train.hyperparameters import load_hyperparams
@@ -562,7 +611,8 @@ def test_the_earlier_alive_bonus_probe_is_the_rising_discount_probe_with_its_bon
 def test_the_capped_drift_probe_moves_the_drift_charges_rise_to_a_capped_near_start_charge():
     """``hop_v3_rising_discount_drift_cap.yml`` is the rising-discount probe's entry with the drift weight's schedule
     replaced by a near-start charge of the same rise above the task's 10 per m^2 (so that near the start the charge is
-    the rising discount's), capped at 1 a step; ``..._drift_cap_kl.yml`` is that with PPO's ``target_kl``."""
+    the rising discount's), capped at 1 a step; ``..._drift_cap_kl.yml`` is that with PPO's ``target_kl``,
+    ``..._drift_cap_floor.yml`` with a floor under the action noise."""
     rising, probe = _hop_entry(RISING), _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap.yml")
     (config, *others), (rising_config, *rising_others) = probe["callback"], rising["callback"]
     assert others == rising_others
@@ -579,6 +629,9 @@ def test_the_capped_drift_probe_moves_the_drift_charges_rise_to_a_capped_near_st
     assert kl.pop("target_kl") == 0.01 and kl == probe
     cap2 = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap2.yml")
     assert cap2["env_kwargs"].pop("drift_near_cap") == 2.0
+    floor = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap_floor.yml")
+    assert floor["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[0, 0.1]]}}]
+    assert _without_callbacks(floor) == _without_callbacks(probe)
     probe["env_kwargs"].pop("drift_near_cap")
     assert cap2 == probe
 

@@ -19,6 +19,7 @@ __all__ = [
     "ConfigSchedule",
     "DiscountSchedule",
     "LearningRateSchedule",
+    "NoiseFloor",
     "CommandCurriculum",
     "zoo_callbacks",
     "evaluate_now",
@@ -405,6 +406,41 @@ class LearningRateSchedule(_ModelSchedule):
     @staticmethod
     def _put(model, rate: float) -> None:
         model.lr_schedule = _Constant(rate)
+
+
+class NoiseFloor(_ModelSchedule):
+    """A floor under the policy's action noise, as a schedule over the env steps done: ``points`` ``[[steps, std],
+    ...]`` (steps increasing), the first point's value before it, the last point's after it, linear in between (as
+    ``ConfigSchedule``). At the start of training (a resumed run too) and of every rollout, every entry of the
+    Gaussian policy's state-independent ``log_std`` below the log of the floor is raised to it, so that the rollout
+    explores with a standard deviation of at least the floor in every action; the optimiser may lower it again
+    within an update, and the next rollout starts from the floor. PPO's Gaussian policies learn their noise, and
+    it shrinks as a policy gets precise; with a small noise the same step of the mean is a larger change of the
+    policy (a larger KL divergence per update). In ``train/hyperparams/ppo.yml``::
+
+        callback:
+          - train.callbacks.NoiseFloor:
+              points: [[0, 0.1]]
+
+    A policy without a ``log_std`` parameter (state-dependent noise, a discrete action) is a ValueError at the start
+    of training. TensorBoard key: ``train/std_floor``.
+    """
+
+    name, log_key, valid_text = "noise floor", "train/std_floor", "a finite standard deviation above 0"
+
+    @staticmethod
+    def valid(values: np.ndarray) -> np.ndarray:
+        return values > 0.0
+
+    @staticmethod
+    def _put(model, std: float) -> None:
+        import torch
+
+        log_std = getattr(model.policy, "log_std", None)
+        if not isinstance(log_std, torch.Tensor):
+            raise ValueError(f"NoiseFloor: the policy {type(model.policy).__name__} has no state-independent log_std to hold up")
+        with torch.no_grad():
+            log_std.clamp_(min=float(np.log(std)))
 
 
 class _Constant:

@@ -15,7 +15,7 @@ import gymnasium
 from .params import LegParams
 from .tasks import ALIASES, REGISTRY
 
-__all__ = ["LegParams", "StanceConfig", "PlanarLegStanceEnv", "PlanarLegStanceVectorEnv", "ENV_ID", "ENV_IDS"]
+__all__ = ["LegParams", "StanceConfig", "PlanarLegStanceEnv", "PlanarLegStanceVectorEnv", "ENV_ID", "ENV_IDS", "ENDINGS"]
 __version__ = "0.1.0"  # the package version's one source (pyproject.toml reads it)
 
 ENV_ID = "leg_env/PlanarLegStance-v0"
@@ -62,4 +62,8 @@ def __getattr__(name: str):
         from . import envs
 
         return getattr(envs, name)
+    if name == "ENDINGS":  # why an episode ended, by info["ending"]
+        from .info import ENDINGS
+
+        return ENDINGS
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

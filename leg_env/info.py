@@ -6,6 +6,7 @@ env's ``info`` arrays, which the SB3 adapter splits into its per-env dicts). Key
 
 * every task: ``contact_force`` (the mean contact force over the step, ``[lam_x, lam_y]`` [N]),
   ``normal_force`` [N], ``unilateral_violation``, ``friction_violation``, ``numerical_failure`` (bools),
+  ``ending`` (why the episode ended at this step, an index into ``ENDINGS``: 0, ``"none"``, while it goes on),
   ``base_drift``, ``foot_error`` [m], ``com_position`` and ``com_velocity`` (the whole-body centre of mass and
   its velocity, world frame [m, m/s]);
 * on the unilateral ground (``UNILATERAL``): ``contact_mode`` (``"stick"``, ``"slip"`` or ``"flight"`` at the
@@ -26,7 +27,16 @@ import numpy as np
 from ._core import kernels
 from .contact import MODE_NAMES
 
-__all__ = ["KEYS", "UNILATERAL", "InfoBuilder"]
+__all__ = ["KEYS", "UNILATERAL", "ENDINGS", "InfoBuilder"]
+
+ENDINGS: tuple[str, ...] = kernels.ENDINGS
+"""Why an episode ends, by ``info["ending"]``: ``"none"`` (0: it goes on, or it was truncated), then, the first
+that holds at the step: ``"torso_angle"`` (the torso tilted past ``max_torso_angle``), ``"base_height"`` (the base
+came within ``min_base_height`` of the foot's contact point), ``"hip_low"``, ``"hip_high"``, ``"knee_low"``,
+``"knee_high"`` (the hip or the knee left ``hip_range`` or ``knee_range``, below or above; the knee above is bent
+past it), ``"base_below_knee"``, ``"contact_lost"`` (``terminate_on_contact_loss``: the foot lifted, or its normal
+force fell below ``contact_loss_threshold``) and ``"numerical_failure"`` (the step failed and was undone). An episode
+is terminated exactly when its ``ending`` is not 0."""
 
 KEYS = (
     # key, out field
@@ -35,6 +45,7 @@ KEYS = (
     ("unilateral_violation", "unilateral_violation"),
     ("friction_violation", "friction_violation"),
     ("numerical_failure", "numerical_failure"),
+    ("ending", "ending"),
     ("base_drift", "base_drift"),
     ("foot_error", "foot_error"),
     ("com_position", "com"),

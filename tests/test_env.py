@@ -18,7 +18,7 @@ from leg_env.params import LegParams
 from leg_env.task import StanceConfig
 
 REWARD_KEYS = ("reward_alive", "reward_drift", "reward_unilateral", "reward_friction", "reward_ctrl")
-INFO_KEYS = ("contact_force", "normal_force", "unilateral_violation", "friction_violation", "numerical_failure", "base_drift", "foot_error")
+INFO_KEYS = ("contact_force", "normal_force", "unilateral_violation", "friction_violation", "numerical_failure", "ending", "base_drift", "foot_error")
 # gymnasium's check_space_limit warns about any infinite Box bound; angles, rates and the contact force
 # have no bound that holds in every reachable state (documented in the class docstring, "Observation Space")
 DOCUMENTED_GYM_WARNINGS = (
@@ -343,19 +343,20 @@ def test_terminate_on_contact_loss():
         env.reset(seed=0)
         _, _, terminated, _, info = env.step(np.array([-1.0, 0.0]))  # lam_y drops below 100 N
         assert info["normal_force"] < 100.0
-        results[flag] = terminated
-    assert results == {False: False, True: True}
+        results[flag] = terminated, leg_env.ENDINGS[info["ending"]]
+    assert results == {False: (False, "none"), True: (True, "contact_lost")}
 
 
 def test_joint_range_termination():
     env = make(reset_noise_scale=0.0, knee_range=(0.05, 0.85))
     env.reset(seed=0)
     for _ in range(100):
-        _, _, terminated, _, _ = env.step(np.array([0.0, 1.0]))  # extra knee torque: the knee opens
+        _, _, terminated, _, info = env.step(np.array([0.0, 1.0]))  # extra knee torque: the knee opens
         if terminated:
             break
+        assert info["ending"] == 0
     q, _, _ = env.state
-    assert terminated and q[4] > 0.85
+    assert terminated and q[4] > 0.85 and leg_env.ENDINGS[info["ending"]] == "knee_high"
 
 
 def test_numerical_failure_restores_state_and_terminates():
@@ -364,6 +365,7 @@ def test_numerical_failure_restores_state_and_terminates():
     state0 = env.state
     obs, reward, terminated, truncated, info = env.step(np.array([1.0, 1.0]))
     assert terminated and not truncated and info["numerical_failure"]
+    assert leg_env.ENDINGS[info["ending"]] == "numerical_failure"
     assert reward == 0.0 and all(info[k] == 0.0 for k in REWARD_KEYS)
     assert np.all(np.isfinite(obs)) and obs in env.observation_space
     np.testing.assert_array_equal(obs, obs0)
@@ -590,5 +592,6 @@ def test_random_action_soak_100k_steps():
 
 def test_public_names():
     assert leg_env.PlanarLegStanceEnv is PlanarLegStanceEnv
+    assert leg_env.ENDINGS[0] == "none" and len(set(leg_env.ENDINGS)) == len(leg_env.ENDINGS) == 10
     assert leg_env.StanceConfig is StanceConfig
     assert math.isclose(make().dt, 0.01)

@@ -19,7 +19,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode
 
 import leg_env
-from leg_env import ENV_ID, LegParams
+from leg_env import ENDINGS, ENV_ID, LegParams
 from leg_env.checks import ArgumentTypeError
 from leg_env.envs.stance import PlanarLegStanceEnv
 from leg_env.envs.vector import PlanarLegStanceVectorEnv
@@ -225,6 +225,7 @@ def test_an_observation_that_overflows_float32_is_a_flagged_numerical_failure(co
     step_batch(state, tiny_g, settings, out, obs)
     assert np.isfinite(obs).all(), obs
     assert out["numerical_failure"].all() and out["terminated"].all()
+    assert [ENDINGS[k] for k in out["ending"]] == ["numerical_failure"] * n
     np.testing.assert_array_equal(obs, before_obs)
     for field in ("q", "qd", "anchor"):
         np.testing.assert_array_equal(state[field], before_state[field])

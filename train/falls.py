@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from leg_env import ENDINGS
 from train.cli import parse_args
 
-__all__ = ["FallsArgs", "FallsReport", "ENDINGS", "ending", "training_env_kwargs", "audit", "format_report", "main"]
+__all__ = ["FallsArgs", "FallsReport", "training_env_kwargs", "audit", "format_report", "main"]
 
 FRESH_SEED = 30_000
 
@@ -113,7 +114,8 @@ class FallsReport:
     in_flight: np.ndarray | None = None
 
     def ends_table(self) -> dict[str, dict[str, int]]:
-        """For each way an episode ended early (``ending``), how many ended so in flight and in contact."""
+        """For each way an episode ended early (``leg_env.ENDINGS``, the task's ``info["ending"]``), how many ended so
+        in flight and in contact."""
         out: dict[str, dict[str, int]] = {}
         for end, flight in zip(self.ends, self.in_flight if self.in_flight is not None else []):
             if end is not None:
@@ -151,26 +153,6 @@ class FallsReport:
         }
 
 
-ENDINGS = ("torso angle", "base height", "hip below its range", "hip above its range", "knee below its range",
-           "knee above its range", "other")
-"""How an episode of a unilateral task ends early (``ending``), in the order checked."""
-
-
-def ending(q: np.ndarray, anchor: np.ndarray, config) -> str:
-    """How an episode that ended at the state ``q`` (its foot's ``anchor``) ended, by the task's limits (``config``):
-    the first of ``ENDINGS`` that holds; "other" for the knee above the base or a numerical failure."""
-    hip, knee = config.hip_range, config.knee_range
-    checks = (
-        abs(q[2]) > config.max_torso_angle,
-        q[1] - anchor[1] < config.min_base_height,
-        q[3] < hip[0],
-        q[3] > hip[1],
-        q[4] < knee[0],
-        q[4] > knee[1],
-    )
-    return next((name for name, hit in zip(ENDINGS, checks) if hit), "other")
-
-
 def audit(args: FallsArgs) -> FallsReport:
     """Run ``args.episodes`` episodes of the policy as ``FallsArgs`` says; returns their figures."""
     import torch
@@ -202,7 +184,6 @@ def audit(args: FallsArgs) -> FallsReport:
     recent = {key: deque(maxlen=args.window) for key in keys}  # each term's last `window` steps, oldest first
     ends: list[str | None] = [None] * n
     in_flight = np.zeros(n, bool)
-    config = envs.unwrapped.config
     while not done.all():
         actions, _ = policy.predict(obs, episode_start=starts, deterministic=not args.sample)
         obs, _, terminated, truncated, info = envs.step(np.asarray(actions, dtype=np.float64).reshape(n, -1))
@@ -217,11 +198,9 @@ def audit(args: FallsArgs) -> FallsReport:
         if ended.any():
             for key in keys:
                 last[key][ended] = np.sum(recent[key], axis=0)[ended] / np.minimum(lengths[ended], args.window)
-        if (ended & terminated).any():
-            q, _, anchor = envs.unwrapped.state  # the state the step ended in (the reset comes with the next step)
-            for i in np.flatnonzero(ended & terminated):
-                ends[i] = ending(q[i], anchor[i], config)
-                in_flight[i] = info["contact_mode"][i] == "flight"
+        for i in np.flatnonzero(ended & terminated):
+            ends[i] = ENDINGS[info["ending"][i]]  # the first limit the step passed, as the task's kernel names it
+            in_flight[i] = info["contact_mode"][i] == "flight"
         done |= ended
         starts = terminated | truncated
     envs.close()

@@ -113,6 +113,23 @@ typedef struct {
     } task;
 } env_settings;
 
+/* Why an episode ended at a control step (env_out.ending): the first that holds, in this order; ENDING_NONE while
+ * it goes on (a time limit is the TimeLimit wrapper's, not an ending). Their names, in the same order: ENDING_NAMES
+ * (module.c), reported to Python as kernels.ENDINGS. */
+typedef enum {
+    ENDING_NONE = 0,
+    ENDING_TORSO_ANGLE,       /* |th_b| above max_torso_angle */
+    ENDING_BASE_HEIGHT,       /* the base below min_base_height above the foot's contact point */
+    ENDING_HIP_LOW,           /* q1 below hip_range */
+    ENDING_HIP_HIGH,          /* q1 above hip_range */
+    ENDING_KNEE_LOW,          /* q2 below knee_range */
+    ENDING_KNEE_HIGH,         /* q2 above knee_range */
+    ENDING_BASE_BELOW_KNEE,   /* the base below the knee */
+    ENDING_CONTACT_LOST,      /* terminate_on_contact_loss: the foot lifted or its normal force fell below the threshold */
+    ENDING_NUMERICAL_FAILURE, /* the step failed and was undone (out.numerical_failure) */
+    N_ENDINGS
+} env_ending;
+
 /* What a control step of one robot gives. */
 typedef struct {
     double lam[2];                              /* mean contact force over the step [N] */
@@ -127,6 +144,7 @@ typedef struct {
         } push;
     } task;
     int32_t mode;                               /* the contact mode at the end of the step */
+    int32_t ending;                             /* why the episode ended at this step (env_ending) */
     uint8_t terminated, unilateral_violation, friction_violation, numerical_failure;
 } env_out;
 

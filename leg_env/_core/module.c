@@ -854,7 +854,7 @@ static const field OUT_FIELDS[] = {
     TALLY_FIELDS(env_out),
     F(env_out, energy, "f8", 1), F(env_out, foot_height, "f8", 1), F(env_out, com, "f8", 2), F(env_out, com_velocity, "f8", 2),
     F(env_out, terms, "f8", MAX_TERMS),
-    F(env_out, mode, "i4", 1), F(env_out, terminated, "?", 1), F(env_out, unilateral_violation, "?", 1),
+    F(env_out, mode, "i4", 1), F(env_out, ending, "i4", 1), F(env_out, terminated, "?", 1), F(env_out, unilateral_violation, "?", 1),
     F(env_out, friction_violation, "?", 1), F(env_out, numerical_failure, "?", 1), {NULL, 0, NULL, 0}};
 static const field OUT_PUSH_FIELDS[] = {
     TASK(env_out, task.push.push_force, "push_force", "f8", 1), TASK(env_out, task.push.work_push, "work_push", "f8", 1),
@@ -1008,6 +1008,20 @@ PyMODINIT_FUNC PyInit_kernels(void)
         || PyModule_AddIntConstant(m, "LIFTOFF", LEG_LIFTOFF) < 0 || PyModule_AddIntConstant(m, "SLIP_ONSET", LEG_SLIP_ONSET) < 0
         || PyModule_AddIntConstant(m, "SLIDING_STOP", LEG_SLIDING_STOP) < 0 || PyModule_AddIntConstant(m, "TOUCHDOWN", LEG_TOUCHDOWN) < 0
         || PyModule_AddObject(m, "TURN_MAX", PyFloat_FromDouble(LEG_TURN_MAX)) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    PyObject *endings = PyTuple_New(N_ENDINGS);
+    for (int k = 0; endings != NULL && k < N_ENDINGS; k++) {
+        PyObject *name = PyUnicode_FromString(ENDING_NAMES[k]);
+        if (name == NULL) {
+            Py_CLEAR(endings);
+            break;
+        }
+        PyTuple_SET_ITEM(endings, k, name);
+    }
+    if (endings == NULL || PyModule_AddObject(m, "ENDINGS", endings) < 0) {
+        Py_XDECREF(endings);
         Py_DECREF(m);
         return NULL;
     }

@@ -11,6 +11,12 @@
 #define PUSH_TERMS 6   /* the balance task's and com */
 #define HOP_TERMS 8    /* alive, height, drift, tilt, impact, slip, ctrl, limit */
 
+/* The names of the endings (env_ending, in its order): kernels.ENDINGS, leg_env.ENDINGS. */
+static const char *const ENDING_NAMES[N_ENDINGS] = {
+    "none",     "torso_angle", "base_height",     "hip_low",      "hip_high",
+    "knee_low", "knee_high",   "base_below_knee", "contact_lost", "numerical_failure",
+};
+
 /* m g of the robot, or 1 without gravity (the observed force is then in newtons). */
 static inline double weight_of(const leg_params *P)
 {
@@ -46,9 +52,6 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, const leg_flight_ine
 
     const double unilateral = leg_fmax(0.0, -lam_y);
     const double friction = leg_fmax(0.0, fabs(lam_x) - mu * lam_y);
-    const int fell = height < c->min_base_height || s->q[1] < knee_y || fabs(th_b) > c->max_torso_angle
-                     || s->q[3] < c->hip_range[0] || s->q[3] > c->hip_range[1] || s->q[4] < c->knee_range[0]
-                     || s->q[4] > c->knee_range[1];
     int lost;
     double flight_time = 0.0;
     if (unilateral_model) { /* the ground cannot pull: what is charged is time off it and sliding on it */
@@ -57,7 +60,25 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, const leg_flight_ine
     } else {
         lost = c->terminate_on_contact_loss && lam_y < c->contact_loss_threshold;
     }
-    const int terminated = fell || lost;
+    /* the health predicate: the first limit passed names the ending */
+    env_ending ending = ENDING_NONE;
+    if (fabs(th_b) > c->max_torso_angle)
+        ending = ENDING_TORSO_ANGLE;
+    else if (height < c->min_base_height)
+        ending = ENDING_BASE_HEIGHT;
+    else if (s->q[3] < c->hip_range[0])
+        ending = ENDING_HIP_LOW;
+    else if (s->q[3] > c->hip_range[1])
+        ending = ENDING_HIP_HIGH;
+    else if (s->q[4] < c->knee_range[0])
+        ending = ENDING_KNEE_LOW;
+    else if (s->q[4] > c->knee_range[1])
+        ending = ENDING_KNEE_HIGH;
+    else if (s->q[1] < knee_y)
+        ending = ENDING_BASE_BELOW_KNEE;
+    else if (lost)
+        ending = ENDING_CONTACT_LOST;
+    const int terminated = ending != ENDING_NONE;
 
     terms[0] = terminated ? 0.0 : c->alive_bonus;
     terms[1] = -(c->w_position * (dx * dx + dy * dy) + c->w_angle * th_b * th_b
@@ -73,6 +94,7 @@ static void stance_assess(const env_batch *b, Py_ssize_t i, const leg_flight_ine
     }
     terms[4] = -c->w_ctrl * (a0 * a0 + a1 * a1);
     o->terminated = terminated;
+    o->ending = ending;
     o->unilateral_violation = lam_y < 0.0;
     o->numerical_failure = 0;
     o->base_drift = sqrt(dx * dx + dy * dy);
@@ -122,6 +144,7 @@ static void fail_row(const env_batch *b, Py_ssize_t i, double *terms, int n_term
     for (int k = 0; k < n_terms; k++)
         terms[k] = 0.0;
     o->terminated = 1;
+    o->ending = ENDING_NUMERICAL_FAILURE;
     o->unilateral_violation = 0;
     o->friction_violation = 0;
     o->numerical_failure = 1;

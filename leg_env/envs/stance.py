@@ -129,7 +129,7 @@ class PlanarLegStanceEnv(LegEnv):
 
     ``info`` also has ``contact_force`` (``lam`` [N], shape (2,)), ``normal_force`` (``lam_y`` [N]),
     ``unilateral_violation`` (``lam_y < 0``), ``friction_violation`` (``|lam_x| > mu lam_y``),
-    ``numerical_failure``, ``base_drift`` (``|p_b - p_nom|`` [m]), ``foot_error`` (the foot's distance from
+    ``numerical_failure``, ``ending`` (why the episode ended, below), ``base_drift`` (``|p_b - p_nom|`` [m]), ``foot_error`` (the foot's distance from
     its contact point [m]) and ``com_position``, ``com_velocity`` (the whole-body centre of mass and its
     velocity, world frame [m, m/s], shape (2,) each). ``reset`` returns the same keys except the reward terms.
 
@@ -169,6 +169,12 @@ class PlanarLegStanceEnv(LegEnv):
     4. a numerical failure: a non-finite state or force, a rate above ``max_rate``, or an observation
        that would overflow float32. The state is restored to the last good one, the observation is the
        last (finite) one, every reward term is 0 and ``info["numerical_failure"]`` is True.
+
+    ``info["ending"]`` says which: an index into ``leg_env.ENDINGS`` (``"torso_angle"``, ``"base_height"``,
+    ``"hip_low"``, ``"hip_high"``, ``"knee_low"``, ``"knee_high"``, ``"base_below_knee"``, ``"contact_lost"``,
+    ``"numerical_failure"``: the first that holds, in that order), 0 (``"none"``) while the episode goes on.
+    ``leg_env.ENDINGS[info["ending"]]`` is its name. A ``reset`` reports it too: a start state already past a
+    limit (large ``reset_noise_scale``) is named there, and its first step ends the episode.
 
     ### Truncation
     Only through the time limit: 1000 steps (10 s) when made with ``gymnasium.make``.

@@ -77,7 +77,7 @@ class LegVectorEnv(VectorEnv):
     ``info["_key"]`` telling which sub-envs report it. The keys are the single env's:
     ``reward_alive, reward_drift, reward_unilateral, reward_friction, reward_ctrl`` (summing to the
     reward), ``contact_force`` ``(num_envs, 2)``, ``normal_force``, ``unilateral_violation``,
-    ``friction_violation``, ``numerical_failure``, ``base_drift``, ``foot_error``.
+    ``friction_violation``, ``numerical_failure``, ``ending`` (int), ``base_drift``, ``foot_error``.
 
     ## Episode end and autoreset
     ``terminated`` is the single env's termination. ``truncated`` is the time limit: a sub-env's

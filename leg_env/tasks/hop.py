@@ -72,7 +72,8 @@ version has ``inf``, one command per episode) the reset also draws ``COMMANDS_AH
 held for ``command_period`` seconds in turn after the first; after the last the command holds. A step's height
 term is judged by the command in force during it, and the observation shows the next one from the step that ends
 a period. Terminates on a fall (torso below 0.5 m above the ground or below
-the knee, ``|th_b| > 1`` rad) or a joint out of range; truncated at 1000 steps (10 s).
+the knee, ``|th_b| > 1`` rad) or a joint out of range, ``info["ending"]`` naming which (``leg_env.ENDINGS``);
+truncated at 1000 steps (10 s).
 
 ## Solved
 Over 100 evaluation episodes on seeds not used in training or selection (``train.evaluate``, whose hop

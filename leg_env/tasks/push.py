@@ -46,7 +46,7 @@ centre of mass for moving away from where the episode started, so a hop is not f
 
 ## Starting State, Episode End, Arguments
 As ``PlanarLegStance`` (nominal posture, noise ``reset_noise_scale = 0.01``; falls and joint limits
-terminate; 1000 steps). Every ``PushConfig`` field is a keyword argument, checked by ``leg_env.checks``.
+terminate, ``info["ending"]`` naming which; 1000 steps). Every ``PushConfig`` field is a keyword argument, checked by ``leg_env.checks``.
 
 | Parameter        | Default       | Description                                                    |
 |------------------|---------------|----------------------------------------------------------------|

@@ -9,7 +9,8 @@ with probability 0.1 per step), at ten times the default torque limit (``torque_
 * ``non_finite``: non-finite values in the observation, the reward or any numeric ``info`` value;
 * ``exceptions``: exceptions raised by ``step`` (a run stops at its first);
 * ``unflagged``: env-steps whose state after the step is non-finite or faster than ``max_rate``, or whose
-  observation leaves the observation space's bounds, without ``info["numerical_failure"]``;
+  observation leaves the observation space's bounds, without ``info["numerical_failure"]``; and terminations
+  whose ``info["ending"]`` names no limit, or numerical failures it does not name as such;
 * ``failures``: flagged numerical failures (each ends its episode; they are allowed), and the
   terminations and truncations.
 
@@ -56,6 +57,7 @@ CASES = {  # name: (env id, keyword arguments)
 ACTIONS = ("random", "bang_bang")
 TORQUE_LIMIT = 500.0  # ten times the default 50 N m
 FLIP = 0.1  # bang-bang: probability that a joint's sign flips in a step
+NUMERICAL_FAILURE = leg_env.ENDINGS.index("numerical_failure")
 
 
 def soak(case: str, actions: str, steps: int, num_envs: int = 4096, seed: int = 0) -> dict:
@@ -95,7 +97,9 @@ def soak(case: str, actions: str, steps: int, num_envs: int = 4096, seed: int = 
         q, qd, anchor = envs.unwrapped.state
         bad |= ~np.isfinite(q).all(axis=1) | ~np.isfinite(qd).all(axis=1) | (np.abs(qd) > max_rate).any(axis=1)
         bad |= ((obs < space.low) | (obs > space.high)).any(axis=1)
-        counts["unflagged"] += int((bad & ~failed).sum())
+        ending = info["ending"]
+        counts["unflagged"] += int((bad & ~failed).sum() + (terminated & (ending == 0)).sum()
+                                   + (failed & (ending != NUMERICAL_FAILURE)).sum())
         counts["failures"] += int(failed.sum())
         counts["terminated"] += int(terminated.sum())
         counts["truncated"] += int(truncated.sum())

@@ -8,7 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import leg_env  # noqa: F401  (registers the ids)
+import leg_env  # registers the ids
 from policies.hopper import HopperController
 from policies.lqr import LQRController
 from policies.stepping import SteppingController
@@ -127,3 +127,34 @@ def test_evaluate_the_push_curve_and_the_training_evaluation_agree_on_the_same_e
     assert periodic["lengths"] == [e["length"] for e in summary["per_episode"]]
     assert periodic["survival_rate"] == summary["survival_rate"] == curve[0]["survival_rate"]
     assert 0.0 < summary["survival_rate"] < 1.0  # the force is one that some of the episodes fall from
+
+
+def test_an_evaluation_names_how_each_episode_ended():
+    """train.evaluate's episodes carry each fall's ending as the single env reports it at the step the episode
+    ended (survivors: "none"), the summary counts them, and the table shows the counts."""
+    from train.evaluate import format_table
+
+    env_id, kwargs = "leg_env/PlanarLegPush-v1", {"push_force": [50.0, 50.0]}
+    env = gym.make(env_id, **kwargs)
+    stepping = SteppingController(env.unwrapped.params, env.unwrapped.config)
+    seeds = list(range(10_000, 10_008))
+    summary, _ = run_episodes(stepping, seeds, kwargs, env_id=env_id)
+    for episode in summary["per_episode"]:
+        single = gym.make(env_id, **kwargs)
+        obs, _ = single.reset(seed=episode["seed"])
+        controller = SteppingController(single.unwrapped.params, single.unwrapped.config)
+        ending, steps = "none", 0
+        while True:
+            action, _ = controller.predict(obs, deterministic=True)
+            obs, _, terminated, truncated, info = single.step(np.asarray(action, dtype=np.float64))
+            steps += 1
+            if terminated or truncated:
+                ending = leg_env.ENDINGS[info["ending"]] if terminated else "none"
+                break
+        assert (episode["ending"], episode["length"]) == (ending, steps), episode["seed"]
+        assert (ending == "none") == episode["survived"]
+    falls = [e["ending"] for e in summary["per_episode"] if not e["survived"]]
+    assert falls and sum(summary["endings"].values()) == len(falls)
+    assert summary["endings"] == {name: falls.count(name) for name in set(falls)}
+    row = next(line for line in format_table({"stepping": summary}).splitlines() if "ended early" in line)
+    assert all(f"{name} {count}" in row for name, count in summary["endings"].items())

@@ -26,6 +26,8 @@ Metrics (over all episodes; "steps" are all control steps of all episodes):
 
 - ``survival_rate``: fraction of episodes that reach the time limit without terminating;
 - ``mean_return``, ``std_return``, ``mean_length``;
+- ``endings``: how many episodes ended early in each way (the task's ``info["ending"]``, named by
+  ``leg_env.ENDINGS``: ``torso_angle``, ``knee_high``, ...); each episode's own is in ``per_episode``;
 - ``rms_base_drift``, ``max_base_drift`` [m]: base distance from its nominal position;
 - ``rms_torso_angle`` [rad]: the torso's tilt (0 in the nominal posture);
 - ``unilateral_violation_frac``: fraction of steps with ``lam_y < 0`` (the ground would have to pull);
@@ -47,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from leg_env import ENV_ID  # importing leg_env registers the env
+from leg_env import ENDINGS, ENV_ID  # importing leg_env registers the env
 from leg_env.tasks.stance import Obs
 from train.cli import parse_args
 from train.policy_loading import BASELINES, PolicyLoadError, PolicyNotFoundError, TrainedPolicy, load_policy
@@ -83,6 +85,7 @@ class EpisodeMetrics:
         self.reward_terms = envs.task.reward_terms
         self.terms = np.zeros((n, len(self.reward_terms)))
         self.drift_sq = np.zeros(n)
+        self.ending = np.zeros(n, dtype=np.int64)  # why each episode ended early (leg_env.ENDINGS; 0: it did not)
         self.drift_max, self.torque_sq, self.tilt_sq, self.unilateral, self.friction = 0.0, np.zeros(2), 0.0, 0, 0
         self.robots = None
         if "params" in info:  # a drawn robot per episode (randomize)
@@ -98,6 +101,8 @@ class EpisodeMetrics:
         tau = np.clip(actions[active], -1.0, 1.0) * self.limit
         for k, name in enumerate(self.reward_terms):
             self.terms[active, k] += info[f"reward_{name}"][active]
+        ended = active & (info["ending"] != 0)  # an episode that was running and ended at this step
+        self.ending[ended] = info["ending"][ended]
         d = info["base_drift"]
         self.drift_sq[active] += d[active] * d[active]
         self.drift_max = max(self.drift_max, float(d[active].max()))
@@ -184,6 +189,7 @@ def run_episodes(
                 "return": round(float(batch.returns[i]), 4),
                 "length": length,
                 "survived": bool(batch.survived[i]),
+                "ending": ENDINGS[metrics.ending[i]],
                 "rms_base_drift": float(np.sqrt(metrics.drift_sq[i] / length)),
                 "reward_terms": {k: round(float(metrics.terms[i, j]), 4) for j, k in enumerate(metrics.reward_terms)},
                 **({"robot": metrics.robots[i]} if metrics.robots is not None and metrics.robots[i] is not None else {}),
@@ -197,6 +203,7 @@ def run_episodes(
         "mean_return": float(returns.mean()),
         "std_return": float(returns.std()),
         "mean_length": float(np.mean([e["length"] for e in per_episode])),
+        "endings": {name: int(np.count_nonzero(metrics.ending == k)) for k, name in enumerate(ENDINGS) if k and np.any(metrics.ending == k)},
         "rms_base_drift": float(np.sqrt(metrics.drift_sq.sum() / steps)),
         "max_base_drift": float(metrics.drift_max),
         "rms_torso_angle": float(np.sqrt(metrics.tilt_sq / steps)),
@@ -216,6 +223,7 @@ _ROWS = (
     ("mean return", "mean_return", lambda v: f"{v:.2f}"),
     ("std return", "std_return", lambda v: f"{v:.2f}"),
     ("mean episode length", "mean_length", lambda v: f"{v:.1f}"),
+    ("episodes ended early, by ending", "endings", lambda v: ", ".join(f"{name} {count}" for name, count in v.items()) or "-"),
     ("RMS base drift [cm]", "rms_base_drift", lambda v: f"{100 * v:.3f}"),
     ("max base drift [cm]", "max_base_drift", lambda v: f"{100 * v:.3f}"),
     ("RMS torso angle [deg]", "rms_torso_angle", lambda v: f"{np.degrees(v):.2f}"),

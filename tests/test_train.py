@@ -650,6 +650,9 @@ def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
     assert probe["callback"] == [*shipped["callback"], {"train.callbacks.DiscountSchedule": {"points": [[36_000_000, 0.995], [45_000_000, 0.998]]}}]
     assert _without_callbacks(probe) == _without_callbacks(shipped)
     _assert_page_trains("PlanarLegHop-v3-rising-discount", RISING)
+    floor = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor.yml")
+    assert floor["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[0, 0.1]]}}]
+    assert _without_callbacks(floor) == _without_callbacks(probe)
 
 
 def test_zoo_callback_entries():

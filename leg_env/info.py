@@ -27,7 +27,7 @@ import numpy as np
 from ._core import kernels
 from .contact import MODE_NAMES
 
-__all__ = ["KEYS", "UNILATERAL", "ENDINGS", "InfoBuilder"]
+__all__ = ["KEYS", "UNILATERAL", "ENDINGS", "InfoBuilder", "RowReader"]
 
 ENDINGS: tuple[str, ...] = kernels.ENDINGS
 """Why an episode ends, by ``info["ending"]``: ``"none"`` (0: it goes on, or it was truncated), then, the first

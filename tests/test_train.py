@@ -654,6 +654,9 @@ def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
     assert floor["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[0, 0.1]]}}]
     assert _without_callbacks(floor) == _without_callbacks(probe)
     _assert_page_trains("PlanarLegHop-v3-rising-discount-floor", "train/hyperparams/probes/hop_v3_rising_discount_floor.yml")
+    lower = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor007.yml")
+    assert lower["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[0, 0.07]]}}]
+    assert _without_callbacks(lower) == _without_callbacks(probe)
 
 
 def test_zoo_callback_entries():

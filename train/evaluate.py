@@ -203,7 +203,7 @@ def run_episodes(
         "mean_return": float(returns.mean()),
         "std_return": float(returns.std()),
         "mean_length": float(np.mean([e["length"] for e in per_episode])),
-        "endings": {name: int(np.count_nonzero(metrics.ending == k)) for k, name in enumerate(ENDINGS) if k and np.any(metrics.ending == k)},
+        "endings": {ENDINGS[k]: int(count) for k, count in enumerate(np.bincount(metrics.ending, minlength=len(ENDINGS))) if k and count},
         "rms_base_drift": float(np.sqrt(metrics.drift_sq.sum() / steps)),
         "max_base_drift": float(metrics.drift_max),
         "rms_torso_angle": float(np.sqrt(metrics.tilt_sq / steps)),

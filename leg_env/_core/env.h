@@ -115,7 +115,7 @@ typedef struct {
 
 /* Why an episode ended at a control step (env_out.ending): the first that holds, in this order; ENDING_NONE while
  * it goes on (a time limit is the TimeLimit wrapper's, not an ending). Their names, in the same order: ENDING_NAMES
- * (module.c), reported to Python as kernels.ENDINGS. */
+ * (tasks.c), reported to Python as kernels.ENDINGS. */
 typedef enum {
     ENDING_NONE = 0,
     ENDING_TORSO_ANGLE,       /* |th_b| above max_torso_angle */

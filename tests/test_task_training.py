@@ -110,6 +110,38 @@ def test_hop_tracker_counts_hops_and_errors_of_the_hopper():
     assert summary["hops"] > 0
 
 
+def test_hop_tracker_splits_the_apex_errors_by_command():
+    """The bands cover the task's command range in equal widths; every hop falls in the band of its command, and the
+    bands' hop-weighted mean is the summary's signed mean; the evaluation table shows one row per band."""
+    from train.evaluate import format_table
+    from train.task_metrics import COMMAND_BANDS
+
+    hopper = HopperController()
+    summary, _ = run_episodes(hopper, list(range(10_000, 10_012)), env_id="leg_env/PlanarLegHop-v3")
+    bands = summary["apex_error_by_command"]
+    assert len(bands) == COMMAND_BANDS
+    np.testing.assert_allclose([b["low"] for b in bands] + [bands[-1]["high"]], np.linspace(0.05, 0.15, COMMAND_BANDS + 1))
+    assert sum(b["hops"] for b in bands) == summary["hops"] > 0
+    with_hops = [b for b in bands if b["hops"]]
+    weighted = sum(b["hops"] * b["mean_apex_error"] for b in with_hops) / summary["hops"]
+    assert weighted == pytest.approx(summary["mean_apex_error"], rel=1e-12)
+    assert all(np.isnan(b["mean_apex_error"]) for b in bands if not b["hops"])
+    table = format_table({"hopper": summary, "again": summary}).splitlines()
+    rows = [line for line in table if line.startswith("| ... at commands")]
+    assert rows[0].startswith("| ... at commands 5-7 cm (hops) |") and rows[-1].startswith("| ... at commands 13-15 cm (hops) |")
+    assert len(rows) == COMMAND_BANDS
+    # by hand: hops of known commands and errors in a tracker of the range 2-6 cm
+    tracker = HopTracker()
+    tracker._command_range = (0.02, 0.06)
+    tracker.errors, tracker.commands = [0.01, -0.01, 0.03, -0.02], [0.02, 0.0279, 0.06, 0.035]
+    by = tracker.by_command()
+    assert [b["hops"] for b in by] == [2, 1, 0, 0, 1]  # bands of 0.8 cm: 2-2.8, 2.8-3.6, ...; 3.5 cm in the second
+    assert by[0]["mean_apex_error"] == pytest.approx(0.0) and by[1]["mean_apex_error"] == pytest.approx(-0.02)
+    assert by[4]["mean_apex_error"] == pytest.approx(0.03)  # the range's top command is in the last band
+    tracker._command_range = (0.1, 0.1)
+    assert [(b["low"], b["high"], b["hops"]) for b in tracker.by_command()] == [(0.1, 0.1, 4)]
+
+
 def test_push_survival_uses_the_same_seeds_and_fixed_forces():
     lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v0")
     rows = push_survival(lqr, [0.0, 200.0], episodes=4, seed=10_000)

@@ -235,11 +235,25 @@ _ROWS = (
     ("hops of 50 ms or more per episode", "hops_per_episode", lambda v: f"{v:.1f}"),
     ("mean abs apex error [cm]", "mean_abs_apex_error", lambda v: f"{100 * v:.2f}"),
     ("RMS apex error [cm]", "rms_apex_error", lambda v: f"{100 * v:.2f}"),
+    ("mean apex error, signed [cm]", "mean_apex_error", lambda v: f"{100 * v:+.2f}"),
     ("mean hop period [s]", "mean_hop_period", lambda v: f"{v:.3f}"),
     ("mean / max COM drift after 10 s [cm]", "mean_drift_10s", None),
     ("mean / max landing impulse [N s]", "mean_landing_impulse", None),
 )
 _PAIRS = {"mean_drift_10s": ("max_drift_10s", 100.0, "{:.2f} / {:.2f}"), "mean_landing_impulse": ("max_landing_impulse", 1.0, "{:.2f} / {:.2f}")}
+
+
+def _band_rows(bands: list[list[dict]]) -> list[str]:
+    """Rows of the hop task's signed apex error by command band (``HopTracker.by_command``), one per band; none if the
+    results' bands differ (policies evaluated on different command ranges)."""
+    edges = [[(b["low"], b["high"]) for b in result] for result in bands]
+    if any(e != edges[0] for e in edges):
+        return []
+    rows = []
+    for k, (low, high) in enumerate(edges[0]):
+        cells = [f"{100 * r[k]['mean_apex_error']:+.2f} ({r[k]['hops']})" if r[k]["hops"] else "-" for r in bands]
+        rows.append(f"| ... at commands {round(100 * low, 1):g}-{round(100 * high, 1):g} cm (hops) | " + " | ".join(cells) + " |")
+    return rows
 
 
 def format_table(results: dict[str, dict]) -> str:
@@ -255,6 +269,8 @@ def format_table(results: dict[str, dict]) -> str:
         else:
             cells = [fmt(results[n][key]) for n in names]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
+        if key == "mean_apex_error" and all("apex_error_by_command" in results[n] for n in names):
+            lines.extend(_band_rows([results[n]["apex_error_by_command"] for n in names]))
     for term in next(iter(results.values()))["mean_reward_terms"]:
         lines.append(
             f"| return from reward_{term} | " + " | ".join(f"{results[n]['mean_reward_terms'][term]:.3f}" for n in names) + " |"

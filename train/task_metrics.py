@@ -8,7 +8,9 @@ metrics; these add what a task's own question needs:
   ``y_apex - (y_stand + dh*)``. The hop period is the time between successive lift-offs, the landing
   impulse the norm of the step's impact impulse (``info["impulse"]``) at each touchdown, the drift the
   COM's horizontal displacement from the episode's start at its end. ``hops_per_episode`` counts the
-  flights of at least ``LONG_FLIGHT`` (50 ms) per episode.
+  flights of at least ``LONG_FLIGHT`` (50 ms) per episode. ``apex_error_by_command`` splits the signed apex
+  errors by the command of the hop into ``COMMAND_BANDS`` bands of equal width over the task's
+  ``command_range``: where in the range a policy hops short or high.
 * **Push** (``push_survival``): episodes of ``PlanarLegPush-v0`` with every push of one magnitude (the
   range ``push_force`` set to ``(F, F)``; signs and times as the task draws them), run as one batch per
   magnitude (``train.episodes.run_batch``); survival is reaching the time limit.
@@ -20,10 +22,13 @@ import numpy as np
 
 from leg_env.tasks.stance import Obs
 
-__all__ = ["HopTracker", "is_push_task", "push_survival", "largest_survived_impulse", "LONG_FLIGHT"]
+__all__ = ["HopTracker", "is_push_task", "push_survival", "largest_survived_impulse", "LONG_FLIGHT", "COMMAND_BANDS"]
 
 LONG_FLIGHT = 0.05
 """A flight of at least this long [s] is a hop in ``hops_per_episode`` (shorter ones are stumbles)."""
+
+COMMAND_BANDS = 5
+"""``HopTracker.summary()["apex_error_by_command"]`` has this many bands of the command range."""
 
 
 class HopTracker:
@@ -38,12 +43,14 @@ class HopTracker:
     def __init__(self, record: int | None = None):
         self.record = record
         self.errors: list[float] = []  # apex error of every hop [m]
+        self.commands: list[float] = []  # the command [m] of every hop, in the order of errors
         self.periods: list[float] = []  # time between successive lift-offs [s]
         self.landings: list[float] = []  # |impact impulse| at each touchdown [N s]
         self.drifts: list[float] = []  # |x_com(end) - x_com(start)| of each episode that ran to its end [m]
         self.hops_per_episode: list[int] = []
         self.long_hops_per_episode: list[int] = []  # flights of at least LONG_FLIGHT seconds
         self.series: dict = {}
+        self._command_range = (0.0, 0.0)
 
     def start(self, envs, obs, info: dict) -> None:
         """New episodes from the batch's reset ``obs`` ``(N, n)`` and ``info`` (the COM comes from ``info``)."""
@@ -51,6 +58,7 @@ class HopTracker:
         from leg_env.tasks.stance import nominal_state
 
         params, config = envs.params, envs.config
+        self._command_range = tuple(float(c) for c in config.command_range)
         self._dt, self._g = envs.dt, params.g
         self._standing = float(com_position(nominal_state(params, config).q, params)[1])
         n = obs.shape[0]
@@ -78,6 +86,7 @@ class HopTracker:
         apex = np.where(flying, y + vy * vy / (2.0 * self._g), np.nan)
         lifted = np.flatnonzero(active & flying & ~self._flying)  # a lift-off in this step: one hop, its apex known now
         self.errors.extend((apex[lifted] - target[lifted]).tolist())
+        self.commands.extend(np.asarray(info["command"], dtype=np.float64)[lifted].tolist())
         self._hops[lifted] += 1
         again = lifted[~np.isnan(self._last_liftoff[lifted])]
         self.periods.extend((self._t[again] - self._last_liftoff[again]).tolist())
@@ -97,6 +106,21 @@ class HopTracker:
         self.long_hops_per_episode.extend((self._long + (self._flying & (self._flight_time >= LONG_FLIGHT))).tolist())
         self.drifts.extend(np.abs(self._x_end - self._x0)[np.asarray(survived, dtype=bool)].tolist())
 
+    def by_command(self) -> list[dict]:
+        """The hops' signed apex errors in ``COMMAND_BANDS`` bands of equal width over the command range: one dict per
+        band, ``low`` and ``high`` [m] (the last band includes ``high``), ``hops`` and ``mean_apex_error`` [m] (nan
+        without hops). One band if the range is a single command."""
+        low, high = self._command_range
+        e, c = np.asarray(self.errors), np.asarray(self.commands)
+        edges = np.linspace(low, high, COMMAND_BANDS + 1) if high > low else np.array([low, high])
+        band = np.clip(np.searchsorted(edges, c, side="right") - 1, 0, len(edges) - 2)
+        rows = []
+        for k in range(len(edges) - 1):
+            in_band = band == k
+            rows.append({"low": float(edges[k]), "high": float(edges[k + 1]), "hops": int(in_band.sum()),
+                         "mean_apex_error": float(e[in_band].mean()) if in_band.any() else float("nan")})  # fmt: skip
+        return rows
+
     def summary(self) -> dict:
         e = np.asarray(self.errors)
         return {
@@ -110,6 +134,7 @@ class HopTracker:
             "max_drift_10s": float(np.max(self.drifts)) if self.drifts else float("nan"),
             "mean_landing_impulse": float(np.mean(self.landings)) if self.landings else 0.0,
             "max_landing_impulse": float(np.max(self.landings)) if self.landings else 0.0,
+            "apex_error_by_command": self.by_command(),
         }
 
 

@@ -657,6 +657,13 @@ def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
     lower = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor007.yml")
     assert lower["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[0, 0.07]]}}]
     assert _without_callbacks(lower) == _without_callbacks(probe)
+    gains = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor_gains.yml")
+    assert gains.pop("policy_kwargs") == {**floor.pop("policy_kwargs"), "features_extractor_class": "train.features.CommandGains"}
+    assert gains == floor
+    anneal = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor_anneal.yml")
+    assert anneal["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[63_000_000, 0.1], [72_000_000, 0.05]]}},
+                                  {"train.callbacks.LearningRateSchedule": {"points": [[63_000_000, 3.0e-4], [72_000_000, 3.0e-5]]}}]  # fmt: skip
+    assert _without_callbacks(anneal) == _without_callbacks(probe) and anneal["learning_rate"] == 3.0e-4
 
 
 def test_zoo_callback_entries():

@@ -13,7 +13,7 @@ from policies.hopper import HopperController
 from policies.lqr import LQRController
 from policies.stepping import SteppingController
 from train.episodes import make_batch, policy_predict, run_batch
-from train.evaluate import run_episodes
+from train.evaluate import load_policy, run_episodes
 from train.task_metrics import push_survival
 
 
@@ -127,6 +127,25 @@ def test_evaluate_the_push_curve_and_the_training_evaluation_agree_on_the_same_e
     assert periodic["lengths"] == [e["length"] for e in summary["per_episode"]]
     assert periodic["survival_rate"] == summary["survival_rate"] == curve[0]["survival_rate"]
     assert 0.0 < summary["survival_rate"] < 1.0  # the force is one that some of the episodes fall from
+
+
+def test_the_training_evaluation_reports_the_hop_measures_as_train_evaluate_does():
+    """On the hop task the periodic evaluation adds the measures of Solved, the same as train.evaluate's on the same
+    seeds; on another task it adds none."""
+    from train.callbacks import HOP_EVAL_KEYS, evaluate_now
+
+    hopper = load_policy("hopper", env_id="leg_env/PlanarLegHop-v3")
+    seeds = list(range(20_000, 20_004))
+    summary, _ = run_episodes(hopper, seeds, env_id="leg_env/PlanarLegHop-v3")
+    envs = make_batch("leg_env/PlanarLegHop-v3", len(seeds))
+    periodic = evaluate_now(hopper, envs, seeds[0])
+    envs.close()
+    assert periodic["returns"] == [e["return"] for e in summary["per_episode"]]
+    assert {key: periodic[key] for key in HOP_EVAL_KEYS} == {key: summary[key] for key in HOP_EVAL_KEYS}
+    assert periodic["hops_per_episode"] > 5 and 0.0 < periodic["mean_abs_apex_error"] < 0.1
+    envs = make_batch("leg_env/PlanarLegBalance-v0", 2)
+    assert not set(HOP_EVAL_KEYS) & set(evaluate_now(load_policy("lqr", env_id="leg_env/PlanarLegBalance-v0"), envs, 0))
+    envs.close()
 
 
 def test_an_evaluation_names_how_each_episode_ended():

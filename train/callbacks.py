@@ -95,13 +95,19 @@ def evaluate_now(policy, envs, seed: int) -> dict:
     native batch ``envs``, sub-env ``i`` seeded ``seed + i`` (``train.episodes.run_batch``), summarised.
 
     Returns per-episode ``returns`` and ``lengths``, their means, the survival rate (episodes ended by the time
-    limit, not by a fall) and the RMS base drift over all steps [m].
+    limit, not by a fall) and the RMS base drift over all steps [m]; on the hop task also its measures of Solved
+    (``train.task_metrics.HopTracker``, as ``train.evaluate`` reports them): ``hops_per_episode``,
+    ``mean_abs_apex_error`` and ``mean_apex_error`` [m] (nan without a hop) and ``mean_drift_10s`` [m] (nan if no
+    episode ran to its end).
     """
+    from leg_env.tasks.hop import HopConfig
     from train.episodes import policy_predict, run_batch
+    from train.task_metrics import HopTracker
 
     drift = _Drift()
-    batch = run_batch(policy_predict(policy), envs, range(seed, seed + envs.num_envs), [drift])
-    return {
+    hop = HopTracker() if isinstance(envs.config, HopConfig) else None
+    batch = run_batch(policy_predict(policy), envs, range(seed, seed + envs.num_envs), [drift] if hop is None else [drift, hop])
+    result = {
         "mean_return": float(batch.returns.mean()),
         "std_return": float(batch.returns.std()),
         "mean_length": float(batch.lengths.mean()),
@@ -110,6 +116,15 @@ def evaluate_now(policy, envs, seed: int) -> dict:
         "returns": batch.returns.round(4).tolist(),
         "lengths": batch.lengths.tolist(),
     }
+    if hop is not None:
+        hop.end(batch.survived)
+        summary = hop.summary()
+        result.update({key: summary[key] for key in HOP_EVAL_KEYS})
+    return result
+
+
+HOP_EVAL_KEYS = ("hops_per_episode", "mean_abs_apex_error", "mean_apex_error", "mean_drift_10s")
+"""The hop task's measures that the in-training evaluation adds (``evaluate_now``), logged under ``eval/``."""
 
 
 class _Periodic(BaseCallback):
@@ -181,8 +196,9 @@ class PeriodicEvaluation(_Periodic):
         result.update(evaluate_now(self.policy, self.envs, self.seed))
         result["time"] = round(self.clock(), 2)
         self.history.append(result)
-        for key in ("mean_return", "std_return", "mean_length", "survival_rate", "rms_base_drift"):
-            self.logger.record(f"eval/{key}", result[key])
+        for key in ("mean_return", "std_return", "mean_length", "survival_rate", "rms_base_drift", *HOP_EVAL_KEYS):
+            if key in result:
+                self.logger.record(f"eval/{key}", result[key])
         self.logger.dump(self.num_timesteps)
         if self.on_result is not None:
             self.on_result(result)

@@ -39,6 +39,7 @@ process is training into is refused.
 
 from __future__ import annotations
 
+import math
 import os
 import platform
 import shutil
@@ -335,6 +336,16 @@ def _notice(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
+def _hop_line(result: dict) -> str:
+    """The hop task's measures of an evaluation, for the training log (``-`` for one without a value)."""
+
+    def cm(value: float) -> str:
+        return f"{100 * value:.2f} cm" if math.isfinite(value) else "-"
+
+    return (f", {result['hops_per_episode']:.1f} hops, apex error {cm(result['mean_abs_apex_error'])}, "
+            f"drift after 10 s {cm(result['mean_drift_10s'])}")
+
+
 def train(args: TrainArgs, command: str | None = None) -> Path:
     """Train (or resume) a run as described by ``args``; returns the run folder.
 
@@ -461,7 +472,8 @@ def _train_locked(args: TrainArgs, config: dict, out: Path, command: str) -> Pat
             print(
                 f"[{result['timesteps']:>9,} steps, {result['time'] / 60:5.1f} min, {rate:,.0f} steps/s] return "
                 f"{result['mean_return']:7.1f} +- {result['std_return']:5.1f}, length {result['mean_length']:6.1f}, "
-                f"survival {100 * result['survival_rate']:5.1f}%, RMS drift {100 * result['rms_base_drift']:.2f} cm",
+                f"survival {100 * result['survival_rate']:5.1f}%, RMS drift {100 * result['rms_base_drift']:.2f} cm"
+                + (_hop_line(result) if "hops_per_episode" in result else ""),
                 flush=True,
             )
 

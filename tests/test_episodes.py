@@ -142,6 +142,7 @@ def test_the_training_evaluation_reports_the_hop_measures_as_train_evaluate_does
     envs.close()
     assert periodic["returns"] == [e["return"] for e in summary["per_episode"]]
     assert {key: periodic[key] for key in HOP_EVAL_KEYS} == {key: summary[key] for key in HOP_EVAL_KEYS}
+    np.testing.assert_equal(periodic["apex_error_by_command"], summary["apex_error_by_command"])  # nan in a band without hops
     assert periodic["hops_per_episode"] > 5 and 0.0 < periodic["mean_abs_apex_error"] < 0.1
     envs = make_batch("leg_env/PlanarLegBalance-v0", 2)
     assert not set(HOP_EVAL_KEYS) & set(evaluate_now(load_policy("lqr", env_id="leg_env/PlanarLegBalance-v0"), envs, 0))

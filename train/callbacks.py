@@ -97,8 +97,8 @@ def evaluate_now(policy, envs, seed: int) -> dict:
     Returns per-episode ``returns`` and ``lengths``, their means, the survival rate (episodes ended by the time
     limit, not by a fall) and the RMS base drift over all steps [m]; on the hop task also its measures of Solved
     (``train.task_metrics.HopTracker``, as ``train.evaluate`` reports them): ``hops_per_episode``,
-    ``mean_abs_apex_error`` and ``mean_apex_error`` [m] (nan without a hop) and ``mean_drift_10s`` [m] (nan if no
-    episode ran to its end).
+    ``mean_abs_apex_error`` and ``mean_apex_error`` [m] (nan without a hop), ``mean_drift_10s`` [m] (nan if no
+    episode ran to its end) and ``apex_error_by_command`` (``HopTracker.by_command``).
     """
     from leg_env.tasks.hop import HopConfig
     from train.episodes import policy_predict, run_batch
@@ -120,6 +120,7 @@ def evaluate_now(policy, envs, seed: int) -> dict:
         hop.end(batch.survived)
         summary = hop.summary()
         result.update({key: summary[key] for key in HOP_EVAL_KEYS})
+        result["apex_error_by_command"] = summary["apex_error_by_command"]
     return result
 
 

@@ -658,6 +658,7 @@ def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
     assert lower["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[0, 0.07]]}}]
     assert _without_callbacks(lower) == _without_callbacks(probe)
     gains = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor_gains.yml")
+    _assert_page_trains("PlanarLegHop-v3-rising-discount-floor-gains", "train/hyperparams/probes/hop_v3_rising_discount_floor_gains.yml")
     assert gains.pop("policy_kwargs") == {**floor.pop("policy_kwargs"), "features_extractor_class": "train.features.CommandGains"}
     assert gains == floor
     anneal = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor_anneal.yml")

@@ -144,7 +144,10 @@ their ranges (``limit_weight``) kept seed 6 standing but off the command (7.28 c
 floor under the policy's action noise (``train.callbacks.NoiseFloor``: a standard deviation of at least 0.1, which the
 learnt noise reaches at about 38M steps and which otherwise shrinks to 0.06 by 72M) on the rising discount ended the
 late collapse: all five seeds survive every held-out episode (survival IQM 100% [100%, 100%], return IQM 2,903), but
-one meets every bar, the named seed missing the apex bar (1.85 cm) and the drift bar (5.98 cm). The command's products with the observation in
+one meets every bar, the named seed missing the apex bar (1.85 cm) and the drift bar (5.98 cm). With the floor and
+the command's products in the first layer as well, two seeds of five meet every bar with apex errors of 0.46
+and 0.64 cm, every band of the command range within 1 cm, while the named seed and one other bounce at nearly one
+height (2.89 and 3.68 cm) and the fifth hops to the command up to about 9 cm only (3.21 cm). The command's products with the observation in
 the networks' first layer (``train.features.CommandGains``, five seeds on the probes page) came as close: seeds 7 and 8
 met every bar of Solved and seed 9 the apex bar (1.02-1.29 cm), but seeds 5 and 6, which hop to the command without
 them, then hopped one height (3.21 and 5.09 cm), so the named seed would miss the apex bar and the configuration keeps

@@ -52,7 +52,8 @@ SB3_TESTS   := test_env.py::test_sb3_check_env test_unilateral.py::test_sb3_chec
                test_gated.py::test_residual_on_the_gated_controller_reloads_as_the_sum \
                test_gated.py::test_shipped_stance_v1_policy_loads_and_survives \
                test_continuity.py::test_shipped_policy_sb3_actions \
-               test_episodes.py::test_evaluate_the_push_curve_and_the_training_evaluation_agree_on_the_same_episodes
+               test_episodes.py::test_evaluate_the_push_curve_and_the_training_evaluation_agree_on_the_same_episodes \
+               test_episodes.py::test_the_training_evaluation_reports_the_hop_measures_as_train_evaluate_does
 RLLIB_TESTS := $(wildcard tests/rllib/test_*.py)
 
 # the compiled core (leg_env/_core, C) is built in place by the editable install; after an edit of its

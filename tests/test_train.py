@@ -665,6 +665,18 @@ def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
     assert anneal["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[63_000_000, 0.1], [72_000_000, 0.05]]}},
                                   {"train.callbacks.LearningRateSchedule": {"points": [[63_000_000, 3.0e-4], [72_000_000, 3.0e-5]]}}]  # fmt: skip
     assert _without_callbacks(anneal) == _without_callbacks(probe) and anneal["learning_rate"] == 3.0e-4
+    floor_gains = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor_gains.yml")
+    for name, key, value, parent_value in [
+        ("fine", "height_scale", [[20_000_000, 0.10], [45_000_000, 0.05], [63_000_000, 0.05], [72_000_000, 0.025]], [[20_000_000, 0.10], [45_000_000, 0.05]]),
+        ("early", "command_range", [[6_000_000, [0.02, 0.06]], [20_000_000, [0.05, 0.15]]], [[6_000_000, [0.02, 0.06]], [36_000_000, [0.05, 0.15]]]),
+    ]:  # fmt: skip
+        variant = _hop_entry(f"train/hyperparams/probes/hop_v3_rising_discount_floor_gains_{name}.yml")
+        (config, *others), (parent_config, *parent_others) = variant["callback"], floor_gains["callback"]
+        assert others == parent_others and _without_callbacks(variant) == _without_callbacks(floor_gains)
+        schedule = dict(config["train.callbacks.ConfigSchedule"]["schedule"])
+        parent_schedule = dict(parent_config["train.callbacks.ConfigSchedule"]["schedule"])
+        assert schedule.pop(key) == value and parent_schedule.pop(key) == parent_value
+        assert schedule == parent_schedule
 
 
 def test_zoo_callback_entries():

@@ -581,6 +581,7 @@ def _assert_page_trains(page: str, hyperparams: str) -> None:
 
 
 RISING = "train/hyperparams/probes/hop_v3_rising_discount.yml"
+CURRICULA = "train/hyperparams/probes/hop_v3_curricula.yml"
 
 
 def test_the_decaying_rate_probe_is_the_rising_discount_probe_with_a_learning_rate_schedule():
@@ -643,10 +644,11 @@ def test_the_joint_limit_probe_is_the_rising_discount_probe_with_a_charge_near_t
     assert env_kwargs == rising.pop("env_kwargs") and probe == rising
 
 
-def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
+def test_the_rising_discount_probe_is_the_curricula_entry_with_a_discount_schedule():
     """``train/hyperparams/probes/hop_v3_rising_discount.yml``, the configuration of the hop task's rising-discount
-    learning page, is ppo.yml's ``PlanarLegHop-v3`` entry with one callback more, and the page records that file."""
-    shipped, probe = _hop_entry("train/hyperparams/ppo.yml"), _hop_entry(RISING)
+    learning page, is the configuration before it (``probes/hop_v3_curricula.yml``) with one callback more, and the
+    page records that file; the probes built on it are checked against their parents in the same way."""
+    shipped, probe = _hop_entry(CURRICULA), _hop_entry(RISING)
     assert probe["callback"] == [*shipped["callback"], {"train.callbacks.DiscountSchedule": {"points": [[36_000_000, 0.995], [45_000_000, 0.998]]}}]
     assert _without_callbacks(probe) == _without_callbacks(shipped)
     _assert_page_trains("PlanarLegHop-v3-rising-discount", RISING)
@@ -677,6 +679,20 @@ def test_the_rising_discount_probe_is_the_hop_entry_with_a_discount_schedule():
         parent_schedule = dict(parent_config["train.callbacks.ConfigSchedule"]["schedule"])
         assert schedule.pop(key) == value and parent_schedule.pop(key) == parent_value
         assert schedule == parent_schedule
+    _assert_page_trains("PlanarLegHop-v3-rising-discount-floor-gains-early", "train/hyperparams/probes/hop_v3_rising_discount_floor_gains_early.yml")
+
+
+def test_the_hop_entry_is_the_earlier_commands_probe_and_the_shipped_policy_trained_it():
+    """ppo.yml's ``PlanarLegHop-v3`` entry, the hop task's shipped configuration, is the entry its learning page
+    trained (``probes/hop_v3_rising_discount_floor_gains_early.yml``), and ``policies/ppo_hop_v3`` is that page's seed
+    5, named before training, trained on that entry."""
+    import yaml
+
+    assert _hop_entry("train/hyperparams/ppo.yml") == _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor_gains_early.yml")
+    config = yaml.safe_load((ROOT / "policies" / "ppo_hop_v3" / "config.yaml").read_text())
+    assert config["hyperparams_file"] == "train/hyperparams/probes/hop_v3_rising_discount_floor_gains_early.yml"
+    assert config["seed"] == 5 and config["env_id"] == "leg_env/PlanarLegHop-v3"
+    assert config["ppo"]["policy_kwargs"]["features_extractor_class"] == "train.features.CommandGains"
 
 
 def test_zoo_callback_entries():

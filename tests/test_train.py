@@ -648,9 +648,9 @@ def test_the_rising_discount_probe_is_the_curricula_entry_with_a_discount_schedu
     """``train/hyperparams/probes/hop_v3_rising_discount.yml``, the configuration of the hop task's rising-discount
     learning page, is the configuration before it (``probes/hop_v3_curricula.yml``) with one callback more, and the
     page records that file; the probes built on it are checked against their parents in the same way."""
-    shipped, probe = _hop_entry(CURRICULA), _hop_entry(RISING)
-    assert probe["callback"] == [*shipped["callback"], {"train.callbacks.DiscountSchedule": {"points": [[36_000_000, 0.995], [45_000_000, 0.998]]}}]
-    assert _without_callbacks(probe) == _without_callbacks(shipped)
+    parent, probe = _hop_entry(CURRICULA), _hop_entry(RISING)
+    assert probe["callback"] == [*parent["callback"], {"train.callbacks.DiscountSchedule": {"points": [[36_000_000, 0.995], [45_000_000, 0.998]]}}]
+    assert _without_callbacks(probe) == _without_callbacks(parent)
     _assert_page_trains("PlanarLegHop-v3-rising-discount", RISING)
     floor = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor.yml")
     assert floor["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[0, 0.1]]}}]

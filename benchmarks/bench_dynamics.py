@@ -8,7 +8,7 @@ of calls, alternating leg-env and Pinocchio repeats; (b) and (c) time trajectori
 timed). One thread (BLAS/OpenMP).
 
 (a) One stance-dynamics evaluation on one robot, called from Python:
-    ``leg_env.dynamics.stance_dynamics`` vs Pinocchio's constrained forward dynamics
+    ``leg_env.physics.dynamics.stance_dynamics`` vs Pinocchio's constrained forward dynamics
     (forward kinematics with zero acceleration, foot frame Jacobian, foot classical
     acceleration as the drift, ``pin.forwardDynamics``) on the same model (``tests/pin_model.py``).
 (b) One control step (dt = 0.01 s, 2 RK4 steps = 8 dynamics evaluations at the defaults) on one robot:
@@ -45,9 +45,8 @@ import platform  # noqa: E402
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
 
-from leg_env import dynamics as dyn  # noqa: E402
-from leg_env import integrate as it  # noqa: E402
-from leg_env.params import LegParams  # noqa: E402
+from leg_env import physics as dyn  # noqa: E402
+from leg_env.physics.params import LegParams  # noqa: E402
 from pin_model import build_model  # noqa: E402
 
 REPEATS = 7
@@ -109,7 +108,7 @@ class PinStance:
         drift = pin.getFrameClassicalAcceleration(model, data, foot, LWA).linear[:2]
         return pin.forwardDynamics(model, data, q, v, self.tau, J, drift)
 
-    def step(self, q, v, tau2, dt=it.DT, n=it.SUBSTEPS):
+    def step(self, q, v, tau2, dt=dyn.DT, n=dyn.SUBSTEPS):
         f, h = self.dynamics, dt / n
         for _ in range(n):
             a1 = f(q, v, tau2)
@@ -129,7 +128,7 @@ def initial_states(p: LegParams, rng, n: int):
     q = q_eq + np.concatenate([np.zeros((n, 2)), rng.normal(0.0, ANGLE_NOISE, (n, 3))], axis=1)
     qd = rng.normal(0.0, RATE_NOISE, (n, 5))
     anchor = np.zeros((n, 2))
-    q, qd = it.project_stance(q, qd, p, anchor)
+    q, qd = dyn.project_stance(q, qd, p, anchor)
     return q, qd, anchor, tau_eq
 
 
@@ -183,8 +182,8 @@ def main() -> None:
     def record_substeps(q0, qd0, anc, taus):
         qb, qdb, lam = q0.copy(), qd0.copy(), np.empty((len(q0), 2))
         for k in range(STEPS_PER_ROUND):
-            substep_counts.extend(it._substeps_for(v, it.DT, it.SUBSTEPS, it.MAX_ANGLE) for v in qdb)
-            it.step_inplace(qb, qdb, taus[k], pa, anc, it.DT, it.SUBSTEPS, it.MAX_ANGLE, True, lam)
+            substep_counts.extend(dyn._substeps_for(v, dyn.DT, dyn.SUBSTEPS, dyn.MAX_ANGLE) for v in qdb)
+            dyn.step_inplace(qb, qdb, taus[k], pa, anc, dyn.DT, dyn.SUBSTEPS, dyn.MAX_ANGLE, True, lam)
         assert np.isfinite(qb).all()
 
     # (b): one robot
@@ -197,10 +196,10 @@ def main() -> None:
         single["q"], single["qd"] = q0[0].copy(), qd0[0].copy()
 
     def public_step(k):
-        single["q"], single["qd"], _ = it.stance_step(single["q"], single["qd"], taus[k, 0], p, anchor=anc[0])
+        single["q"], single["qd"], _ = dyn.stance_step(single["q"], single["qd"], taus[k, 0], p, anchor=anc[0])
 
     def inplace_step(k):
-        it.step_inplace(state["q"], state["qd"], taus[k], pa, anc, it.DT, it.SUBSTEPS, it.MAX_ANGLE, True, lam1)
+        dyn.step_inplace(state["q"], state["qd"], taus[k], pa, anc, dyn.DT, dyn.SUBSTEPS, dyn.MAX_ANGLE, True, lam1)
 
     def pin_step(k):
         single["q"], single["qd"] = ref.step(single["q"], single["qd"], taus[k, 0])
@@ -219,7 +218,7 @@ def main() -> None:
         lam = np.empty((n, 2))
 
         def batch_step(k):
-            it.step_inplace(state["q"], state["qd"], taus[k], pa, anc, it.DT, it.SUBSTEPS, it.MAX_ANGLE, True, lam)
+            dyn.step_inplace(state["q"], state["qd"], taus[k], pa, anc, dyn.DT, dyn.SUBSTEPS, dyn.MAX_ANGLE, True, lam)
 
         rounds = max(1, ROBOT_STEPS_PER_REPEAT // (n * STEPS_PER_ROUND))
         rate_leg = n / seconds_per_step(batch_step, reset, rounds)
@@ -245,12 +244,12 @@ def main() -> None:
     rate_4096 = dict((n, r) for n, r, _ in rows)[4096]
     print("leg-env dynamics benchmark")
     print(f"machine: {machine_info()}")
-    print(f"timing: median of {REPEATS} repeats, time.perf_counter; default LegParams; dt={it.DT}, "
-          f"substeps={it.SUBSTEPS}, max_angle={it.MAX_ANGLE}")
+    print(f"timing: median of {REPEATS} repeats, time.perf_counter; default LegParams; dt={dyn.DT}, "
+          f"substeps={dyn.SUBSTEPS}, max_angle={dyn.MAX_ANGLE}")
     print(f"states: nominal posture + N(0, {ANGLE_NOISE}) rad angles, N(0, {RATE_NOISE}) velocities; "
           f"torques: holding torques {np.round(tau_eq, 2).tolist()} N m + U(-{TORQUE_NOISE}, {TORQUE_NOISE}) N m")
     print(f"RK4 steps per control step in (b), (c): mean {np.mean(substep_counts):.2f}, max {max(substep_counts)} "
-          f"({4 * it.SUBSTEPS} dynamics evaluations at {it.SUBSTEPS}); leg-env vs Pinocchio qdd agreement {agreement:.1e}")
+          f"({4 * dyn.SUBSTEPS} dynamics evaluations at {dyn.SUBSTEPS}); leg-env vs Pinocchio qdd agreement {agreement:.1e}")
     print()
     w = 58
     print(f"{'measurement':<{w}} {'leg-env':>12} {'Pinocchio':>12} {'ratio':>8}  target")
@@ -270,7 +269,7 @@ def main() -> None:
     print()
     print("Pinocchio columns: (a) pin.forwardKinematics(q, v, 0) + computeFrameJacobian + "
           "getFrameClassicalAcceleration + pin.forwardDynamics per evaluation; (b), (c) a Python RK4 loop "
-          f"over {4 * it.SUBSTEPS} such evaluations per control step, (c) looping over robots in Python.")
+          f"over {4 * dyn.SUBSTEPS} such evaluations per control step, (c) looping over robots in Python.")
 
 
 if __name__ == "__main__":

@@ -164,7 +164,7 @@ def balancer(envs, calls: int):
     """The balancing rows' actions for ``envs``: ``action(obs, k)``, the stance LQR (``policies.lqr``) on the
     observation's stance entries plus the ``k``-th (mod ``calls``) of ``calls`` uniform noises of +-``BALANCE_NOISE``.
     The first observation is ``envs``' reset's, after ``BALANCE_WARMUP`` untimed steps under these actions."""
-    from leg_env.layout import OBS
+    from leg_env.physics.layout import OBS
     from policies.lqr import LQRController
 
     lqr = LQRController(envs.params, envs.config)
@@ -268,9 +268,9 @@ def arithmetic_limit() -> dict:
     ``kernels.rk4_step`` (pinned) and one ``kernels.hybrid_step`` (unilateral, the foot sticking, no event)
     over ``LIMIT_ROBOTS`` robots near the nominal posture under their holding torques; median of ``REPEATS``."""
     from leg_env._core import kernels
-    from leg_env.dynamics import foot_position, static_equilibrium
-    from leg_env.layout import RECORD
-    from leg_env.params import LegParams
+    from leg_env.physics.dynamics import foot_position, static_equilibrium
+    from leg_env.physics.layout import RECORD
+    from leg_env.physics.params import LegParams
 
     p = LegParams()
     q0, tau0, _ = static_equilibrium(p)
@@ -301,12 +301,12 @@ def arithmetic_limit() -> dict:
 def work_per_step(steps: int = 200) -> dict:
     """What one control step computes under the random actions of the timed rows, pinned and unilateral
     (``make_vec`` of ``VECTOR_SIZES[-1]`` robots, ``steps`` steps): the RK4 steps the step rule asks for
-    (``leg_env.integrate``: at least 2, more when a link turns fast), the RK4 steps the compiled step integrated
+    (``leg_env.physics.integrate``: at least 2, more when a link turns fast), the RK4 steps the compiled step integrated
     (``out["rk4_steps"]``: the re-integrations that locate events included), the located events, and the share
     of robots in flight. The physics of a step costs about its RK4 steps (4 dynamics evaluations each, the same
     for every contact mode): their ratio bounds the unilateral share of the pinned rate at equal cost per RK4
     step."""
-    from leg_env.integrate import MAX_ANGLE, SUBSTEPS
+    from leg_env.physics.integrate import MAX_ANGLE, SUBSTEPS
 
     n = max(VECTOR_SIZES)
     out = {}

@@ -172,11 +172,6 @@ def _task_page(env_id: str, task: str, kwargs: dict, gif: Path | None) -> str:
                 shutil.copyfile(gif.parent / plot, copy)
                 lines += [f"![{caption}]({copy.name})", "", f"*{caption[0].upper() + caption[1:]}.*", ""]
     lines += ["## The task", "", f"From the docstring of `leg_env.tasks.{task}`:", "", _docstring_block(module.__doc__), ""]
-    if task == "stance":
-        from leg_env.envs.stance import PlanarLegStanceEnv
-
-        lines += ["## The environment", "", "From the docstring of `leg_env.envs.stance.PlanarLegStanceEnv`:", "",
-                  _docstring_block(PlanarLegStanceEnv.__doc__), ""]
     return "\n".join(lines)
 
 

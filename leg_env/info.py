@@ -14,7 +14,7 @@ env's ``info`` arrays, which the SB3 adapter splits into its per-env dicts). Key
   [N s]), ``stick_time``, ``slip_time``, ``flight_time`` [s] (they sum to ``dt``), ``slip_distance`` [m],
   ``work_actuators``, ``dissipation_slip``, ``dissipation_impacts`` [J] (``energy(t) - energy(0)`` is the sum
   over the steps of the first minus the other two), ``energy`` (kinetic + potential [J]),
-  ``contact_events``, ``painleve_fallbacks``, ``zeno_settles`` (ints, what ``leg_env.hybrid`` counts);
+  ``contact_events``, ``painleve_fallbacks``, ``zeno_settles`` (ints, what ``leg_env.physics.hybrid`` counts);
 * the task's own: its ``Task.info_names`` (push: ``push_force``, ``work_push``) and ``Task.state_info``
   (hop: ``command``);
 * after a step, not a reset: the reward terms ``reward_<name>`` (they sum to the reward).
@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._core import kernels
-from .contact import MODE_NAMES
+from .physics.contact import MODE_NAMES
 
 __all__ = ["KEYS", "UNILATERAL", "ENDINGS", "InfoBuilder", "RowReader"]
 

@@ -23,7 +23,7 @@ all its fields drawn again, when its nominal posture could not be run:
 * the nominal posture is outside the task's termination limits (``hip_range``, ``knee_range``,
   ``min_base_height``);
 * on the unilateral ground, the friction is at or past the Painleve bound at the nominal posture,
-  ``mu >= mu_critical(q_nom)`` (sliding there would not be well posed; ``leg_env.contact``).
+  ``mu >= mu_critical(q_nom)`` (sliding there would not be well posed; ``leg_env.physics.contact``).
 
 A reset tries at most ``MAX_DRAWS`` robots. Ranges under which fewer than ``MIN_ACCEPTANCE`` of
 ``CHECK_DRAWS`` robots (drawn from a fixed seed at construction) are accepted are refused at
@@ -46,9 +46,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import checks, layout
+from . import checks
 from ._core import kernels
-from .params import PARAM_NAMES, PARAM_RANGE
+from .physics import layout
+from .physics.params import PARAM_NAMES, PARAM_RANGE
 
 __all__ = [
     "FIELDS",
@@ -84,11 +85,11 @@ def _double_index(field: str, k: int = 0) -> int:
     return layout.ROBOT.fields[field][1] // 8 + k
 
 
-# where each field lives among the doubles of a robot (leg_env.layout.ROBOT: its LegParams, mu, torque limits)
+# where each field lives among the doubles of a robot (leg_env.physics.layout.ROBOT: its LegParams, mu, torque limits)
 _COLUMN = {**{name: _double_index(name) for name in PARAM_NAMES}, "mu": _double_index("mu"),
            "hip_torque_limit": _double_index("torque_limit", 0), "knee_torque_limit": _double_index("torque_limit", 1)}  # fmt: skip
 FIELD_COLUMNS = np.array([_COLUMN[name] for name in FIELDS])
-"""The index of each of ``FIELDS`` among the doubles of a ``leg_env.layout.ROBOT`` row (``row.view(np.float64)``)."""
+"""The index of each of ``FIELDS`` among the doubles of a ``leg_env.physics.layout.ROBOT`` row (``row.view(np.float64)``)."""
 _BIG = 1.0e6
 # accepted values of a drawn field: (low, high, low open)
 _VALID = {
@@ -184,9 +185,9 @@ def robot_params(u: np.ndarray, spec: np.ndarray, base: np.ndarray, limits: np.n
     """Build a drawn robot in ``row`` from the ``(k,)`` uniforms ``u``; return whether it is accepted.
 
     ``spec`` is ``Randomization.spec()``; ``base`` the nominal robot and ``row`` the drawn one, 1-row arrays of
-    ``leg_env.layout.ROBOT``; ``limits`` ``(hip_lo, hip_hi, knee_lo, knee_hi, min_base_height, nominal_knee,
+    ``leg_env.physics.layout.ROBOT``; ``limits`` ``(hip_lo, hip_hi, knee_lo, knee_hi, min_base_height, nominal_knee,
     unilateral)`` (``posture_limits``). The drawn fields are written, then the nominal posture, holding
-    torques and COM of the drawn parameters (``leg_env.dynamics.static_equilibrium``), then the
+    torques and COM of the drawn parameters (``leg_env.physics.dynamics.static_equilibrium``), then the
     rejection rule of the module docstring is applied (in the compiled core, ``leg_env/_core/draws.c``).
     """
     return kernels.robot_params(u, spec, base, limits, row)
@@ -222,7 +223,7 @@ class Robots:
     """The robots of an env's sub-envs: the nominal one, the ranges, and how a reset sets each robot's row.
 
     Shared by the single and the vector env, so that a sub-env and a single env draw the same robot from
-    the same generator. ``base`` is the nominal robot, a 1-row array of ``leg_env.layout.ROBOT``.
+    the same generator. ``base`` is the nominal robot, a 1-row array of ``leg_env.physics.layout.ROBOT``.
     """
 
     def __init__(self, randomize, base: np.ndarray, config):
@@ -262,7 +263,7 @@ class Robots:
 
     def draw_rows(self, rngs, rows: np.ndarray, robots: np.ndarray) -> np.ndarray:
         """Draw the robots of sub-envs ``rows`` into their rows of ``robots`` (``(num_envs,)`` ``ROBOT``) from ``rngs``
-        (``leg_env.step.BitGeneratorRows``); the refused tries of each."""
+        (``leg_env.envs.generators.BitGeneratorRows``); the refused tries of each."""
         rejected = np.zeros(rows.size, dtype=np.int64)
         kernels.draw_robots(rngs.bit_generators, np.ascontiguousarray(rows, dtype=np.int64), self.spec, self.base, self.limits, MAX_DRAWS,
                             robots, rejected)
@@ -314,5 +315,5 @@ class Robots:
 
 
 def params_of_row(row) -> dict:
-    """``info["params"]`` of one robot (a row of ``leg_env.layout.ROBOT``): field name to float."""
+    """``info["params"]`` of one robot (a row of ``leg_env.physics.layout.ROBOT``): field name to float."""
     return dict(zip(FIELDS, np.asarray(row).reshape(1).view(np.float64)[FIELD_COLUMNS].tolist()))

@@ -26,7 +26,7 @@ import os
 
 import numpy as np
 
-from .params import LegParams
+from .physics.params import LegParams
 
 __all__ = ["draw", "Viewer"]
 
@@ -172,7 +172,7 @@ def _paint(pygame, surface, q, anchor, lam, params: LegParams, violated: bool, m
 
 
 def _contact_mode_marker(pygame, surface, camera, foot, ground: float, mode: int, joint_px: float) -> None:
-    """The foot's contact mode: 0 stick, 1 / 2 slip forward / backward, 3 flight (``leg_env.contact``)."""
+    """The foot's contact mode: 0 stick, 1 / 2 slip forward / backward, 3 flight (``leg_env.physics.contact``)."""
     centre = camera(*foot)
     r = max(4, round(1.1 * joint_px))
     c = (round(centre[0]), round(centre[1]))
@@ -215,7 +215,7 @@ def draw(
         violated: draw the force red (a contact constraint is violated) instead of green.
         width, height: frame size in pixels.
         mu: friction coefficient; if given, the friction cone is drawn at the contact point.
-        mode: the contact mode on the unilateral ground (``leg_env.contact`` constants), or None (pinned).
+        mode: the contact mode on the unilateral ground (``leg_env.physics.contact`` constants), or None (pinned).
         impulse: ``(2,)`` impact impulse of the last step [N s] (a burst is drawn if it is not zero).
         push: horizontal force on the torso's COM over the last step [N] (an arrow is drawn if it is not zero).
 

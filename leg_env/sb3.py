@@ -1,4 +1,4 @@
-"""A Stable-Baselines3 ``VecEnv`` over the natively batched ``PlanarLegStanceVectorEnv``.
+"""A Stable-Baselines3 ``VecEnv`` over the natively batched ``LegVectorEnv``.
 
 SB3 does not accept ``gymnasium.vector.VectorEnv`` objects (``gymnasium.make_vec`` output), and its
 own ``DummyVecEnv`` steps one single environment at a time. ``LegStanceVecEnv`` gives SB3 the batch

@@ -5,7 +5,7 @@ The model-based controllers: ``policies.lqr.LQRController`` (balancing; stateles
 starts that need one) and ``policies.stepping.SteppingController`` (the LQR, and a quick hop after a large push).
 The stateful ones share ``policies.base.BatchedController``: one ``predict`` for one observation or a batch, the
 per-robot state, SB3's ``episode_start``; all read the observation by the task's named columns
-(``leg_env.tasks.stance.Obs``).
+(``leg_env.tasks.base.Obs``).
 
 The shipped PPO policies are folders, each with its card (``README.md``): ``ppo_stance``, ``ppo_stance_randomized``,
 ``ppo_balance``, ``ppo_push_v1``, ``ppo_push_randomized``, ``ppo_hop_v1``, ``ppo_hop_v2`` and ``ppo_hop_v3`` are plain PPO

@@ -4,7 +4,7 @@ per-robot state that a controller keeps between calls.
 A controller names the observation widths it reads (``widths``), allocates its per-robot arrays for a batch of
 ``n`` robots (``_allocate``), starts rows anew (``_start``: at the first call, after ``reset`` or a change of the
 batch size, and wherever SB3's ``episode_start`` is true) and maps a batch of observations ``(N, width)`` to
-actions in [-1, 1] (``act``). It reads the observation by the task's named columns (``leg_env.tasks.stance.Obs``).
+actions in [-1, 1] (``act``). It reads the observation by the task's named columns (``leg_env.tasks.base.Obs``).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ controller makes that choice once per episode, at its first observation:
 
 ``x_com`` and ``y_com`` are the whole-body COM relative to the foot, computed from the observation's base
 position (entries 0-1, relative to the contact point), angles (2-4) and rates (5-9), as in
-``leg_env.dynamics.com_position``. The rule and its constants were found on the evaluation seeds 10000..10099
+``leg_env.physics.dynamics.com_position``. The rule and its constants were found on the evaluation seeds 10000..10099
 of ``train.evaluate`` (96/100 survive there); ``policies/baselines/gated/README.md`` reports it on fresh seeds.
 
 The controller is batch-capable and keeps per-robot state: the decision, the step count since the episode
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from leg_env.params import LegParams
+from leg_env.physics.params import LegParams
 from policies.base import BatchedController
 from policies.recovery import com_from_observation, lqr_and_hopper
 
@@ -80,7 +80,7 @@ class GatedController(BatchedController):
         hop_command: float = 0.06,
         hop_gains: dict | None = None,
     ):
-        from leg_env.tasks.stance import StanceConfig
+        from leg_env.tasks.base import StanceConfig
 
         gains = HOP_GAINS if hop_gains is None else hop_gains
         self.params, self.config, self.lqr, self.hopper = lqr_and_hopper(params, config, StanceConfig, gains)

@@ -67,8 +67,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from leg_env.params import LegParams
-from leg_env.tasks.stance import OBS_DIM_UNILATERAL, Obs
+from leg_env.physics.params import LegParams
+from leg_env.tasks.base import OBS_DIM_UNILATERAL, Obs
 from policies.base import BatchedController
 
 __all__ = ["HopperController"]
@@ -114,15 +114,15 @@ class HopperController(BatchedController):
         friction_margin: float = 0.8,
         swing_gains: tuple = (400.0, 40.0),
     ):
-        from leg_env.dynamics import com_position
+        from leg_env.physics.dynamics import com_position
         from leg_env.tasks.hop import HopConfig
-        from leg_env.tasks.stance import nominal_state
+        from leg_env.tasks.base import nominal_state
 
         self.params = p = LegParams.from_any(params)
         self.config = c = config if isinstance(config, HopConfig) else HopConfig.from_kwargs(config)
         self.m = m = p.m_b + p.m1 + p.m2
         self.a, self.b = a, b = p.m1 * p.c1 + p.m2 * p.l1, p.m2 * p.c2  # leg's and shank's first moments
-        # flight inertia of the absolute leg angles about the free-falling COM (leg_env.dynamics._flight_core)
+        # flight inertia of the absolute leg angles about the free-falling COM (leg_env.physics.dynamics._flight_core)
         self.kf = p.m2 * p.l1 * p.c2 - a * b / m
         self.K11 = p.I1 + p.m1 * p.c1**2 + p.m2 * p.l1**2 - a * a / m
         self.K22 = p.I2 + p.m2 * p.c2**2 - b * b / m
@@ -258,7 +258,7 @@ class HopperController(BatchedController):
         with ``Lambda t_1 = lam_des``, ``Lambda t_0 = lam_0``; ``s`` is the largest scale in [0, 1] within
         the torque limits.
         """
-        from leg_env.dynamics import stance_dynamics
+        from leg_env.physics.dynamics import stance_dynamics
 
         n = obs.shape[0]
         q = np.zeros((n, 5))

@@ -35,17 +35,16 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from leg_env.dynamics import stance_dynamics
-from leg_env.integrate import project_stance
-from leg_env.params import LegParams
-from leg_env.task import StanceConfig, nominal_state
-from leg_env.tasks.stance import Obs
+from leg_env.physics.dynamics import stance_dynamics
+from leg_env.physics.integrate import project_stance
+from leg_env.physics.params import LegParams
+from leg_env.tasks.base import Obs, StanceConfig, nominal_state
 from policies.base import BatchedController
 
 __all__ = ["LQRController", "linearize", "discretize", "base_jacobian", "STATE_INDEX"]
 
 STATE_INDEX = (Obs.th_b, Obs.q1, Obs.q2, Obs.w_b, Obs.w_q1, Obs.w_q2)
-"""Observation indices of the minimal state ``[th_b, q1, q2, th_b', q1', q2']`` (see ``leg_env.task``)."""
+"""Observation indices of the minimal state ``[th_b, q1, q2, th_b', q1', q2']`` (see ``leg_env.tasks.base.Obs``)."""
 
 
 def _full_state(x: np.ndarray, p: LegParams) -> tuple[np.ndarray, np.ndarray]:

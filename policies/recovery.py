@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from leg_env.params import LegParams
-from leg_env.tasks.stance import Obs
+from leg_env.physics.params import LegParams
+from leg_env.tasks.base import Obs
 
 __all__ = ["com_from_observation", "lqr_and_hopper"]
 
@@ -15,7 +15,7 @@ def com_from_observation(obs, params: LegParams) -> tuple[np.ndarray, np.ndarray
     """The whole-body COM's ``(x, y, x')`` from observations ``(..., >=10)``: relative to the foot [m], and [m/s].
 
     Reads the base position (entries 0-1, relative to the contact point), the angles (2-4) and the rates (5-9),
-    as ``leg_env.dynamics.com_position`` computes the COM from ``q``:
+    as ``leg_env.physics.dynamics.com_position`` computes the COM from ``q``:
     ``x_com = x_b + (a cos th1 + b cos th2) / m`` with ``a = m1 c1 + m2 l1``, ``b = m2 c2`` (first moments of the
     leg and the shank about the hip), ``th1 = th_b + q1``, ``th2 = th1 + q2``.
     """

@@ -37,8 +37,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from leg_env.params import LegParams
-from leg_env.tasks.stance import Obs
+from leg_env.physics.params import LegParams
+from leg_env.tasks.base import Obs
 from policies.base import BatchedController
 from policies.recovery import com_from_observation, lqr_and_hopper
 

@@ -16,7 +16,7 @@ try:
 except ImportError:  # pragma: no cover - torch is a test dependency
     pass
 
-from leg_env.params import LegParams  # noqa: E402
+from leg_env.physics.params import LegParams  # noqa: E402
 
 
 @pytest.fixture

@@ -1,6 +1,6 @@
-"""Independent references for the unilateral-contact functions of ``leg_env.dynamics``.
+"""Independent references for the unilateral-contact functions of ``leg_env.physics.dynamics``.
 
-Nothing here imports ``leg_env.dynamics``: every quantity is built from the SymPy Lagrangian of
+Nothing here imports ``leg_env.physics.dynamics``: every quantity is built from the SymPy Lagrangian of
 ``tests/test_dynamics_reference.py`` (``M``, ``h``, ``Jc``, ``Jcdot qd``; derived once per session)
 or, for the momenta, from link kinematics written out below, and solved with numpy.
 

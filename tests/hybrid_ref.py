@@ -1,6 +1,6 @@
 """Independent event-driven reference simulator of the planar leg with a unilateral Coulomb foot contact.
 
-The reference for ``leg_env.hybrid.hybrid_step`` (``tests/test_hybrid_reference.py``). It shares no
+The reference for ``leg_env.physics.hybrid.hybrid_step`` (``tests/test_hybrid_reference.py``). It shares no
 math with ``leg_env``: every dynamic term (``M``, ``h``, ``J = Jc``, ``gamma = Jcdot qd``, the foot
 position, ``K``, ``P``) comes from the SymPy Lagrangian of ``tests/test_dynamics_reference.py``
 (``sympy_reference``), lambdified to numpy. On those terms:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from leg_env.params import LegParams
+from leg_env.physics.params import LegParams
 
 __all__ = ["build_model", "foot_terms", "constrained_forward_dynamics"]
 

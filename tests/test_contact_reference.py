@@ -1,4 +1,4 @@
-"""The unilateral-contact functions of leg_env.dynamics against independent references.
+"""The unilateral-contact functions of leg_env.physics.dynamics against independent references.
 
 References (``tests/contact_ref.py``; none of them calls ``leg_env``):
 
@@ -26,8 +26,8 @@ import pytest
 import contact_ref as cr
 from conftest import random_params
 from pin_model import build_model, foot_terms
-from leg_env import dynamics as dyn
-from leg_env.params import LegParams
+from leg_env import physics as dyn
+from leg_env.physics.params import LegParams
 
 N_CASES = 200  # random (state, parameter set) pairs per test family
 N_REST_CASES = 240  # foot at rest on the ground, for the mode test

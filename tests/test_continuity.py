@@ -129,7 +129,7 @@ def test_recording_covers_the_contact_events():
 
 
 def _params():
-    from leg_env.params import LegParams
+    from leg_env.physics.params import LegParams
 
     return LegParams()
 
@@ -170,7 +170,7 @@ def test_stance_and_flight_step(name):
     the step before the shadow run departed for good (the pinned leg falls over: an unstable motion; flight: a
     tumbling double pendulum, up to 200 rad/s; on the isolated ``jitter`` steps, where a mean force passes near zero
     or the rates peak, nothing is compared: these have no discrete quantities)."""
-    from leg_env.integrate import flight_step, stance_step
+    from leg_env.physics.integrate import flight_step, stance_step
 
     step = {"stance": stance_step, "flight": flight_step}[name]
     g = group(name)

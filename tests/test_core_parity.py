@@ -1,8 +1,8 @@
 """An environment's control step is the public physics step, bit for bit.
 
-The environments step their packed rows (``leg_env.step.physics_range``: the action clipped and scaled to
+The environments step their packed rows (the compiled core's control step: the action clipped and scaled to
 torques, the load, the mode and anchor carried over, the trigonometry kept); the public functions
-(``leg_env.hybrid.hybrid_step``, ``leg_env.integrate.stance_step``) take a state as arrays. Both end in the
+(``leg_env.physics.hybrid.hybrid_step``, ``leg_env.physics.integrate.stance_step``) take a state as arrays. Both end in the
 same compiled step, so every step of every task, pinned and unilateral, nominal and randomised, taken
 again by the public function from the state before it, must agree to the last bit: a difference is a
 wrong column, a lost load or a mode carried wrongly.
@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import leg_env  # noqa: F401  (registers the ids)
-from leg_env.hybrid import hybrid_step
-from leg_env.integrate import stance_step
+from leg_env.physics.hybrid import hybrid_step
+from leg_env.physics.integrate import stance_step
 from leg_env.envs.single import robot_of_row
 CASES = [
     ("leg_env/PlanarLegStance-v0", False),

@@ -1,7 +1,7 @@
 """Identities the dynamics must satisfy, the lesson's Problems 1-4, batching and input validation.
 
 Derivatives are taken by central finite differences of the public functions, so these checks
-are independent of how ``leg_env.dynamics`` computes its terms. Tolerances are norm-relative:
+are independent of how ``leg_env.physics.dynamics`` computes its terms. Tolerances are norm-relative:
 ``|a - b| <= tol * (1 + |b|)``.
 """
 
@@ -14,8 +14,8 @@ import pytest
 import scipy.linalg
 
 from conftest import random_params
-from leg_env import dynamics as dyn
-from leg_env.params import PARAM_NAMES, LegParams
+from leg_env import physics as dyn
+from leg_env.physics.params import PARAM_NAMES, LegParams
 
 N_STATES = 200  # random (state, parameter set) pairs per identity
 SEED = 7

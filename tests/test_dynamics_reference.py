@@ -1,4 +1,4 @@
-"""leg_env.dynamics against two independent references, over random states and random parameters.
+"""leg_env.physics.dynamics against two independent references, over random states and random parameters.
 
 1. A SymPy Lagrangian derivation written here from the link COM positions and angular
    velocities (lesson sections 1-4): ``M = d^2 K / d qd^2``, ``h`` = the Euler-Lagrange terms
@@ -22,8 +22,8 @@ import sympy as sp
 
 from conftest import random_params
 from pin_model import build_model, constrained_forward_dynamics, foot_terms
-from leg_env import dynamics as dyn
-from leg_env.params import PARAM_NAMES
+from leg_env import physics as dyn
+from leg_env.physics.params import PARAM_NAMES
 
 N_CASES = 200  # random (state, parameter set) pairs, each with its own parameters
 SEED = 20240611

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import leg_env
-from leg_env import ENV_ID, PlanarLegStanceEnv
-from leg_env.dynamics import com_position, contact_jacobian, foot_position
-from leg_env.params import LegParams
-from leg_env.task import StanceConfig
+from leg_env import ENV_ID, LegEnv
+from leg_env.physics.dynamics import com_position, contact_jacobian, foot_position
+from leg_env.physics.params import LegParams
+from leg_env.tasks.base import StanceConfig
 
 REWARD_KEYS = ("reward_alive", "reward_drift", "reward_unilateral", "reward_friction", "reward_ctrl")
 INFO_KEYS = ("contact_force", "normal_force", "unilateral_violation", "friction_violation", "numerical_failure", "ending", "base_drift", "foot_error")
@@ -71,11 +71,11 @@ BAD_ACTIONS = [
 ]
 
 
-def make(**kwargs) -> PlanarLegStanceEnv:
-    return PlanarLegStanceEnv(**kwargs)
+def make(**kwargs) -> LegEnv:
+    return LegEnv(**kwargs)
 
 
-def holding_action(env: PlanarLegStanceEnv) -> np.ndarray:
+def holding_action(env: LegEnv) -> np.ndarray:
     """The action that applies the nominal equilibrium torques."""
     return env.nominal.tau / np.asarray(env.config.torque_limit)
 
@@ -103,10 +103,10 @@ def rollout(env, seed: int, actions: np.ndarray, resets: int = 3):
 def test_registration():
     spec = gym.spec(ENV_ID)
     assert spec.max_episode_steps == 1000
-    assert spec.entry_point == "leg_env.envs.stance:PlanarLegStanceEnv"
-    assert spec.vector_entry_point == "leg_env.envs.vector:PlanarLegStanceVectorEnv"
+    assert spec.entry_point == "leg_env.envs.single:LegEnv" and spec.kwargs == {"task": "stance"}
+    assert spec.vector_entry_point == "leg_env.envs.vector:LegVectorEnv"
     env = gym.make(ENV_ID)
-    assert isinstance(env.unwrapped, PlanarLegStanceEnv)
+    assert isinstance(env.unwrapped, LegEnv)
     assert env.spec.max_episode_steps == 1000
 
 
@@ -119,13 +119,13 @@ def test_make_with_module_prefix_without_prior_import():
         "print(type(env.unwrapped).__name__, env.spec.max_episode_steps, obs.shape)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.split() == ["PlanarLegStanceEnv", "1000", "(12,)"]
+    assert out.stdout.split() == ["LegEnv", "1000", "(12,)"]
 
 
 def test_import_is_cheap_and_reimport_safe():
     code = (
         "import sys, importlib, leg_env\n"
-        "assert 'pygame' not in sys.modules and 'numba' not in sys.modules\n"
+        "assert 'pygame' not in sys.modules\n"
         "importlib.reload(leg_env)\n"
         "import gymnasium as gym\n"
         "env = gym.make('leg_env/PlanarLegStance-v0'); env.reset(seed=0); env.step(env.action_space.sample())\n"
@@ -242,7 +242,7 @@ def test_env_physics_is_the_integrators_control_step():
     """Each env step is exactly ``integrate.stance_step`` with the clipped, scaled torques, across
     resets and explicit states (the task kernel keeps the state's sines/cosines between steps; a
     stale copy would show here)."""
-    from leg_env.integrate import stance_step
+    from leg_env.physics.integrate import stance_step
 
     env = make(torque_limit=(40.0, 60.0))
     rng = np.random.default_rng(5)
@@ -445,7 +445,7 @@ def test_render_fps_follows_dt():
     assert make().metadata["render_fps"] == 100
     env = make(dt=0.02)
     assert env.metadata["render_fps"] == 50 and env.dt == 0.02
-    assert PlanarLegStanceEnv.metadata["render_fps"] == 100  # the class default is untouched
+    assert LegEnv.metadata["render_fps"] == 100  # the class default is untouched
     assert make(dt=0.003).metadata["render_fps"] == pytest.approx(1.0 / 0.003)
 
 
@@ -591,7 +591,7 @@ def test_random_action_soak_100k_steps():
 
 
 def test_public_names():
-    assert leg_env.PlanarLegStanceEnv is PlanarLegStanceEnv
+    assert leg_env.LegEnv is LegEnv and leg_env.LegVectorEnv is leg_env.envs.vector.LegVectorEnv
     assert leg_env.ENDINGS[0] == "none" and len(set(leg_env.ENDINGS)) == len(leg_env.ENDINGS) == 10
     assert leg_env.StanceConfig is StanceConfig
     assert math.isclose(make().dt, 0.01)

@@ -21,11 +21,14 @@ from gymnasium.vector import AutoresetMode
 import leg_env
 from leg_env import ENDINGS, ENV_ID, LegParams
 from leg_env.checks import ArgumentTypeError
-from leg_env.envs.stance import PlanarLegStanceEnv
-from leg_env.envs.vector import PlanarLegStanceVectorEnv
-from leg_env.integrate import stance_step
-from leg_env.params import PARAM_NAMES
-from leg_env.tasks.stance import FIELD_RANGES, FLAG_NAMES, TASK, robot_row, start_batch, step_batch
+from leg_env.envs.single import LegEnv
+from leg_env.envs.vector import LegVectorEnv
+from leg_env.physics.integrate import stance_step
+from leg_env.physics.params import PARAM_NAMES
+from leg_env.physics.layout import FLAG_NAMES
+from leg_env.tasks import stance
+from leg_env.tasks.base import FIELD_RANGES, robot_row
+from leg_env.tasks.stance import TASK
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTACTS = ("pinned", "unilateral")
@@ -75,7 +78,7 @@ def test_rejected_reset_changes_nothing_in_the_single_env(options):
 
 @pytest.mark.parametrize("seed", BAD_SEEDS, ids=repr)
 def test_rejected_seed_changes_nothing_in_the_single_env(seed):
-    env = PlanarLegStanceEnv()
+    env = LegEnv()
     env.reset(seed=0)
     env.step(np.zeros(2))
     state, rng = env.state, generator_state(env)
@@ -87,7 +90,7 @@ def test_rejected_seed_changes_nothing_in_the_single_env(seed):
 
 @pytest.mark.parametrize("options", BAD_OPTIONS, ids=repr)
 def test_rejected_reset_changes_nothing_in_the_vector_env(options):
-    envs, twin = PlanarLegStanceVectorEnv(3), PlanarLegStanceVectorEnv(3)
+    envs, twin = LegVectorEnv(3), LegVectorEnv(3)
     for e in (envs, twin):
         e.reset(seed=0)
         for _ in range(4):
@@ -122,7 +125,7 @@ def test_rejected_reset_changes_nothing_in_the_sb3_adapter(options):
 
 @pytest.mark.parametrize("mode", list(AutoresetMode), ids=str)
 def test_vector_step_before_reset_raises_and_changes_nothing(mode):
-    envs = PlanarLegStanceVectorEnv(3, autoreset_mode=mode, max_episode_steps=1)
+    envs = LegVectorEnv(3, autoreset_mode=mode, max_episode_steps=1)
     state = envs.state
     with pytest.raises(ResetNeeded, match="reset"):
         envs.step(np.zeros((3, 2)))
@@ -158,7 +161,7 @@ def test_sb3_step_before_reset_raises_and_changes_nothing():
 def test_every_config_field_refuses_a_number_too_large_for_a_float(field):
     value = (HUGE, HUGE) if field in ("hip_range", "knee_range") else HUGE
     with pytest.raises(ValueError, match=field):
-        PlanarLegStanceEnv(**{field: value})
+        LegEnv(**{field: value})
 
 
 @pytest.mark.parametrize("field", PARAM_NAMES, ids=str)
@@ -170,15 +173,15 @@ def test_every_param_refuses_a_number_too_large_for_a_float(field):
 @pytest.mark.parametrize("value", [2**63, 4097, np.nan, np.inf, 2.5, 0], ids=repr)
 def test_substeps_has_a_documented_upper_bound(value):
     with pytest.raises(ValueError, match=r"substeps must be .*\[1, 4096\]"):
-        PlanarLegStanceEnv(substeps=value)
+        LegEnv(substeps=value)
     with pytest.raises(ValueError, match="substeps"):
         stance_step(np.zeros(5), np.zeros(5), np.zeros(2), LegParams(), substeps=value)
 
 
 def test_substeps_at_the_bound_and_unknown_keywords():
-    assert PlanarLegStanceEnv(substeps=4096).config.substeps == 4096
+    assert LegEnv(substeps=4096).config.substeps == 4096
     with pytest.raises(TypeError, match="unexpected keyword argument 'substep'"):
-        PlanarLegStanceEnv(substep=2)
+        LegEnv(substep=2)
 
 
 # ---------------------------------------------------------------- item 8: nothing overflows float32 silently
@@ -194,15 +197,15 @@ def test_gravity_between_zero_and_its_bound_is_refused(g):
 @pytest.mark.parametrize("options", BAD_OPTIONS[1:4], ids=repr)
 def test_reset_states_that_overflow_the_observation_are_refused(contact, options):
     with pytest.raises(ValueError, match="qpos|qvel"):
-        PlanarLegStanceEnv(contact=contact).reset(options=options)
+        LegEnv(contact=contact).reset(options=options)
     with pytest.raises(ValueError, match="qpos|qvel"):
-        PlanarLegStanceVectorEnv(2, contact=contact).reset(options=options)
+        LegVectorEnv(2, contact=contact).reset(options=options)
 
 
 def test_reset_noise_scale_is_bounded():
     with pytest.raises(ValueError, match=r"reset_noise_scale must be in \[0, 3.14159\]"):
-        PlanarLegStanceEnv(reset_noise_scale=1e300)
-    PlanarLegStanceEnv(reset_noise_scale=np.pi).reset(seed=0)
+        LegEnv(reset_noise_scale=1e300)
+    LegEnv(reset_noise_scale=np.pi).reset(seed=0)
 
 
 @pytest.mark.parametrize("contact", CONTACTS)
@@ -210,19 +213,19 @@ def test_an_observation_that_overflows_float32_is_a_flagged_numerical_failure(co
     """The kernel's last guard: a finite state whose observation overflows float32 (here through a
     gravity below the accepted range, put into the kernel's constants directly) is a numerical
     failure: flagged and terminated, the state and observation left at the last good ones."""
-    env = PlanarLegStanceEnv(contact=contact, reset_noise_scale=0.0)
+    env = LegEnv(contact=contact, reset_noise_scale=0.0)
     robots, settings = robot_row(env.params, env.config, env.nominal), env.config.settings()
     n = 2
     state, out = np.zeros(n, dtype=TASK.state_dtype), np.zeros(n, dtype=TASK.out_dtype)
     obs = np.zeros((n, env.observation_space.shape[0]), dtype=np.float32)
     state["q"] = env.nominal.q
-    start_batch(state, robots, settings, out, obs)
+    TASK.start(state, robots, settings, out, obs)
     assert np.isfinite(obs).all()
     before_state, before_obs = state.copy(), obs.copy()
     state["action"] = [[0.5, -0.2], [0.4, -0.25]]
     tiny_g = robots.copy()
     tiny_g["p"]["g"] = 1e-300  # the weight m g becomes 1.5e-299 N, and lam / (m g) overflows float32
-    step_batch(state, tiny_g, settings, out, obs)
+    TASK.step(state, tiny_g, settings, out, obs)
     assert np.isfinite(obs).all(), obs
     assert out["numerical_failure"].all() and out["terminated"].all()
     assert [ENDINGS[k] for k in out["ending"]] == ["numerical_failure"] * n
@@ -239,13 +242,13 @@ BAD_TYPED_ACTIONS = [["0.5", "0.5"], np.array([0.5 + 1j, 0.5]), [0.5 + 0j, 0.5],
 
 @pytest.mark.parametrize("action", BAD_TYPED_ACTIONS, ids=repr)
 def test_actions_that_are_not_real_numbers_are_refused(action):
-    env = PlanarLegStanceEnv()
+    env = LegEnv()
     env.reset(seed=0)
     state = env.state
     with pytest.raises(ValueError, match="action"):
         env.step(action)
     assert_same_state(env.state, state)
-    envs = PlanarLegStanceVectorEnv(2)
+    envs = LegVectorEnv(2)
     envs.reset(seed=0)
     with pytest.raises(ValueError, match="actions"):
         envs.step([action, action])
@@ -269,20 +272,20 @@ def test_actions_that_are_not_real_numbers_are_refused(action):
 )
 def test_arguments_of_the_wrong_type_are_refused_naming_them(kwargs, match):
     with pytest.raises(ArgumentTypeError, match=match) as error:
-        PlanarLegStanceEnv(**kwargs)
+        LegEnv(**kwargs)
     assert isinstance(error.value, TypeError) and isinstance(error.value, ValueError)
 
 
 @pytest.mark.parametrize("config", [5, "defaults", [("mu", 0.5)]], ids=repr)
 def test_config_of_the_wrong_type_is_a_type_error_naming_config(config):
-    for build in (PlanarLegStanceEnv, lambda **kw: PlanarLegStanceVectorEnv(2, **kw), lambda **kw: gym.make(ENV_ID, **kw)):
+    for build in (LegEnv, lambda **kw: LegVectorEnv(2, **kw), lambda **kw: gym.make(ENV_ID, **kw)):
         with pytest.raises(TypeError, match="config must be"):
             build(config=config)
 
 
 @pytest.mark.parametrize("seed", BAD_SEEDS + [[0, 1.5], [0, 1, 2], "ab"], ids=repr)
 def test_vector_reset_refuses_bad_seeds_clearly_and_changes_nothing(seed):
-    envs = PlanarLegStanceVectorEnv(2)
+    envs = LegVectorEnv(2)
     envs.reset(seed=0)
     state = envs.state
     with pytest.raises(ValueError, match="seed"):
@@ -398,10 +401,10 @@ def test_threads_work_in_a_child_forked_after_the_parent_ran_them():
     code = textwrap.dedent(
         """
         import multiprocessing as mp, numpy as np
-        from leg_env.envs.vector import PlanarLegStanceVectorEnv
+        from leg_env.envs.vector import LegVectorEnv
 
         def step_once():
-            envs = PlanarLegStanceVectorEnv(8, num_threads=2)
+            envs = LegVectorEnv(8, num_threads=2)
             envs.reset(seed=0)
             out = float(envs.step(np.full((8, 2), 0.3))[1].sum())
             envs.close()
@@ -411,7 +414,7 @@ def test_threads_work_in_a_child_forked_after_the_parent_ran_them():
             conn.send(step_once())
 
         if __name__ == "__main__":
-            envs = PlanarLegStanceVectorEnv(8, num_threads=2)  # the parent's pool is alive at the fork
+            envs = LegVectorEnv(8, num_threads=2)  # the parent's pool is alive at the fork
             envs.reset(seed=0)
             print("parent", float(envs.step(np.full((8, 2), 0.3))[1].sum()))
             for method in ("spawn", "fork"):
@@ -438,14 +441,14 @@ def test_threads_work_in_a_child_forked_after_the_parent_ran_them():
 @pytest.mark.parametrize("contact", CONTACTS)
 def test_zero_gravity_reports_the_contact_force_in_newtons(contact):
     """With ``g = 0`` there is no weight to divide by: obs[10:12] is the force in newtons (documented)."""
-    env = PlanarLegStanceEnv(params={"g": 0.0}, contact=contact, reset_noise_scale=0.0)
+    env = LegEnv(params={"g": 0.0}, contact=contact, reset_noise_scale=0.0)
     env.reset(seed=0)
     obs, *_, info = env.step(np.array([0.3, -0.2]))
     np.testing.assert_allclose(obs[10:12], info["contact_force"].astype(np.float32), rtol=1e-6)
     assert np.abs(info["contact_force"]).max() > 0.1  # a force, not a rounding error
-    weighted = PlanarLegStanceEnv(contact=contact, reset_noise_scale=0.0)
+    weighted = LegEnv(contact=contact, reset_noise_scale=0.0)
     weighted.reset(seed=0)
     obs, *_, info = weighted.step(np.array([0.3, -0.2]))
     np.testing.assert_allclose(obs[10:12], (info["contact_force"] / weighted.params.weight).astype(np.float32), rtol=1e-6)
-    doc = PlanarLegStanceEnv.__doc__
+    doc = stance.__doc__
     assert "g = 0" in doc and "newtons" in doc

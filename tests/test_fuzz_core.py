@@ -182,8 +182,8 @@ class Run:
 
 # ------------------------------------------------------------------------------------------------ values
 def _nominal():
-    from leg_env.dynamics import static_equilibrium
-    from leg_env.params import LegParams
+    from leg_env.physics.dynamics import static_equilibrium
+    from leg_env.physics.params import LegParams
 
     return static_equilibrium(LegParams())[0]
 
@@ -346,8 +346,8 @@ def _any(v):
 
 def kernel_specs(rng):
     """{kernel: [Arg]} of the kernels that take robots' arrays."""
-    from leg_env.layout import RECORD
-    from leg_env.params import LegParams
+    from leg_env.physics.layout import RECORD
+    from leg_env.physics.params import LegParams
 
     P = LegParams().array
 
@@ -574,7 +574,7 @@ def fuzz_kernel_random(run, name, spec, rng, rounds):
 
 
 # ------------------------------------------------------------------------------------------------ packed
-# The environments' arrays (leg_env.layout): 1-d structured arrays of the C structs, state and out a row per
+# The environments' arrays (leg_env.physics.layout): 1-d structured arrays of the C structs, state and out a row per
 # robot, robots one row or a row per robot, settings one row; obs a float32 matrix.
 ARRAYS = ("state", "robots", "settings", "out", "obs")
 _ENV_ARRAYS: dict = {}
@@ -748,15 +748,6 @@ def packed_calls(kernels, task):
         f"tasks.{t.name}.TASK.assess": (t.assess, lambda a, n: [a["state"], a["robots"], a["settings"], a["out"], a["obs"]], False, True, True),
         f"tasks.{t.name}.TASK.start": (t.start, lambda a, n: [a["state"], a["robots"], a["settings"], a["out"], a["obs"]], True, True, False),
     }
-    if task == 0:
-        from leg_env.tasks import stance
-
-        calls["tasks.stance.step_batch"] = (stance.step_batch, lambda a, n: [a["state"], a["robots"], a["settings"], a["out"], a["obs"]],
-                                            False, True, True)
-        calls["tasks.stance.start_batch"] = (stance.start_batch, lambda a, n: [a["state"], a["robots"], a["settings"], a["out"], a["obs"]],
-                                             True, True, False)
-        calls["tasks.stance.step_range"] = (stance.step_range, lambda a, n: [0, n, a["state"], a["robots"], a["settings"], a["out"], a["obs"]],
-                                            False, True, True)
     return calls
 
 
@@ -1072,7 +1063,7 @@ def fuzz_draws(run, rng):
     run.counts(where, kernels.draw_uniform, [gens(), rows, _filled((5, 3))], ("draw_uniform",))
 
     # draw_robots(generators, rows, spec, base, limits, max_draws, robots, rejected) and robot_params(u, spec, base, limits, row):
-    # base, robots and row are leg_env.layout's robot rows
+    # base, robots and row are leg_env.physics.layout's robot rows
     env = gym.make("leg_env/PlanarLegBalance-v0", randomize=True).unwrapped
     spec, base, limits = env.robots.spec.copy(), env.robots.base.copy(), np.asarray(env.robots.limits, dtype=np.float64).copy()
     env.close()
@@ -1219,8 +1210,8 @@ def _same(a, b, exact=True) -> bool:
 
 def public_specs(rng):
     """(where, fn, {arg: (valid value maker of lead, kind)}, result shapes of lead, options)."""
-    from leg_env import contact, dynamics, hybrid, integrate
-    from leg_env.params import LegParams
+    from leg_env.physics import arrays, contact, dynamics, hybrid, integrate
+    from leg_env.physics.params import LegParams
 
     P = LegParams()
 
@@ -1263,7 +1254,7 @@ def public_specs(rng):
         ("dynamics.kinetic_energy", dynamics.kinetic_energy, {"q": Q, "qd": QD, "p": PP}, lambda L: (L,)),
         ("dynamics.potential_energy", dynamics.potential_energy, {"q": Q, "p": PP}, lambda L: (L,)),
         ("dynamics.static_equilibrium", dynamics.static_equilibrium, {"p": PP, "knee": (scalar(0.8), "knee")}, lambda L: ((5,), (2,), (2,))),
-        ("dynamics.params_array", dynamics.params_array, {"p": PP, "load_x": (scalar(0.0), "load")}, lambda L: ((12,),)),
+        ("arrays.params_array", arrays.params_array, {"p": PP, "load_x": (scalar(0.0), "load")}, lambda L: ((12,),)),
         ("contact.slip_dynamics", contact.slip_dynamics, {"q": Q, "qd": QD, "tau": TAU, "p": PP, "mu": (scalar(0.8), "mu"),
                                                           "sigma": (scalar(1.0), "sigma")}, lambda L: (L + (5,), L + (2,))),
         ("contact.impact_map", contact.impact_map, {"q": Q, "qd": QD, "p": PP, "mu": (scalar(0.8), "mu_inf")}, lambda L: (L + (5,), L + (2,))),
@@ -1330,7 +1321,7 @@ def public_arg_cases(arg, kind, v, lead, rng, n_vec=1):
             yield f"a value {val!r}", w, A, None, nm
         return
     if kind == "p":
-        from leg_env.params import LegParams
+        from leg_env.physics.params import LegParams
 
         a = LegParams().array
         yield "LegParams array", a.copy(), OK, v, nm + ("params",)
@@ -1438,8 +1429,8 @@ def fuzz_public(run, module, rng):
 
 def fuzz_step_inplace(run, rng):
     """integrate.step_inplace: the in-place public step (its arrays are the kernel's)."""
-    from leg_env import integrate
-    from leg_env.params import LegParams
+    from leg_env.physics import integrate
+    from leg_env.physics.params import LegParams
 
     where = "integrate.step_inplace"
     P = LegParams().array

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import leg_env  # noqa: F401  (registers the ids)
-from leg_env.dynamics import com_position
+from leg_env.physics.dynamics import com_position
 from policies.gated import HOP_GAINS, GatedController, capture_point
 from policies.hopper import HopperController
 from policies.lqr import LQRController

@@ -1,4 +1,4 @@
-"""``leg_env.hybrid.hybrid_step`` against an independent event-driven reference (``tests/hybrid_ref.py``).
+"""``leg_env.physics.hybrid.hybrid_step`` against an independent event-driven reference (``tests/hybrid_ref.py``).
 
 The reference integrates the mode dynamics (KKT solves on the SymPy Lagrangian's ``M, h, J, Jdot qd``)
 with DOP853 at ``rtol = atol = 1e-12`` and locates the events with ``solve_ivp``'s terminal events,
@@ -38,9 +38,9 @@ import pytest
 import hybrid_ref as H
 from conftest import random_params
 from pin_model import build_model, constrained_forward_dynamics, foot_terms
-from leg_env.dynamics import static_equilibrium
-from leg_env.integrate import flight_step, stance_step
-from leg_env.params import LegParams
+from leg_env.physics.dynamics import static_equilibrium
+from leg_env.physics.integrate import flight_step, stance_step
+from leg_env.physics.params import LegParams
 
 DT = 0.01
 EVENT_TIME_TOL = 1e-7  # [s]
@@ -115,7 +115,7 @@ def _all_events(recs):
 
 
 def _hybrid():
-    from leg_env import hybrid  # fails (not skips) when the module is missing
+    from leg_env.physics import hybrid  # fails (not skips) when the module is missing
 
     return hybrid
 
@@ -328,9 +328,9 @@ def test_reference_scenario_design(name):
 
 
 def test_impact_map_matches_reference():
-    """leg_env.dynamics.impact_map = the reference's impact (sticking, sliding, stop-then-stick,
+    """leg_env.physics.dynamics.impact_map = the reference's impact (sticking, sliding, stop-then-stick,
     stop-then-reverse) on approaching feet near the nominal posture."""
-    from leg_env import dynamics as dyn
+    from leg_env import physics as dyn
 
     rng = np.random.default_rng(21)
     p = LegParams()
@@ -352,7 +352,7 @@ def test_impact_map_matches_reference():
 
 
 def test_contact_mode_and_slip_dynamics_match_reference():
-    from leg_env import dynamics as dyn
+    from leg_env import physics as dyn
 
     rng = np.random.default_rng(22)
     p = LegParams()
@@ -401,7 +401,7 @@ def _compare_events(name):
 
 def test_api_constants():
     hyb = _hybrid()
-    from leg_env import dynamics as dyn
+    from leg_env import physics as dyn
 
     assert (hyb.LIFTOFF, hyb.SLIP_ONSET, hyb.SLIDING_STOP, hyb.TOUCHDOWN) == (
         H.LIFTOFF, H.SLIP_ONSET, H.SLIDING_STOP, H.TOUCHDOWN)
@@ -412,7 +412,7 @@ def test_api_constants():
 def test_drop_touchdown_sticks():
     """1. The drop: touchdown time (step index * dt + event time) within 1e-7 s, step by step and in a
     free replay of hybrid_step from the initial state; then STICK; impulse and post-impact velocity."""
-    from leg_env import dynamics as dyn
+    from leg_env import physics as dyn
 
     hyb = _hybrid()
     ref, recs = reference_run("drop")
@@ -518,7 +518,7 @@ def test_step_bookkeeping(name):
 
 
 def _step_rule(qd, dt, substeps=2, max_angle=0.02):
-    """leg_env.integrate's step rule: at least ``substeps`` RK4 steps, and no link or joint turning by more than
+    """leg_env.physics.integrate's step rule: at least ``substeps`` RK4 steps, and no link or joint turning by more than
     ``max_angle`` per step at the rates of ``qd``."""
     va, vb, vc = qd[2], qd[3], qd[4]
     w = max(abs(va), abs(vb), abs(vc), abs(va + vb), abs(va + vb + vc))

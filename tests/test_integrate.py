@@ -1,4 +1,4 @@
-"""The RK4 stepper with contact projection (leg_env.integrate): constraint drift, energy, order,
+"""The RK4 stepper with contact projection (leg_env.physics.integrate): constraint drift, energy, order,
 the mean contact force, batching, the projections and argument checks.
 
 Tolerances are norm-relative, ``|a - b| <= tol * (1 + |b|)``, unless stated.
@@ -11,9 +11,8 @@ import pytest
 from scipy.integrate import simpson
 
 from conftest import random_params
-from leg_env import dynamics as dyn
-from leg_env import integrate as it
-from leg_env.params import LegParams
+from leg_env import physics as dyn
+from leg_env.physics.params import LegParams
 
 PARAM_SEEDS = [None, 0, 1]  # None: the lesson's defaults; ints: conftest.random_params(seed)
 DRIFT_STEPS = 1000  # control steps of the drift test
@@ -44,7 +43,7 @@ def near_nominal(p, rng, angle_noise=ANGLE_NOISE, rate_noise=RATE_NOISE, anchor=
     q_eq, tau_eq, _ = dyn.static_equilibrium(p)
     q = q_eq + np.concatenate([[0.0, 0.0], rng.normal(0.0, angle_noise, 3)])
     qd = rng.normal(0.0, rate_noise, 5)
-    q, qd = it.project_stance(q, qd, p, np.asarray(anchor, dtype=float))
+    q, qd = dyn.project_stance(q, qd, p, np.asarray(anchor, dtype=float))
     return q, qd, tau_eq
 
 
@@ -68,7 +67,7 @@ def test_foot_drift_under_random_torques(seed):
     worst_drift = worst_velocity = 0.0
     for _ in range(DRIFT_STEPS):
         tau = rng.uniform(-DRIFT_TORQUE, DRIFT_TORQUE, (DRIFT_ROBOTS, 2))
-        q, qd, lam = it.stance_step(q, qd, tau, p, anchor=anchor)
+        q, qd, lam = dyn.stance_step(q, qd, tau, p, anchor=anchor)
         worst_drift = max(worst_drift, np.abs(dyn.foot_position(q, p) - anchor).max())
         Jc = dyn.contact_jacobian(q, p)
         worst_velocity = max(worst_velocity, np.abs((Jc @ qd[..., None])[..., 0]).max())
@@ -88,7 +87,7 @@ def test_energy_conserved_in_stance(seed):
     K_max = K0
     anchor = np.zeros(2)
     for _ in range(ENERGY_STEPS):
-        q, qd, _ = it.stance_step(q, qd, np.zeros(2), p, anchor=anchor)
+        q, qd, _ = dyn.stance_step(q, qd, np.zeros(2), p, anchor=anchor)
         assert abs(energy(q, qd, p) - E0) <= ENERGY_RTOL * abs(E0)
         K_max = max(K_max, dyn.kinetic_energy(q, qd, p))
     assert K_max > K0 + 1e-3 * abs(E0)  # potential energy really turned into kinetic energy
@@ -102,7 +101,7 @@ def test_energy_conserved_in_flight(seed):
     qd = rng.normal(0.0, 1.0, 5)  # free flight: any velocity
     E0 = energy(q, qd, p)
     for _ in range(ENERGY_STEPS):
-        q, qd = it.flight_step(q, qd, np.zeros(2), p)
+        q, qd = dyn.flight_step(q, qd, np.zeros(2), p)
         assert abs(energy(q, qd, p) - E0) <= ENERGY_RTOL * abs(E0)
     assert q[1] < -1.0  # it fell under gravity
 
@@ -141,16 +140,16 @@ def test_turn_matches_library_trigonometry():
 def simulate(p, q, qd, tau, stance, substeps, max_angle, steps=ORDER_STEPS):
     for _ in range(steps):
         if stance:
-            q, qd, _ = it.stance_step(q, qd, tau, p, substeps=substeps, max_angle=max_angle, anchor=np.zeros(2))
+            q, qd, _ = dyn.stance_step(q, qd, tau, p, substeps=substeps, max_angle=max_angle, anchor=np.zeros(2))
         else:
-            q, qd = it.flight_step(q, qd, tau, p, substeps=substeps, max_angle=max_angle)
+            q, qd = dyn.flight_step(q, qd, tau, p, substeps=substeps, max_angle=max_angle)
     return np.concatenate([q, qd])
 
 
 # (substeps, max_angle) -> halved step (2 substeps, 2x finer angle rule)
 ORDER_SETTINGS = {
     "fixed": ((2, np.inf), (4, np.inf)),
-    "adaptive_default": ((it.SUBSTEPS, it.MAX_ANGLE), (2 * it.SUBSTEPS, it.MAX_ANGLE / 2)),
+    "adaptive_default": ((dyn.SUBSTEPS, dyn.MAX_ANGLE), (2 * dyn.SUBSTEPS, dyn.MAX_ANGLE / 2)),
 }
 
 
@@ -175,10 +174,10 @@ def test_fast_motion_takes_more_substeps():
     rng = np.random.default_rng(14)
     q, qd, tau_eq = near_nominal(p, rng)
     qd[2:] = [0.0, 40.0, -40.0]
-    q, qd = it.project_stance(q, qd, p, np.zeros(2))
-    ref = np.concatenate(it.stance_step(q, qd, tau_eq, p, substeps=512, max_angle=np.inf)[:2])
-    adaptive = np.concatenate(it.stance_step(q, qd, tau_eq, p)[:2])
-    fixed = np.concatenate(it.stance_step(q, qd, tau_eq, p, max_angle=np.inf)[:2])
+    q, qd = dyn.project_stance(q, qd, p, np.zeros(2))
+    ref = np.concatenate(dyn.stance_step(q, qd, tau_eq, p, substeps=512, max_angle=np.inf)[:2])
+    adaptive = np.concatenate(dyn.stance_step(q, qd, tau_eq, p)[:2])
+    fixed = np.concatenate(dyn.stance_step(q, qd, tau_eq, p, max_angle=np.inf)[:2])
     err_adaptive = np.linalg.norm(adaptive - ref)
     err_fixed = np.linalg.norm(fixed - ref)
     assert err_adaptive < 1e-6 * np.linalg.norm(ref)
@@ -198,16 +197,16 @@ def test_lam_mean_is_time_average_of_contact_force(seed, rate_scale, substeps):
     q, qd, tau_eq = near_nominal(p, rng, rate_noise=rate_scale)
     tau = tau_eq + rng.uniform(-20.0, 20.0, 2)
     anchor = np.zeros(2)
-    _, _, lam_mean = it.stance_step(q, qd, tau, p, substeps=substeps, anchor=anchor)
+    _, _, lam_mean = dyn.stance_step(q, qd, tau, p, substeps=substeps, anchor=anchor)
     # fine re-integration of the same control step; Simpson's rule over the instantaneous forces
-    h = it.DT / LAM_FINE_STEPS
+    h = dyn.DT / LAM_FINE_STEPS
     qf, qdf = q, qd
     lam_t = [dyn.stance_dynamics(qf, qdf, tau, p)[1]]
     for _ in range(LAM_FINE_STEPS):
-        qf, qdf, _ = it.stance_step(qf, qdf, tau, p, dt=h, substeps=1, max_angle=np.inf, anchor=anchor)
+        qf, qdf, _ = dyn.stance_step(qf, qdf, tau, p, dt=h, substeps=1, max_angle=np.inf, anchor=anchor)
         lam_t.append(dyn.stance_dynamics(qf, qdf, tau, p)[1])
     lam_t = np.array(lam_t)
-    lam_avg = simpson(lam_t, dx=h, axis=0) / it.DT
+    lam_avg = simpson(lam_t, dx=h, axis=0) / dyn.DT
     err = np.linalg.norm(lam_mean - lam_avg)
     assert err <= LAM_RTOL * (1.0 + np.linalg.norm(lam_avg))
     # the average differs from the force at either end of the step by far more than the tolerance
@@ -218,7 +217,7 @@ def test_lam_mean_is_time_average_of_contact_force(seed, rate_scale, substeps):
 def test_lam_mean_at_rest_is_the_weight():
     p = LegParams()
     q, tau, lam = dyn.static_equilibrium(p)
-    q1, qd1, lam_mean = it.stance_step(q, np.zeros(5), tau, p)
+    q1, qd1, lam_mean = dyn.stance_step(q, np.zeros(5), tau, p)
     np.testing.assert_allclose(lam_mean, [0.0, p.weight], rtol=0, atol=1e-10 * p.weight)
     np.testing.assert_allclose(q1, q, rtol=0, atol=1e-12)
     np.testing.assert_allclose(qd1, 0.0, rtol=0, atol=1e-12)
@@ -228,8 +227,8 @@ def test_flight_step_has_no_contact_force():
     p = LegParams()
     q, qd, tau = near_nominal(p, np.random.default_rng(16))
     lam = np.full((1, 2), np.nan)
-    it.step_inplace(q[None].copy(), qd[None].copy(), tau[None], p.array, np.zeros((1, 2)), it.DT, it.SUBSTEPS,
-                    it.MAX_ANGLE, False, lam)
+    dyn.step_inplace(q[None].copy(), qd[None].copy(), tau[None], p.array, np.zeros((1, 2)), dyn.DT, dyn.SUBSTEPS,
+                    dyn.MAX_ANGLE, False, lam)
     np.testing.assert_array_equal(lam, 0.0)
 
 
@@ -255,10 +254,10 @@ def random_batch(p, rng, lead):
 def test_stance_step_batched_equals_stacked_singles(lead):
     p = random_params(np.random.default_rng(17))
     q, qd, tau, anchor = random_batch(p, np.random.default_rng(18), lead)
-    q, qd = it.project_stance(q, qd, p, anchor)
-    batched = it.stance_step(q.reshape(lead + (5,)), qd.reshape(lead + (5,)), tau.reshape(lead + (2,)), p,
+    q, qd = dyn.project_stance(q, qd, p, anchor)
+    batched = dyn.stance_step(q.reshape(lead + (5,)), qd.reshape(lead + (5,)), tau.reshape(lead + (2,)), p,
                              anchor=anchor.reshape(lead + (2,)))
-    singles = [it.stance_step(q[i], qd[i], tau[i], p, anchor=anchor[i]) for i in range(len(q))]
+    singles = [dyn.stance_step(q[i], qd[i], tau[i], p, anchor=anchor[i]) for i in range(len(q))]
     for k, b in enumerate(batched):
         assert b.shape == lead + singles[0][k].shape
         np.testing.assert_array_equal(b.reshape(len(q), -1), np.array([s[k] for s in singles]))
@@ -268,8 +267,8 @@ def test_stance_step_batched_equals_stacked_singles(lead):
 def test_flight_step_batched_equals_stacked_singles(lead):
     p = random_params(np.random.default_rng(19))
     q, qd, tau, _ = random_batch(p, np.random.default_rng(20), lead)
-    batched = it.flight_step(q.reshape(lead + (5,)), qd.reshape(lead + (5,)), tau.reshape(lead + (2,)), p)
-    singles = [it.flight_step(q[i], qd[i], tau[i], p) for i in range(len(q))]
+    batched = dyn.flight_step(q.reshape(lead + (5,)), qd.reshape(lead + (5,)), tau.reshape(lead + (2,)), p)
+    singles = [dyn.flight_step(q[i], qd[i], tau[i], p) for i in range(len(q))]
     for k, b in enumerate(batched):
         assert b.shape == lead + (5,)
         np.testing.assert_array_equal(b.reshape(len(q), -1), np.array([s[k] for s in singles]))
@@ -279,22 +278,22 @@ def test_single_torque_and_default_anchor_broadcast():
     p = LegParams()
     q, qd, _, anchor = random_batch(p, np.random.default_rng(21), (5,))
     tau = np.array([3.0, -4.0])
-    batched = it.stance_step(q, qd, tau, p)  # anchor: each foot where it is
-    singles = [it.stance_step(q[i], qd[i], tau, p) for i in range(len(q))]
+    batched = dyn.stance_step(q, qd, tau, p)  # anchor: each foot where it is
+    singles = [dyn.stance_step(q[i], qd[i], tau, p) for i in range(len(q))]
     for k, b in enumerate(batched):
         np.testing.assert_array_equal(b, np.array([s[k] for s in singles]))
-    flight_singles = np.array([it.flight_step(x, v, tau, p)[0] for x, v in zip(q, qd)])
-    np.testing.assert_array_equal(it.flight_step(q, qd, tau, p)[0], flight_singles)
+    flight_singles = np.array([dyn.flight_step(x, v, tau, p)[0] for x, v in zip(q, qd)])
+    np.testing.assert_array_equal(dyn.flight_step(q, qd, tau, p)[0], flight_singles)
 
 
 def test_step_inplace_equals_stance_step():
     """The env's low-level entry point is the same computation as the checked wrapper."""
     p = random_params(np.random.default_rng(22))
     q, qd, tau, anchor = random_batch(p, np.random.default_rng(23), (6,))
-    q, qd = it.project_stance(q, qd, p, anchor)
-    expected = it.stance_step(q, qd, tau, p, anchor=anchor)
+    q, qd = dyn.project_stance(q, qd, p, anchor)
+    expected = dyn.stance_step(q, qd, tau, p, anchor=anchor)
     q_io, qd_io, lam = q.copy(), qd.copy(), np.empty((6, 2))
-    it.step_inplace(q_io, qd_io, tau, p.array, anchor, it.DT, it.SUBSTEPS, it.MAX_ANGLE, True, lam)
+    dyn.step_inplace(q_io, qd_io, tau, p.array, anchor, dyn.DT, dyn.SUBSTEPS, dyn.MAX_ANGLE, True, lam)
     for a, b in zip((q_io, qd_io, lam), expected):
         np.testing.assert_array_equal(a, b)
 
@@ -305,16 +304,16 @@ def test_step_inplace_reads_no_load_past_an_11_entry_parameter_array():
     zero load do; another length is a ValueError."""
     p = random_params(np.random.default_rng(24))
     q, qd, tau, anchor = random_batch(p, np.random.default_rng(25), (4,))
-    q, qd = it.project_stance(q, qd, p, anchor)
-    expected = it.stance_step(q, qd, tau, p, anchor=anchor)
+    q, qd = dyn.project_stance(q, qd, p, anchor)
+    expected = dyn.stance_step(q, qd, tau, p, anchor=anchor)
     buffer = np.append(p.array, 1e4)  # a 10 kN "load" right after the 11 parameters
     for params in (buffer[:11], dyn.params_array(p)):
         q_io, qd_io, lam = q.copy(), qd.copy(), np.empty((4, 2))
-        it.step_inplace(q_io, qd_io, tau, params, anchor, it.DT, it.SUBSTEPS, it.MAX_ANGLE, True, lam)
+        dyn.step_inplace(q_io, qd_io, tau, params, anchor, dyn.DT, dyn.SUBSTEPS, dyn.MAX_ANGLE, True, lam)
         for a, b in zip((q_io, qd_io, lam), expected):
             np.testing.assert_array_equal(a, b)
     with pytest.raises(ValueError, match="11 values"):
-        it.step_inplace(q.copy(), qd.copy(), tau, p.array[:10], anchor, it.DT, it.SUBSTEPS, it.MAX_ANGLE, True, np.empty((4, 2)))
+        dyn.step_inplace(q.copy(), qd.copy(), tau, p.array[:10], anchor, dyn.DT, dyn.SUBSTEPS, dyn.MAX_ANGLE, True, np.empty((4, 2)))
 
 
 # ----------------------------------------------------------------------------
@@ -329,7 +328,7 @@ def test_project_stance_puts_foot_on_anchor_with_zero_contact_velocity():
         q = np.concatenate([rng.uniform(-2.0, 2.0, 2), rng.uniform(-np.pi, np.pi, 3)])
         qd = rng.normal(0.0, 3.0, 5)
         anchor = rng.uniform(-1.0, 1.0, 2)
-        qp, qdp = it.project_stance(q, qd, p, anchor)
+        qp, qdp = dyn.project_stance(q, qd, p, anchor)
         np.testing.assert_allclose(dyn.foot_position(qp, p), anchor, rtol=0, atol=PROJECTION_TOL)
         np.testing.assert_allclose(dyn.contact_jacobian(qp, p) @ qdp, 0.0, rtol=0, atol=PROJECTION_TOL * 10)
         np.testing.assert_array_equal(qp[2:], q[2:])  # only the base moves
@@ -342,10 +341,10 @@ def test_project_velocity_is_the_euclidean_projection_onto_the_nullspace():
         p = random_params(rng)
         q = np.concatenate([rng.uniform(-2.0, 2.0, 2), rng.uniform(-np.pi, np.pi, 3)])
         qd = rng.normal(0.0, 3.0, 5)
-        qdp = it.project_velocity(q, qd, p)
+        qdp = dyn.project_velocity(q, qd, p)
         Jc = dyn.contact_jacobian(q, p)
         np.testing.assert_allclose(Jc @ qdp, 0.0, rtol=0, atol=PROJECTION_TOL * 10)
-        np.testing.assert_allclose(it.project_velocity(q, qdp, p), qdp, rtol=0, atol=PROJECTION_TOL * 10)
+        np.testing.assert_allclose(dyn.project_velocity(q, qdp, p), qdp, rtol=0, atol=PROJECTION_TOL * 10)
         # the removed part lies in the range of Jc^T, i.e. orthogonal to the nullspace
         removed = qd - qdp
         assert abs(removed @ qdp) <= PROJECTION_TOL * 10 * (1.0 + qd @ qd)
@@ -356,8 +355,8 @@ def test_project_velocity_batched():
     p = random_params(rng)
     q = rng.uniform(-np.pi, np.pi, (3, 4, 5))
     qd = rng.normal(0.0, 3.0, (3, 4, 5))
-    batched = it.project_velocity(q, qd, p)
-    singles = np.array([it.project_velocity(a, b, p) for a, b in zip(q.reshape(-1, 5), qd.reshape(-1, 5))])
+    batched = dyn.project_velocity(q, qd, p)
+    singles = np.array([dyn.project_velocity(a, b, p) for a, b in zip(q.reshape(-1, 5), qd.reshape(-1, 5))])
     np.testing.assert_allclose(batched.reshape(-1, 5), singles, rtol=1e-14, atol=1e-14)
 
 
@@ -386,7 +385,7 @@ def test_bad_step_arguments_raise(stepper, kwargs):
     p = LegParams()
     q, tau, _ = dyn.static_equilibrium(p)
     with pytest.raises(ValueError, match=next(iter(kwargs))):
-        getattr(it, stepper)(q, np.zeros(5), tau, p, **kwargs)
+        getattr(dyn, stepper)(q, np.zeros(5), tau, p, **kwargs)
 
 
 @pytest.mark.parametrize("stepper", ["stance_step", "flight_step"])
@@ -395,10 +394,10 @@ def test_wrong_shapes_raise(stepper):
     q, tau, _ = dyn.static_equilibrium(p)
     for args in ((q[:4], np.zeros(5), tau), (q, np.zeros(6), tau), (q, np.zeros(5), np.zeros(3))):
         with pytest.raises(ValueError):
-            getattr(it, stepper)(*args, p)
+            getattr(dyn, stepper)(*args, p)
     if stepper == "stance_step":
         with pytest.raises(ValueError):
-            it.stance_step(q, np.zeros(5), tau, p, anchor=np.zeros(3))
+            dyn.stance_step(q, np.zeros(5), tau, p, anchor=np.zeros(3))
 
 
 def test_single_robot_inputs_of_any_layout_agree():
@@ -406,10 +405,10 @@ def test_single_robot_inputs_of_any_layout_agree():
     p = LegParams()
     q, qd, tau = near_nominal(p, np.random.default_rng(27))
     anchor = dyn.foot_position(q, p)
-    expected = it.stance_step(q, qd, tau, p, anchor=anchor)
+    expected = dyn.stance_step(q, qd, tau, p, anchor=anchor)
     strided = np.zeros((5, 2))
     strided[:, 0] = q
     for args in ((list(q), list(qd), list(tau), list(anchor)), (strided[:, 0], qd, tau, anchor)):
-        got = it.stance_step(*args[:3], p, anchor=args[3])
+        got = dyn.stance_step(*args[:3], p, anchor=args[3])
         for a, b in zip(got, expected):
             np.testing.assert_array_equal(a, b)

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 import leg_env
-from leg_env.dynamics import stance_dynamics
-from leg_env.integrate import project_stance, stance_step
-from leg_env.params import LegParams
-from leg_env.task import StanceConfig
+from leg_env.physics.dynamics import stance_dynamics
+from leg_env.physics.integrate import project_stance, stance_step
+from leg_env.physics.params import LegParams
+from leg_env.tasks.base import StanceConfig
 from policies.lqr import STATE_INDEX, LQRController
 
 EPISODE_SEEDS = (10_000, 10_001, 10_002)

@@ -22,9 +22,9 @@ import pytest
 import hybrid_ref as H
 from contact_ref import terms
 from leg_env._core import kernels
-from leg_env import dynamics as dyn
-from leg_env.hybrid import hybrid_step
-from leg_env.params import LegParams
+from leg_env import physics as dyn
+from leg_env.physics.hybrid import hybrid_step
+from leg_env.physics.params import LegParams
 
 DT = 0.01
 LOADS = (-120.0, -35.0, 60.0, 150.0)  # [N]

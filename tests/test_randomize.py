@@ -10,11 +10,11 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import leg_env
-from leg_env.contact import mu_critical
-from leg_env.dynamics import static_equilibrium, stance_dynamics
-from leg_env.hybrid import hybrid_step
-from leg_env.integrate import stance_step
-from leg_env.params import PARAM_NAMES, LegParams
+from leg_env.physics.contact import mu_critical
+from leg_env.physics.dynamics import static_equilibrium, stance_dynamics
+from leg_env.physics.hybrid import hybrid_step
+from leg_env.physics.integrate import stance_step
+from leg_env.physics.params import PARAM_NAMES, LegParams
 from leg_env.randomize import DEFAULT_RANGES, FIELDS, MAX_DRAWS
 from test_tasks import _as_sync_info, _strings_as_objects
 from test_vector import SEED, STEPS, assert_same, random_actions
@@ -85,7 +85,7 @@ def test_randomised_vector_env_equals_sync_vector_env_of_single_envs(env_id, mod
 
 @pytest.mark.parametrize("contact", ["pinned", "unilateral"])
 def test_each_sub_env_runs_leg_env_dynamics_with_its_drawn_parameters(contact):
-    """A batch of different robots against stacked single calls of ``leg_env.dynamics`` / the integrators:
+    """A batch of different robots against stacked single calls of ``leg_env.physics.dynamics`` / the integrators:
     the start at each robot's own equilibrium and holding force, then one control step."""
     envs = gym.make_vec("leg_env/PlanarLegStance-v0", num_envs=N, randomize=True, contact=contact, reset_noise_scale=0.0)
     env = envs.unwrapped

@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from leg_env import ENV_ID, PlanarLegStanceEnv
+from leg_env import ENV_ID, LegEnv
 from leg_env.render import FEASIBLE, VIOLATED, draw
 
 SIZES = [(480, 480), (320, 200), (120, 360)]
@@ -58,7 +58,7 @@ def test_render_after_a_fall():
 
 
 def test_render_without_mode_warns_and_returns_none():
-    env = PlanarLegStanceEnv()
+    env = LegEnv()
     env.reset(seed=0)
     with pytest.warns(UserWarning, match="render_mode"):
         assert env.render() is None

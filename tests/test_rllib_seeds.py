@@ -75,7 +75,7 @@ def test_an_unnamed_batch_refuses_an_int_seed():
 
 def test_make_env_builds_the_native_batch_with_the_env_arguments():
     env = make_env({"env_id": leg_env.ENV_ID, "env_kwargs": {"contact": "unilateral"}, "num_envs": 3})
-    assert type(env.unwrapped).__name__ == "PlanarLegStanceVectorEnv"
+    assert type(env.unwrapped).__name__ == "LegVectorEnv"
     assert env.num_envs == 3 and env.single_observation_space.shape == (18,)
     with pytest.raises(ValueError, match="num_env"):
         make_env({"num_env": 3})

@@ -11,8 +11,14 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan, VecMonitor, VecNormalize
 
 import leg_env
-from leg_env.envs.vector import REWARD_KEYS, STATE_KEYS, PlanarLegStanceVectorEnv
+from leg_env.envs.vector import LegVectorEnv
+from leg_env.info import KEYS
+from leg_env.tasks.stance import TASK as STANCE
+
 from leg_env.sb3 import LegStanceVecEnv, make_sb3_vec_env
+
+REWARD_KEYS = STANCE.reward_keys
+STATE_KEYS = tuple(key for key, _ in KEYS)
 
 ENV_ID = leg_env.ENV_ID
 NUM_ENVS = 4
@@ -244,7 +250,7 @@ def test_ppo_trains_on_the_adapter():
 def test_seed_and_set_options_reach_the_next_reset():
     venv = make_sb3_vec_env(3)
     assert venv.seed(5) == [5, 6, 7]
-    twin = PlanarLegStanceVectorEnv(3)
+    twin = LegVectorEnv(3)
     np.testing.assert_array_equal(venv.reset(), twin.reset(seed=5)[0])
     np.testing.assert_array_equal(venv.reset(), twin.reset()[0])  # seeds are used once, then generators continue
     q = venv.env.nominal.q + np.array([0.0, 0.0, 0.05, -0.1, 0.2])
@@ -264,7 +270,7 @@ def test_attributes_and_methods_come_from_the_shared_batch():
         venv.set_attr("render_envs", 1, indices=[0])
     results = venv.env_method("reset", seed=1, indices=[1])  # one call on the batch, one result per index
     assert len(results) == 1
-    np.testing.assert_array_equal(results[0][0], PlanarLegStanceVectorEnv(3).reset(seed=1)[0])
+    np.testing.assert_array_equal(results[0][0], LegVectorEnv(3).reset(seed=1)[0])
     assert venv.env_is_wrapped(Monitor) == [False, False, False]
     venv.close()
 
@@ -281,7 +287,7 @@ def test_render_and_get_images():
 
 def test_needs_a_same_step_env():
     with pytest.raises(ValueError, match="SAME_STEP"):
-        LegStanceVecEnv(PlanarLegStanceVectorEnv(2))
+        LegStanceVecEnv(LegVectorEnv(2))
     with pytest.raises(TypeError):
         LegStanceVecEnv(gym.make(ENV_ID))
     with pytest.raises(ValueError):
@@ -290,7 +296,7 @@ def test_needs_a_same_step_env():
 
 def test_set_config_reaches_the_vector_env_by_env_method():
     """A curriculum's path (``train.callbacks.ConfigSchedule``): VecEnv.env_method to ``LegVectorEnv.set_config``."""
-    from leg_env.tasks.stance import Obs
+    from leg_env.tasks.base import Obs
 
     venv = make_sb3_vec_env(4, seed=0, env_id="leg_env/PlanarLegHop-v3", command_range=[0.02, 0.15])
     venv.env_method("set_config", command_range=(0.1, 0.1))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import leg_env  # noqa: F401  (registers the ids)
-from leg_env.tasks.stance import Obs
+from leg_env.tasks.base import Obs
 
 HOP = "leg_env/PlanarLegHop-v3"
 BALANCE = "leg_env/PlanarLegBalance-v0"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import leg_env  # noqa: F401  (registers the ids)
-from leg_env.dynamics import com_position
+from leg_env.physics.dynamics import com_position
 from policies.gated import GatedController
 from policies.lqr import LQRController
 from policies.recovery import com_from_observation

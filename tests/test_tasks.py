@@ -13,7 +13,7 @@ from gymnasium.utils.env_checker import check_env, data_equivalence
 from gymnasium.vector import AutoresetMode
 
 import leg_env
-from leg_env import dynamics as dyn
+from leg_env import physics as dyn
 from leg_env.tasks import REGISTRY
 
 NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegPush-v1", "leg_env/PlanarLegHop-v0", "leg_env/PlanarLegHop-v1",
@@ -384,7 +384,7 @@ def test_hop_v1_pays_the_height_term_in_flight_and_the_alive_bonus_while_hopping
     start, recomputed here from the contact modes and flight times) is at most ``max_ground_time``; entries 19 and
     20 are the COM's x from its start and the ground time. The episodes: random torques with knee kicks, standing
     first or not; a throw (its landing is not held: it falls within 0.1 s); the model-based hopper's hops."""
-    from leg_env.tasks.stance import Obs
+    from leg_env.tasks.base import Obs
     from policies.hopper import HopperController
 
     v0, v1 = (gym.make(f"leg_env/PlanarLegHop-v{k}", reset_noise_scale=0.002).unwrapped for k in (0, version))
@@ -456,7 +456,7 @@ def test_hop_v3_pays_the_last_landed_hops_apex_at_every_step_while_hopping():
     most ``max_ground_time``, and never on a step that falls; before the first landed hop it is 0. Flights shorter
     than a hop change nothing. Modelled here step by step from the contact modes, flight times and the COM, over
     random torques with knee kicks, standing, a throw, and the model-based hopper (``_probe_action``)."""
-    from leg_env.tasks.stance import Obs
+    from leg_env.tasks.base import Obs
     from policies.hopper import HopperController
 
     registered = gym.make("leg_env/PlanarLegHop-v3").unwrapped.config

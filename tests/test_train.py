@@ -716,7 +716,7 @@ def test_a_curriculum_moves_the_commands_of_the_training_episodes():
     from stable_baselines3.common.callbacks import BaseCallback
 
     from leg_env.sb3 import make_sb3_vec_env
-    from leg_env.tasks.stance import Obs
+    from leg_env.tasks.base import Obs
     from train.callbacks import ConfigSchedule
 
     venv = make_sb3_vec_env(16, seed=0, env_id="leg_env/PlanarLegHop-v3", per_env_info=False, command_range=[0.02, 0.15])
@@ -765,7 +765,7 @@ class FirstCommands(BaseCallback):
     seen: list = []
 
     def _on_training_start(self) -> None:
-        from leg_env.tasks.stance import Obs
+        from leg_env.tasks.base import Obs
 
         env = self.training_env
         obs = env.get_original_obs() if hasattr(env, "get_original_obs") else self.model._last_obs
@@ -878,7 +878,7 @@ def _curriculum(**kwargs):
 
 
 def _observe(curriculum, apex, command, dones):
-    from leg_env.tasks.stance import Obs
+    from leg_env.tasks.base import Obs
 
     obs = np.zeros((len(apex), 22), dtype=np.float32)
     obs[:, Obs.last_apex], obs[:, Obs.command] = apex, command
@@ -959,7 +959,7 @@ def test_command_gains_are_the_observation_and_its_products_with_the_command():
     import gymnasium as gym
     import torch
 
-    from leg_env.tasks.stance import Obs
+    from leg_env.tasks.base import Obs
     from train.features import CommandGains
 
     space = gym.spaces.Box(-np.inf, np.inf, (22,), np.float32)

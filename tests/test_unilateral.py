@@ -16,10 +16,10 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import leg_env
-from leg_env import dynamics as dyn
-from leg_env.contact import STICK
-from leg_env.hybrid import LOG_SIZE, MAX_EVENTS, hybrid_step
-from leg_env.params import LegParams
+from leg_env import physics as dyn
+from leg_env.physics.contact import STICK
+from leg_env.physics.hybrid import LOG_SIZE, MAX_EVENTS, hybrid_step
+from leg_env.physics.params import LegParams
 
 UNI = {"contact": "unilateral"}
 ENERGY_RTOL = 1e-6  # energy balance over 10 s, relative to the initial energy

@@ -12,8 +12,11 @@ from gymnasium.utils.env_checker import data_equivalence
 from gymnasium.vector import AutoresetMode
 
 import leg_env
-from leg_env.envs.stance import PlanarLegStanceEnv
-from leg_env.envs.vector import REWARD_KEYS, PlanarLegStanceVectorEnv
+from leg_env.envs.single import LegEnv
+from leg_env.envs.vector import LegVectorEnv
+from leg_env.tasks.stance import TASK as STANCE
+
+REWARD_KEYS = STANCE.reward_keys
 
 ENV_ID = leg_env.ENV_ID
 NUM_ENVS = 4
@@ -61,7 +64,7 @@ def as_sync_info(info: dict) -> dict:
 @pytest.mark.filterwarnings("error", "ignore:.*PlanarLegStance-v0 is out of date:DeprecationWarning")
 def test_make_vec_uses_the_native_class_by_default():
     envs = gym.make_vec(ENV_ID, num_envs=3)
-    assert type(envs) is PlanarLegStanceVectorEnv
+    assert type(envs) is LegVectorEnv
     assert envs.num_envs == 3 and envs.max_episode_steps == 1000
     assert envs.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
     assert envs.spec.id == ENV_ID
@@ -71,7 +74,7 @@ def test_make_vec_uses_the_native_class_by_default():
 
 
 def test_spaces_and_metadata_match_the_single_env():
-    envs = PlanarLegStanceVectorEnv(5, **ENV_KWARGS)
+    envs = LegVectorEnv(5, **ENV_KWARGS)
     single = gym.make(ENV_ID, **ENV_KWARGS)
     assert envs.single_observation_space == single.observation_space
     assert envs.single_action_space == single.action_space
@@ -97,12 +100,12 @@ def test_spaces_and_metadata_match_the_single_env():
 def test_bad_arguments_raise(kwargs):
     kwargs = {"num_envs": 2, **kwargs}
     with pytest.raises(ValueError):
-        PlanarLegStanceVectorEnv(**kwargs)
+        LegVectorEnv(**kwargs)
 
 
 def test_unknown_keyword_argument_is_a_type_error():
     with pytest.raises(TypeError, match="unexpected keyword argument 'not_a_setting'"):
-        PlanarLegStanceVectorEnv(2, not_a_setting=1.0)
+        LegVectorEnv(2, not_a_setting=1.0)
 
 
 # ------------------------------------------------------------------ parity
@@ -111,7 +114,7 @@ def test_unknown_keyword_argument_is_a_type_error():
 @pytest.mark.parametrize("mode", AUTORESET_MODES)
 def test_sub_env_i_is_a_single_env_seeded_seed_plus_i(mode):
     """The bar: each row matches a single env (TimeLimit) reset with seed + i, across autoresets."""
-    envs = PlanarLegStanceVectorEnv(NUM_ENVS, autoreset_mode=mode, max_episode_steps=MAX_STEPS, **ENV_KWARGS)
+    envs = LegVectorEnv(NUM_ENVS, autoreset_mode=mode, max_episode_steps=MAX_STEPS, **ENV_KWARGS)
     singles = [gym.make(ENV_ID, max_episode_steps=MAX_STEPS, **ENV_KWARGS) for _ in range(NUM_ENVS)]
     obs, _ = envs.reset(seed=SEED)
     for i, env in enumerate(singles):
@@ -210,7 +213,7 @@ def test_gymnasium_vector_wrappers_see_the_same_episodes():
 
 
 def test_reward_is_the_sum_of_its_terms_and_truncation_is_at_the_limit():
-    hold = PlanarLegStanceVectorEnv(3, max_episode_steps=10, reset_noise_scale=0.0)
+    hold = LegVectorEnv(3, max_episode_steps=10, reset_noise_scale=0.0)
     obs, _ = hold.reset(seed=0)
     action = np.tile(hold.nominal.tau / np.asarray(hold.config.torque_limit), (3, 1))
     for t in range(1, 31):
@@ -222,7 +225,7 @@ def test_reward_is_the_sum_of_its_terms_and_truncation_is_at_the_limit():
 
 
 def test_seeding_is_reproducible():
-    a, b = PlanarLegStanceVectorEnv(3, **ENV_KWARGS), PlanarLegStanceVectorEnv(3, **ENV_KWARGS)
+    a, b = LegVectorEnv(3, **ENV_KWARGS), LegVectorEnv(3, **ENV_KWARGS)
     obs_a, _ = a.reset(seed=5)
     obs_b, _ = b.reset(seed=[5, 6, 7])
     np.testing.assert_array_equal(obs_a, obs_b)
@@ -233,13 +236,13 @@ def test_seeding_is_reproducible():
     assert_same(a.reset(), b.reset(), "unseeded reset")
     obs_c, _ = a.reset(seed=6)
     np.testing.assert_array_equal(obs_c[:2], obs_b[1:])
-    fresh = [PlanarLegStanceVectorEnv(3).reset()[0] for _ in range(2)]
+    fresh = [LegVectorEnv(3).reset()[0] for _ in range(2)]
     assert not np.array_equal(*fresh)
 
 
 def test_explicit_start_state_and_reset_mask():
-    envs = PlanarLegStanceVectorEnv(3)
-    single = PlanarLegStanceEnv()
+    envs = LegVectorEnv(3)
+    single = LegEnv()
     q = single.nominal.q + np.array([0.0, 0.0, 0.05, -0.1, 0.2])
     qd = np.array([0.0, 0.0, 0.1, 0.0, -0.2])
     obs, info = envs.reset(options={"qpos": q, "qvel": qd})
@@ -272,7 +275,7 @@ def test_explicit_start_state_and_reset_mask():
     ],
 )
 def test_bad_actions_raise_and_leave_the_state_untouched(actions, match):
-    envs, twin = PlanarLegStanceVectorEnv(4), PlanarLegStanceVectorEnv(4)
+    envs, twin = LegVectorEnv(4), LegVectorEnv(4)
     envs.reset(seed=3)
     twin.reset(seed=3)
     with pytest.raises(ValueError, match=match):
@@ -285,7 +288,7 @@ def test_bad_actions_raise_and_leave_the_state_untouched(actions, match):
 
 
 def test_pickle_keeps_arguments_and_state():
-    envs = PlanarLegStanceVectorEnv(3, autoreset_mode=AutoresetMode.SAME_STEP, max_episode_steps=9, **ENV_KWARGS)
+    envs = LegVectorEnv(3, autoreset_mode=AutoresetMode.SAME_STEP, max_episode_steps=9, **ENV_KWARGS)
     envs.reset(seed=4)
     actions = random_actions(40, 3)
     for a in actions[:20]:
@@ -299,7 +302,7 @@ def test_pickle_keeps_arguments_and_state():
 def test_bit_generator_rows_draw_what_python_draws():
     """Compiled draws equal ``rng.random`` and advance the generators alike; other bit generators
     fall back to Python; pickling keeps the streams."""
-    from leg_env.task import BitGeneratorRows
+    from leg_env.envs.generators import BitGeneratorRows
 
     def gens():
         return [np.random.Generator(np.random.PCG64(s)) for s in range(5)] + [np.random.Generator(np.random.Philox(9))]
@@ -324,8 +327,8 @@ def test_bit_generator_rows_draw_what_python_draws():
 
 
 def test_rgb_array_frames_of_the_first_sub_envs():
-    envs = PlanarLegStanceVectorEnv(5, render_mode="rgb_array", width=160, height=120, render_envs=3)
-    single = PlanarLegStanceEnv(render_mode="rgb_array", width=160, height=120)
+    envs = LegVectorEnv(5, render_mode="rgb_array", width=160, height=120, render_envs=3)
+    single = LegEnv(render_mode="rgb_array", width=160, height=120)
     envs.reset(seed=0)
     single.reset(seed=1)
     frames = envs.render()
@@ -335,7 +338,7 @@ def test_rgb_array_frames_of_the_first_sub_envs():
         assert frame.std() > 10.0  # not blank
     np.testing.assert_array_equal(frames[1], single.render())
     with pytest.warns(UserWarning, match="render_mode"):
-        assert PlanarLegStanceVectorEnv(2).render() is None
+        assert LegVectorEnv(2).render() is None
 
 
 # ------------------------------------------------------------------- threads
@@ -368,7 +371,7 @@ def test_threaded_kernel_is_bitwise_the_serial_one():
 @pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2", 10_000])
 def test_bad_num_threads_raise(bad):
     with pytest.raises(ValueError, match="num_threads"):
-        PlanarLegStanceVectorEnv(num_envs=2, num_threads=bad)
+        LegVectorEnv(num_envs=2, num_threads=bad)
 
 
 def test_np_random_seed_and_reset_mask_errors_follow_sync_vector_env():
@@ -401,7 +404,7 @@ def test_info_names_each_contact_mode_and_refuses_a_corrupt_one_without_writing_
     """The compiled info pass writes each robot's mode as its name; a mode outside 0..3 in ``out`` (a corrupted
     array) is a ValueError, and bad name buffers are refused by name, never a crash."""
     from leg_env._core import kernels
-    from leg_env.contact import MODE_NAMES
+    from leg_env.physics.contact import MODE_NAMES
     from leg_env.info import _MODE_CODES
 
     envs = gym.make_vec("leg_env/PlanarLegBalance-v0", num_envs=4)

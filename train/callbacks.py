@@ -577,7 +577,7 @@ class CommandCurriculum(BaseCallback):
         self._rollout = []
 
     def _on_step(self) -> bool:
-        from leg_env.tasks.stance import Obs
+        from leg_env.tasks.base import Obs
 
         obs = self.training_env.get_original_obs() if isinstance(self.training_env, VecNormalize) else self.locals["new_obs"]
         apex, command = obs[:, Obs.last_apex], obs[:, Obs.command]

@@ -50,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from leg_env import ENDINGS, ENV_ID  # importing leg_env registers the env
-from leg_env.tasks.stance import Obs
+from leg_env.tasks.base import Obs
 from train.cli import parse_args
 from train.policy_loading import BASELINES, PolicyLoadError, PolicyNotFoundError, TrainedPolicy, load_policy
 

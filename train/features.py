@@ -23,7 +23,7 @@ class CommandGains(BaseFeaturesExtractor):
 
     Args:
         observation_space: a flat ``Box`` observation space.
-        command: the index of the command entry (by default the hop task's, ``leg_env.tasks.stance.Obs.command``).
+        command: the index of the command entry (by default the hop task's, ``leg_env.tasks.base.Obs.command``).
             With ``VecNormalize`` the command the products see is the normalised one, centred on the commands'
             mean.
 
@@ -36,7 +36,7 @@ class CommandGains(BaseFeaturesExtractor):
         if not isinstance(observation_space, gym.spaces.Box) or len(observation_space.shape) != 1:
             raise TypeError(f"CommandGains needs a flat Box observation space, got {observation_space}")
         if command is None:
-            from leg_env.tasks.stance import Obs
+            from leg_env.tasks.base import Obs
 
             command = int(Obs.command)
         if isinstance(command, bool) or not isinstance(command, int):

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from leg_env.tasks.stance import Obs
+from leg_env.tasks.base import Obs
 
 __all__ = ["HopTracker", "is_push_task", "push_survival", "largest_survived_impulse", "LONG_FLIGHT", "COMMAND_BANDS"]
 
@@ -54,8 +54,8 @@ class HopTracker:
 
     def start(self, envs, obs, info: dict) -> None:
         """New episodes from the batch's reset ``obs`` ``(N, n)`` and ``info`` (the COM comes from ``info``)."""
-        from leg_env.dynamics import com_position
-        from leg_env.tasks.stance import nominal_state
+        from leg_env.physics.dynamics import com_position
+        from leg_env.tasks.base import nominal_state
 
         params, config = envs.params, envs.config
         self._command_range = tuple(float(c) for c in config.command_range)

@@ -6,7 +6,7 @@
  *   th1 = th_b + q1, th2 = th1 + q2.  M(q) qdd + h(q, qd) = S^T tau + Jc^T lam, h holding Coriolis,
  *   centrifugal and gravity terms; lam = [lam_x, lam_y] is the ground's force on the foot.
  *
- * Every layout here is mirrored once by a numpy dtype in leg_env/layout.py, which checks the field
+ * Every layout here is mirrored once by a numpy dtype in leg_env/physics/layout.py, which checks the field
  * names, offsets and sizes against leg_core_layouts() (module.c) at import.
  */
 #ifndef LEG_ROBOT_H

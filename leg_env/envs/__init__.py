@@ -1,8 +1,6 @@
 """The Gymnasium environments, generic over the task: one robot (``single``) and a native batch (``vector``)."""
 
-from .stance import PlanarLegStanceEnv
-
-__all__ = ["LegEnv", "LegVectorEnv", "PlanarLegStanceEnv", "PlanarLegStanceVectorEnv"]
+__all__ = ["LegEnv", "LegVectorEnv"]
 
 
 def __getattr__(name: str):
@@ -10,8 +8,8 @@ def __getattr__(name: str):
         from .single import LegEnv
 
         return LegEnv
-    if name in ("LegVectorEnv", "PlanarLegStanceVectorEnv"):
-        from . import vector
+    if name == "LegVectorEnv":
+        from .vector import LegVectorEnv
 
-        return getattr(vector, name)
+        return LegVectorEnv
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import warnings
 
-__all__ = ["single_stance", "vector_stance"]
+__all__ = ["single", "vector"]
 
 
 def _warn(alias: tuple[str, str]) -> None:
@@ -20,17 +20,17 @@ def _warn(alias: tuple[str, str]) -> None:
     )
 
 
-def single_stance(_alias: tuple[str, str], **kwargs):
-    """The balance task's single env, made by a deprecated id."""
-    from .stance import PlanarLegStanceEnv
+def single(_alias: tuple[str, str], **kwargs):
+    """The current id's single env, made by a deprecated id."""
+    from .single import LegEnv
 
     _warn(_alias)
-    return PlanarLegStanceEnv(**kwargs)
+    return LegEnv(**kwargs)
 
 
-def vector_stance(_alias: tuple[str, str], **kwargs):
-    """The balance task's vector env, made by a deprecated id."""
-    from .vector import PlanarLegStanceVectorEnv
+def vector(_alias: tuple[str, str], **kwargs):
+    """The current id's vector env, made by a deprecated id."""
+    from .vector import LegVectorEnv
 
     _warn(_alias)
-    return PlanarLegStanceVectorEnv(**kwargs)
+    return LegVectorEnv(**kwargs)

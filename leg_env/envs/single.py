@@ -10,14 +10,14 @@ import numpy as np
 from gymnasium import spaces
 
 from .. import checks
-from ..dynamics import foot_position
-from ..params import PARAM_NAMES, LegParams
-from ..hybrid import GROUND_TOL
+from ..physics.dynamics import foot_position
+from ..physics.hybrid import GROUND_TOL
+from ..physics.params import PARAM_NAMES, LegParams
 from .. import tasks
 from .._core import kernels
 from ..info import InfoBuilder
 from ..randomize import Robots, params_of_row, posture_limits
-from ..tasks.stance import StanceConfig, nominal_state, robot_row
+from ..tasks.base import StanceConfig, nominal_state, robot_row
 
 __all__ = ["LegEnv"]
 
@@ -37,7 +37,6 @@ class LegEnv(gym.Env):
     ``task`` names the task module (``"stance"``, ``"push"``); its docstring documents spaces, rewards,
     termination and arguments. Everything here (argument checks, reset, step, info, rendering,
     pickling) is shared by every task: the task enters only through its ``leg_env.tasks.base.Task``.
-    ``PlanarLegStanceEnv`` is this class for the balance task, with that task's documentation.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 100}
@@ -70,7 +69,7 @@ class LegEnv(gym.Env):
 
         self.unilateral = self.config.contact == "unilateral"
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
-        # the compiled core's arrays (leg_env.layout), one row, shared with nothing; _bind() hands them to C
+        # the compiled core's arrays (leg_env.physics.layout), one row, shared with nothing; _bind() hands them to C
         self._robots = robot_row(self.params, self.config, self.nominal)
         self.robots = Robots(randomize, self._robots, self.config)  # leg_env.randomize
         self.observation_space = self.task.observation_space(self.robots.longest(self.params), self.config)
@@ -296,7 +295,7 @@ def checked_config_change(env, observation_space: spaces.Box, changes: dict):
 
 
 def robot_of_row(row) -> tuple[LegParams, float]:
-    """The ``LegParams`` and friction coefficient of a robot (a row of ``leg_env.layout.ROBOT``)."""
+    """The ``LegParams`` and friction coefficient of a robot (a row of ``leg_env.physics.layout.ROBOT``)."""
     return LegParams(**dict(zip(PARAM_NAMES, row["p"].item()))), float(row["mu"])
 
 

@@ -1,13 +1,13 @@
-"""``leg_env/PlanarLegStance-v0`` as a natively batched ``gymnasium.vector.VectorEnv``.
+"""Every task as a natively batched ``gymnasium.vector.VectorEnv``.
 
-``gymnasium.make_vec("leg_env/PlanarLegStance-v0", num_envs=N)`` builds this class (it is the id's
-``vector_entry_point``). One call of the compiled core advances all N robots (``Task.step``: the physics of
-``leg_env.step.physics_range`` and the task's ``assess``, block by block), the same kernels the single
+``gymnasium.make_vec(id, num_envs=N)`` builds this class (it is every id's ``vector_entry_point``). One call
+of the compiled core advances all N robots (``Task.step``: the control step and the task's ``assess``, block by
+block), the same kernels the single
 environment calls with N = 1, and resets build their
 start states with the same task ``start`` kernel (the noise, and with ``randomize`` the robot, drawn in
 compiled code from each sub-env's own generator, ``BitGeneratorRows``, the same numbers as ``rng.random``):
 sub-env ``i`` of a batch reset with
-``seed=s`` is exactly a ``PlanarLegStanceEnv`` reset with ``seed=s + i`` under ``TimeLimit``, step for
+``seed=s`` is exactly a ``LegEnv`` reset with ``seed=s + i`` under ``TimeLimit``, step for
 step and across autoresets. Observations, rewards, terminations, truncations and ``info`` (keys,
 values and ``_key`` masks) equal, bit for bit, those of ``gymnasium.vector.SyncVectorEnv`` over N
 single environments in the same autoreset mode, with one deliberate difference: on a step where
@@ -28,23 +28,16 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .. import checks
-from ..params import LegParams
+from ..physics.params import LegParams
 from .. import tasks
-from ..info import KEYS, InfoBuilder
-from ..layout import put_rows, take_rows
+from ..info import InfoBuilder
+from ..physics.layout import put_rows, take_rows
 from ..randomize import FIELD_COLUMNS, FIELDS
-from ..step import BitGeneratorRows
-from ..tasks.stance import REWARD_TERMS, StanceConfig
+from .generators import BitGeneratorRows
+from ..tasks.base import StanceConfig
 from .single import LegEnv, checked_config_change, explicit_start, render_marks, robot_of_row, start_anchor
 
-__all__ = ["LegVectorEnv", "PlanarLegStanceVectorEnv", "REWARD_KEYS", "STATE_KEYS"]
-
-REWARD_KEYS = tuple(f"reward_{name}" for name in REWARD_TERMS)
-"""``info`` keys of the balance task's reward terms (after a step only); they sum to the reward
-(a task's own: ``env.reward_keys``)."""
-STATE_KEYS = tuple(key for key, _ in KEYS)
-"""``info`` keys of every task after both ``reset`` and ``step``, as in the single environment (``leg_env.info``;
-an env's own, with those of its ground and task: ``state_keys``)."""
+__all__ = ["LegVectorEnv"]
 
 _RESET_OPTIONS = ("qpos", "qvel", "reset_mask", "params")
 MAX_ENVS = 2**31 - 1  # bound of num_envs and render_envs
@@ -57,7 +50,7 @@ class LegVectorEnv(VectorEnv):
     r"""N independent copies of ``LegEnv`` (any task; ``task`` names it), stepped by batched kernel calls.
 
     Everything about a sub-environment (dynamics, observation, reward terms, termination, ``info``,
-    constructor arguments, spaces) is documented on ``leg_env.envs.stance.PlanarLegStanceEnv`` and
+    constructor arguments, spaces) is documented in its task's module (``leg_env.tasks.<task>``) and
     is computed by the same code; this class adds batching, the time limit and autoreset.
 
     ## Spaces
@@ -188,7 +181,7 @@ class LegVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, n)
         self.action_space = batch_space(self.single_action_space, n)
 
-        # the compiled core's arrays (leg_env.layout), row i is sub-env i; _bind() makes the views
+        # the compiled core's arrays (leg_env.physics.layout), row i is sub-env i; _bind() makes the views
         # one robot for every row, or a row per robot when robots are drawn or set by a reset
         self._robots = np.repeat(self.robots.base, n if self.robots.active else 1)
         self._custom = np.zeros(n, dtype=np.bool_)  # rows whose robot is not the nominal one
@@ -609,9 +602,3 @@ def _some(rows: np.ndarray, limit: int = 10) -> str:
     shown = rows[:limit].tolist()
     return f"{shown}{' ...' if rows.size > limit else ''}"
 
-
-class PlanarLegStanceVectorEnv(LegVectorEnv):
-    """``LegVectorEnv`` of the balance task (``leg_env/PlanarLegStance-v0``'s ``vector_entry_point``)."""
-
-    def __init__(self, num_envs: int = 1, render_mode: str | None = None, params=None, config=None, **kwargs: Any):
-        super().__init__(num_envs, render_mode, params, config, task="stance", **kwargs)

@@ -62,7 +62,7 @@ first hop).
 
 Flight is the task, so it is not charged. **Unilateral violation** here means what it means on the
 unilateral ground of ``PlanarLegStance``: ``info["unilateral_violation"]`` (``lam_y < 0``) and
-``friction_violation`` can only come from a Zeno settle or a Painleve jam (``leg_env.hybrid``); the ground
+``friction_violation`` can only come from a Zeno settle or a Painleve jam (``leg_env.physics.hybrid``); the ground
 never pulls. ``info["flight_time"]``, ``impulse`` and the event counts describe the hops.
 
 ## Starting State, Episode End
@@ -224,9 +224,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import checks
-from ..layout import state_dtype
-from .base import Task
-from .stance import OBS_DIM_UNILATERAL, StanceConfig, observation_space as _stance_space
+from ..physics.layout import state_dtype
+from .base import OBS_DIM_UNILATERAL, StanceConfig, Task, observation_space as _stance_space
 
 __all__ = ["HopConfig", "TASK", "REWARD_TERMS", "OBS_DIM"]
 

@@ -1,7 +1,7 @@
 r"""``leg_env/PlanarLegPush-v0``, ``-v1``: recover from horizontal pushes on the torso, on the unilateral ground.
 
 ## Description
-The robot, the physics and the balance task of ``PlanarLegStance`` (``leg_env.envs.stance``), on the exact
+The robot, the physics and the balance task of ``PlanarLegStance`` (``leg_env.tasks.stance``), on the exact
 unilateral ground (``contact="unilateral"`` by default), with unannounced horizontal pushes on the torso's
 centre of mass. A push is a force ``F`` along ``x`` at the torso's COM, held over whole control steps:
 
@@ -9,8 +9,8 @@ centre of mass. A push is a force ``F`` along ``x`` at the torso's COM, held ove
 
 ``J_b = d(x_b, y_b)/dq = [I_2 0]``: the hip, and so the base point, sits at the torso's COM, so the push is
 a generalised force on the base coordinates only and exerts no torque on the torso about its COM
-(``leg_env.dynamics``). It enters every contact mode's dynamics, the located events and the mode choice
-(``leg_env.hybrid``); the step's accumulators book its work ``F (x_b(end) - x_b(start))`` (exact: ``F`` is
+(``leg_env.physics.dynamics``). It enters every contact mode's dynamics, the located events and the mode choice
+(``leg_env.physics.hybrid``); the step's accumulators book its work ``F (x_b(end) - x_b(start))`` (exact: ``F`` is
 constant over the step and ``x_b`` continuous through impacts), so that
 ``energy(t) - energy(0) = sum(work_actuators + work_push - dissipation_slip - dissipation_impacts)``.
 
@@ -157,10 +157,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import checks, layout
+from .. import checks
 from .._core import kernels
-from .base import Task
-from .stance import REWARD_TERMS as _STANCE_TERMS, StanceConfig, observation_space as _stance_space
+from ..physics import layout
+from .base import StanceConfig, Task, observation_space as _stance_space
+from .stance import REWARD_TERMS as _STANCE_TERMS
 
 __all__ = ["PushConfig", "TASK", "MAX_PUSHES", "REWARD_TERMS", "INFO_NAMES", "OBS_COM_DRIFT"]
 

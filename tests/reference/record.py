@@ -37,14 +37,14 @@ window and its counts of flight, slip, impact and event steps):
 2. ``vector``: ``gymnasium.make_vec(id, num_envs=8, vectorization_mode="vector_entry_point")`` for every id, and
    Stance-v1 with ``randomize=True``; reset with a seed, 150 steps of pre-drawn uniform actions; obs, rewards,
    terminations, truncations (autoresets included).
-3. ``hybrid``: ``leg_env.hybrid.hybrid_step`` on 64 random robots' states (default ``LegParams``; the nominal
+3. ``hybrid``: ``leg_env.physics.hybrid.hybrid_step`` on 64 random robots' states (default ``LegParams``; the nominal
    posture with the joints perturbed, the foot on the ground or up to 5 cm above it, random velocities; ``mu``
    uniform in [0.3, 0.9]) for 200 control steps under piecewise-constant random torques around the holding
    torques, feeding back ``q, qd, mode, anchor_x``; every ``HybridStep`` field of every step (each step's start is
    the previous step's end: ``runners.chain_starts``). Robots whose chain leaves the foot below the ground, which
    the numba implementation does in a corner case (``below_ground``), are redrawn (one was).
-   ``stance``, ``flight``: ``leg_env.integrate.stance_step`` (foot pinned at its start) and ``flight_step`` on 16
-   perturbed equilibria (``leg_env.dynamics.static_equilibrium``) for 200 steps of torques around the holding
+   ``stance``, ``flight``: ``leg_env.physics.integrate.stance_step`` (foot pinned at its start) and ``flight_step`` on 16
+   perturbed equilibria (``leg_env.physics.dynamics.static_equilibrium``) for 200 steps of torques around the holding
    torques.
 4. ``policy``: the controllers of ``policies/`` on their tasks (``lqr`` on Stance-v0 and Stance-v1, ``gated`` on
    Stance-v1, ``hopper`` on Hop-v0, ``stepping`` on Push-v0) and the shipped SB3 policies (``policies/ppo_stance``,
@@ -231,7 +231,7 @@ def hybrid_robot(rng: np.random.Generator, p, q_nom, tau_hold, lifted: bool):
     """One robot of the ``hybrid`` group: joints perturbed about the nominal posture, the foot on the ground or up
     to 5 cm above it, random velocities, ``mu`` in [0.3, 0.9], and piecewise-constant torques: the holding torques
     plus uniform +-40 N m, each entry redrawn after 1 to 12 steps."""
-    from leg_env.dynamics import foot_position
+    from leg_env.physics.dynamics import foot_position
 
     q = q_nom.copy()
     q[2] += rng.uniform(-0.2, 0.2)
@@ -262,8 +262,8 @@ def below_ground(q0, qd0, taus, mu, p) -> np.ndarray:
     the step's start; if the foot comes back down within the step, the touchdown witness (``y_f`` going from
     ``>= 0`` to ``< 0``) never fires, since it started below zero, and the step ends with the foot 1e-5 m below
     the ground and no event. Such robots are redrawn: the reference holds well-defined steps only."""
-    from leg_env.dynamics import foot_position
-    from leg_env.hybrid import GROUND_TOL, hybrid_step
+    from leg_env.physics.dynamics import foot_position
+    from leg_env.physics.hybrid import GROUND_TOL, hybrid_step
 
     bad = np.zeros(len(q0), dtype=bool)
     for factor in (None, 34):
@@ -285,8 +285,8 @@ def below_ground(q0, qd0, taus, mu, p) -> np.ndarray:
 def hybrid_inputs(rng: np.random.Generator):
     """64 robots (``hybrid_robot``), half with the foot on the ground, half lifted; robots whose chain ends with
     the foot below the ground (``below_ground``) are redrawn. Returns ``p, q0, qd0, mu, taus, redrawn``."""
-    from leg_env.dynamics import static_equilibrium
-    from leg_env.params import LegParams
+    from leg_env.physics.dynamics import static_equilibrium
+    from leg_env.physics.params import LegParams
 
     p = LegParams()
     q_nom, tau_hold, _ = static_equilibrium(p)
@@ -364,8 +364,8 @@ def record_hybrid(data: dict, meta: dict) -> None:
 
 
 def pinned_inputs(rng: np.random.Generator, n: int):
-    from leg_env.dynamics import static_equilibrium
-    from leg_env.params import LegParams
+    from leg_env.physics.dynamics import static_equilibrium
+    from leg_env.physics.params import LegParams
 
     p = LegParams()
     q_nom, tau_hold, _ = static_equilibrium(p)
@@ -378,8 +378,8 @@ def pinned_inputs(rng: np.random.Generator, n: int):
 
 
 def record_pinned(data: dict, meta: dict) -> None:
-    from leg_env.dynamics import foot_position
-    from leg_env.integrate import flight_step, project_stance, stance_step
+    from leg_env.physics.dynamics import foot_position
+    from leg_env.physics.integrate import flight_step, project_stance, stance_step
 
     for name, step, seed in (("stance", stance_step, 41), ("flight", flight_step, 42)):
         p, q0, qd0, taus = pinned_inputs(np.random.default_rng(seed), N_PINNED)

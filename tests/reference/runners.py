@@ -2,8 +2,8 @@
 
 Both sides call these functions, so a recording and its replay run the same driver code; only the package
 under test (``leg_env``, and the controllers of ``policies/``) may differ. Everything goes through the public
-API: ``gymnasium.make`` / ``gymnasium.make_vec``, ``reset(seed=...)``, ``step``, ``leg_env.hybrid.hybrid_step``,
-``leg_env.integrate.stance_step`` / ``flight_step``, ``leg_env.dynamics.static_equilibrium`` and the
+API: ``gymnasium.make`` / ``gymnasium.make_vec``, ``reset(seed=...)``, ``step``, ``leg_env.physics.hybrid.hybrid_step``,
+``leg_env.physics.integrate.stance_step`` / ``flight_step``, ``leg_env.physics.dynamics.static_equilibrium`` and the
 controllers' ``predict``.
 
 Agreement (``mismatch``): a float64 quantity ``a`` agrees with its recorded value ``b`` when
@@ -289,7 +289,7 @@ HYBRID_FIELDS = (
 
 def hybrid_one(q, qd, tau, mu, mode, anchor_x, params) -> dict:
     """One ``hybrid_step`` of a batch, as a dict of ``HYBRID_FIELDS``."""
-    from leg_env.hybrid import hybrid_step
+    from leg_env.physics.hybrid import hybrid_step
 
     r = hybrid_step(q, qd, tau, params, mu, mode, anchor_x)
     return {k: np.asarray(getattr(r, k)) for k in HYBRID_FIELDS}
@@ -377,7 +377,7 @@ def pinned_steps_from(step: Callable, starts_q, starts_qd, taus, params, anchor=
 
 def pinned_one(step: Callable, q, qd, tau, params, anchor=None) -> dict:
     """One ``stance_step`` (pinned at ``anchor``) or ``flight_step`` (``anchor`` unused) of a batch."""
-    from leg_env.integrate import stance_step
+    from leg_env.physics.integrate import stance_step
 
     if step is stance_step:
         q1, qd1, lam = stance_step(q, qd, tau, params, anchor=anchor)

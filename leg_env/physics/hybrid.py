@@ -1,9 +1,9 @@
 r"""The hybrid control step: exact unilateral contact with event-located transitions (lesson section 5).
 
-The foot is in one of the modes of ``leg_env.contact`` (stick, slip forward / backward, flight), carried
+The foot is in one of the modes of ``leg_env.physics.contact`` (stick, slip forward / backward, flight), carried
 as state with the stick contact point ``anchor``; the ground is the line ``y = anchor[1]`` (``0`` in
 the environments). A control step of length ``dt`` holds the torques and is integrated by RK4
-substeps in the current mode (``leg_env.integrate._rk4_substep``: the same step rule and the same
+substeps in the current mode (``leg_env.physics.integrate._rk4_substep``: the same step rule and the same
 projections as the pinned model), with every mode change located inside its substep.
 
 Transitions, each a named witness (Drake's ``examples/rod2d`` habit) that fires when it goes from
@@ -27,10 +27,10 @@ state just past the root (witness ``< 0``) is kept, so the old mode is inconsist
 of the control step is integrated in the new mode, with the step rule re-applied to the post-event
 rates.
 
-Mode choice (``leg_env.contact``), at the start of every control step (the torques jump there) and
+Mode choice (``leg_env.physics.contact``), at the start of every control step (the torques jump there) and
 after every reset map: a foot above the ground, or leaving it, flies; a foot hitting the ground gets
 the impact map first; a sliding foot slips or flies; a foot at rest gets the one consistent mode of
-the four closed forms. Past the Painleve bound the documented rule of ``leg_env.contact`` applies
+the four closed forms. Past the Painleve bound the documented rule of ``leg_env.physics.contact`` applies
 (stick "jam", or flight, or a tangential sticking impulse) and is counted.
 
 Zeno: at most ``MAX_EVENTS`` (8) located events per control step. After that the robot is
@@ -49,7 +49,7 @@ quadrature of ``-lam_x x_f'``), the kinetic energy lost in impulses and the work
 ``E(end) - E(start) = work + work_load - slip_dissipation - impact_dissipation`` up to the RK4 error.
 The force enters every mode's dynamics and so every witness and mode choice; impulses are unaffected
 (a finite force does no impulsive work). ``rk4_steps`` counts the step's work: the RK4 steps it integrated, the
-step rule's (``leg_env.integrate``) plus, for each located event, the substep that crossed it and the shorter
+step rule's (``leg_env.physics.integrate``) plus, for each located event, the substep that crossed it and the shorter
 re-integrations that located it.
 
 Every function here runs in the compiled core (``leg_env/_core``, C, built at install); this module
@@ -62,12 +62,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import checks
-from .contact import FLIGHT, SLIP_BACKWARD, SLIP_FORWARD, STICK
-from ._core import kernels
-from .dynamics import NQ, NU, _batched, _core_params, _vec
+from .. import checks
+from .._core import kernels
+from .arrays import NQ, NU, batched, core_params, vec
+from .contact import FLIGHT, SLIP_BACKWARD, SLIP_FORWARD, STICK, checked_mu, scalar_field, contact_mode
+from .dynamics import foot_position
+from .integrate import DT, MAX_ANGLE, SUBSTEPS, checked_steps
 from .layout import RECORD
-from .integrate import DT, MAX_ANGLE, SUBSTEPS, _checked_steps
 from .params import LegParams
 
 __all__ = [
@@ -94,17 +95,12 @@ SETTLE_SPEED = kernels.SETTLE_SPEED  # a touchdown slower than this [m/s] settle
 ROOT_TIME = kernels.ROOT_TIME  # event location: bracket length [s]: 1e-12
 
 
-
-
-
-
-
 class HybridStep(NamedTuple):
     """What ``hybrid_step`` returns; every field has the batch's leading shape ``(...)`` first."""
 
     q: np.ndarray  # (..., 5) configuration at the end of the step
     qd: np.ndarray  # (..., 5) velocity at the end of the step
-    mode: np.ndarray  # (...) int, contact mode at the end (leg_env.contact constants)
+    mode: np.ndarray  # (...) int, contact mode at the end (leg_env.physics.contact constants)
     anchor_x: np.ndarray  # (...) the stick contact point's x, else the foot's x [m]
     lam_mean: np.ndarray  # (..., 2) mean contact force over the step, impulses excluded [N]
     impulse: np.ndarray  # (..., 2) sum of impact (and tangential) impulses on the foot [N s]
@@ -126,9 +122,6 @@ class HybridStep(NamedTuple):
 
 def _initial_modes(qf, qdf, tf, mu, p: LegParams) -> np.ndarray:
     """Modes of states given without one: flight above the ground, else the contact's consistent mode."""
-    from .contact import contact_mode
-    from .dynamics import foot_position
-
     mode = np.where(foot_position(qf, p)[:, 1] > GROUND_TOL, FLIGHT, STICK).astype(np.int64)
     on = mode == STICK
     if on.any():
@@ -146,32 +139,29 @@ def hybrid_step(
         q, qd: ``(..., 5)`` world state; the foot must not be below the ground by more than ``GROUND_TOL``.
         tau: ``(..., 2)`` hip and knee torques held over the step [N m].
         p: physical parameters. mu: friction coefficient (>= 0, finite), scalar or per robot.
-        mode: ``(...)`` contact modes (``leg_env.contact`` constants) or None: flight for a foot above
+        mode: ``(...)`` contact modes (``leg_env.physics.contact`` constants) or None: flight for a foot above
             ``GROUND_TOL``, else ``contact_mode`` under ``tau``. The step re-chooses it anyway where
             the state requires (a stick keeps its anchor).
         anchor_x: ``(...)`` stick contact points [m]; None: the feet's current ``x``.
-        dt, substeps, max_angle: the step rule of ``leg_env.integrate.stance_step``.
+        dt, substeps, max_angle: the step rule of ``leg_env.physics.integrate.stance_step``.
         load_x: ``(...)`` or scalar horizontal force on the torso's COM held over the step [N] (a push:
-            ``M qdd + h = S^T tau + Jc^T lam + (F, 0, 0, 0, 0)``, ``leg_env.dynamics``); its work is ``work_load``.
+            ``M qdd + h = S^T tau + Jc^T lam + (F, 0, 0, 0, 0)``, ``leg_env.physics.dynamics``); its work is ``work_load``.
 
     Returns:
         ``HybridStep``: the new state and mode, and what the step did.
     """
-    from .contact import _checked_mu, _scalar_field
-    from .dynamics import foot_position
-
-    dt, substeps, max_angle = _checked_steps(dt, substeps, max_angle)
-    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
+    dt, substeps, max_angle = checked_steps(dt, substeps, max_angle)
+    lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
     qf, qdf = qf.copy(), qdf.copy()
     n = qf.shape[0]
-    mu_f = _checked_mu(mu, lead)
+    mu_f = checked_mu(mu, lead)
     foot = foot_position(qf, p)
     if np.any(foot[:, 1] < -GROUND_TOL):
         raise ValueError(f"q puts the foot below the ground (y_f = {foot[:, 1].min():.3e} m < -{GROUND_TOL} m)")
     if mode is None:
         modes = _initial_modes(qf, qdf, tf, mu_f, p)
     else:
-        m = _scalar_field(mode, lead, "mode")
+        m = scalar_field(mode, lead, "mode")
         if not np.all((m == STICK) | (m == SLIP_FORWARD) | (m == SLIP_BACKWARD) | (m == FLIGHT)):
             raise ValueError(f"mode must be one of STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT (0-3), got {checks.shown(mode)}")
         modes = m.astype(np.int64)
@@ -179,14 +169,14 @@ def hybrid_step(
     if anchor_x is None:
         anchor[:, 0] = foot[:, 0]
     else:
-        anchor[:, 0] = _scalar_field(anchor_x, lead, "anchor_x")
+        anchor[:, 0] = scalar_field(anchor_x, lead, "anchor_x")
         if not np.all(np.isfinite(anchor[:, 0])):
             raise ValueError("anchor_x must be finite")
-    load = _scalar_field(load_x, lead, "load_x")
+    load = scalar_field(load_x, lead, "load_x")
     if not np.all(np.isfinite(load)):
         raise ValueError("load_x must be finite")
     record = np.empty(n, dtype=RECORD)
-    kernels.hybrid_step(qf, qdf, tf, _core_params(p), load, mu_f, modes, anchor, dt, substeps, max_angle, record)
+    kernels.hybrid_step(qf, qdf, tf, core_params(p), load, mu_f, modes, anchor, dt, substeps, max_angle, record)
 
     def r(x, tail=()):
         return np.ascontiguousarray(x).reshape(lead + tail)

@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from . import checks
+from .. import checks
 
 __all__ = ["LegParams", "PARAM_NAMES", "PARAM_RANGE", "G_MIN"]
 
@@ -99,7 +99,7 @@ class LegParams:
 
     @cached_property
     def _unloaded(self) -> np.ndarray:
-        """``array`` then a zero load: ``leg_env.dynamics.params_array(self)``, made once (no kernel writes it)."""
+        """``array`` then a zero load: ``leg_env.physics.dynamics.params_array(self)``, made once (no kernel writes it)."""
         return np.append(self.array, 0.0)
 
     def __getstate__(self) -> dict:

@@ -32,9 +32,10 @@ import math
 
 import numpy as np
 
-from ._core import kernels
-from .dynamics import _F64, LOAD_X, NP, NQ, NU, _batched, _core_params, _single_robot, _vec, params_array
-from . import checks
+from .. import checks
+from .._core import kernels
+from .arrays import F64, LOAD_X, NP, NQ, NU, batched, core_params, params_array, single_robot, vec
+from .dynamics import contact_jacobian, foot_position
 from .params import LegParams
 
 DT = 0.01  # default control period [s]
@@ -45,7 +46,6 @@ MAX_SUBSTEPS = 4096  # most RK4 steps per control period: the step rule's cap, a
 __all__ = ["stance_step", "flight_step", "project_stance", "project_velocity", "step_inplace"]
 
 
-
 def step_inplace(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mean):
     """Advance a batch by one control step in place (the compiled core's RK4 step).
 
@@ -53,7 +53,7 @@ def step_inplace(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mea
         q, qd: ``(N, 5)`` C-contiguous float64 states, overwritten.
         tau: ``(N, 2)`` torques held over the step.
         p: ``(11,)`` parameter array (``LegParams.array``: no load), or ``(12,)`` with the horizontal force
-            on the torso's COM last (``leg_env.dynamics.params_array(p, load_x)``).
+            on the torso's COM last (``leg_env.physics.dynamics.params_array(p, load_x)``).
         anchor: ``(N, 2)`` foot contact points (read only in stance).
         dt: control period [s]; substeps: least number of RK4 steps per control period.
         max_angle: largest rotation [rad] of any link per RK4 step at the step's initial
@@ -74,7 +74,7 @@ def step_inplace(q, qd, tau, p, anchor, dt, substeps, max_angle, stance, lam_mea
     kernels.rk4_step(q, qd, tau, np.ascontiguousarray(p[:NP]), load, anchor, dt, substeps, max_angle, stance, lam_mean)
 
 
-def _checked_steps(dt: float, substeps: int, max_angle: float) -> tuple[float, int, float]:
+def checked_steps(dt: float, substeps: int, max_angle: float) -> tuple[float, int, float]:
     return (
         checks.real("dt", dt, 0.0, math.inf, lo_open=True, hi_open=True, unit="s"),
         checks.integer("substeps", substeps, 1, MAX_SUBSTEPS, floats=True),
@@ -99,50 +99,46 @@ def stance_step(
     Returns:
         ``(q_next, qd_next, lam_mean)``: the new state and the mean contact force over the step.
     """
-    from .dynamics import foot_position
-
-    dt, substeps, max_angle = _checked_steps(dt, substeps, max_angle)
-    if _single_robot(q, qd, tau):
+    dt, substeps, max_angle = checked_steps(dt, substeps, max_angle)
+    if single_robot(q, qd, tau):
         # one robot: the same kernel on (1, n) views, without the broadcasting machinery
         if anchor is None:
             anchor = foot_position(q, p)
-        if type(anchor) is np.ndarray and anchor.shape == (2,) and anchor.dtype is _F64 and anchor.flags.c_contiguous:
+        if type(anchor) is np.ndarray and anchor.shape == (2,) and anchor.dtype is F64 and anchor.flags.c_contiguous:
             q1, qd1, lam = q.reshape(1, NQ).copy(), qd.reshape(1, NQ).copy(), np.empty((1, 2))
-            step_inplace(q1, qd1, tau.reshape(1, NU), _core_params(p), anchor.reshape(1, 2), dt, substeps, max_angle,
+            step_inplace(q1, qd1, tau.reshape(1, NU), core_params(p), anchor.reshape(1, 2), dt, substeps, max_angle,
                          True, lam)
             return q1[0], qd1[0], lam[0]
-    q = _vec(q, NQ, "q")
-    anchor = foot_position(q, p) if anchor is None else _vec(anchor, 2, "anchor")
-    lead, (qf, qdf, tf, af) = _batched(("q", q), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")), ("anchor", anchor))
+    q = vec(q, NQ, "q")
+    anchor = foot_position(q, p) if anchor is None else vec(anchor, 2, "anchor")
+    lead, (qf, qdf, tf, af) = batched(("q", q), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")), ("anchor", anchor))
     qf, qdf = qf.copy(), qdf.copy()
     lam = np.empty((qf.shape[0], 2))
-    step_inplace(qf, qdf, tf, _core_params(p), af, dt, substeps, max_angle, True, lam)
+    step_inplace(qf, qdf, tf, core_params(p), af, dt, substeps, max_angle, True, lam)
     return qf.reshape(lead + (NQ,)), qdf.reshape(lead + (NQ,)), lam.reshape(lead + (2,))
 
 
 def flight_step(q, qd, tau, p: LegParams, dt: float = DT, substeps: int = SUBSTEPS, max_angle: float = MAX_ANGLE):
     """One flight control step (no contact) of RK4, stepped as in ``stance_step``. Returns ``(q_next, qd_next)``."""
-    dt, substeps, max_angle = _checked_steps(dt, substeps, max_angle)
-    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
+    dt, substeps, max_angle = checked_steps(dt, substeps, max_angle)
+    lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
     qf, qdf = qf.copy(), qdf.copy()
     lam = np.empty((qf.shape[0], 2))
-    step_inplace(qf, qdf, tf, _core_params(p), np.zeros((qf.shape[0], 2)), dt, substeps, max_angle, False, lam)
+    step_inplace(qf, qdf, tf, core_params(p), np.zeros((qf.shape[0], 2)), dt, substeps, max_angle, False, lam)
     return qf.reshape(lead + (NQ,)), qdf.reshape(lead + (NQ,))
 
 
 def project_stance(q, qd, p: LegParams, anchor):
     """Coordinate-partitioning projection: move only the base so the foot is at ``anchor`` and ``Jc qd = 0``."""
-    lead, (qf, qdf, af) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("anchor", _vec(anchor, 2, "anchor")))
+    lead, (qf, qdf, af) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("anchor", vec(anchor, 2, "anchor")))
     qf, qdf = qf.copy(), qdf.copy()
-    kernels.project(qf, qdf, _core_params(p), af)
+    kernels.project(qf, qdf, core_params(p), af)
     return qf.reshape(lead + (NQ,)), qdf.reshape(lead + (NQ,))
 
 
 def project_velocity(q, qd, p: LegParams) -> np.ndarray:
     """Euclidean projection of ``qd`` onto the nullspace of ``Jc(q)``: ``qd - Jc^T (Jc Jc^T)^-1 Jc qd`` (solved)."""
-    from .dynamics import contact_jacobian
-
-    lead, (qf, qdf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")))
+    lead, (qf, qdf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")))
     Jc = contact_jacobian(qf, p)
     JJt = Jc @ np.swapaxes(Jc, -1, -2)
     y = np.linalg.solve(JJt, (Jc @ qdf[..., None]))

@@ -22,8 +22,8 @@ Conventions, stated once:
       [ Jc    0   ] [lam] = [-Jcdot qd   ]
 
 * Gravity acts along ``-y``; ``P = g (m_b y_b + m1 y_c1 + m2 y_c2)``.
-* An external horizontal force ``F`` on the torso's COM (a push; ``p[LOAD_X]`` of the kernels' parameter
-  array, 0 unless a task sets it) adds the generalised force ``Q = J_b^T (F, 0)`` to the right-hand side,
+* An external horizontal force ``F`` on the torso's COM (a push: the ``load`` of the compiled core's
+  steps, 0 unless a task sets it) adds the generalised force ``Q = J_b^T (F, 0)`` to the right-hand side,
   ``J_b = d(x_b, y_b)/dq``. The torso's COM is the base point, so ``J_b = [I_2 0]`` and
   ``Q = (F, 0, 0, 0, 0)``: it moves the base, and exerts no torque on the torso about its COM.
 
@@ -50,13 +50,12 @@ import math
 
 import numpy as np
 
-from . import checks
-from ._core import kernels
+from .. import checks
+from .._core import kernels
+from .arrays import NO_LOAD, NQ, NU, as_params, batched, core_params, single_robot, vec
 from .params import LegParams
 
 __all__ = [
-    "NQ",
-    "NU",
     "S",
     "mass_matrix",
     "bias_forces",
@@ -70,170 +69,66 @@ __all__ = [
     "kinetic_energy",
     "potential_energy",
     "com_position",
-    "params_array",
     "static_equilibrium",
 ]
 
-_LOAD_MAX = 1.0e12  # bound of a horizontal load [N]: far beyond any use, far below overflow
-NQ = 5  # generalized coordinates
-NU = 2  # actuated joints
-NP = 11  # LegParams fields in the kernels' parameter array
-LOAD_X = NP  # the kernels' parameter array ends with the horizontal force on the torso's COM [N] (``params_array``)
 S = np.array([[0.0, 0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0]])
 S.setflags(write=False)
-
-# ----------------------------------------------------------------------------
-# Public API: shape handling around the compiled core (leg_env._core.kernels)
-# ----------------------------------------------------------------------------
-
-
-def params_array(p: LegParams | np.ndarray, load_x: float = 0.0) -> np.ndarray:
-    """``LegParams`` as the float64 array the kernels read: its 11 fields, then the load ``p[LOAD_X]``.
-
-    ``load_x`` is the horizontal force on the torso's COM [N] held over a step (0: no load). An array of
-    11 values gets the load appended; one of 12 passes through.
-    """
-    load_x = checks.real("load_x", load_x, -_LOAD_MAX, _LOAD_MAX, unit="N")
-    if isinstance(p, LegParams):
-        return _loaded(p.array, load_x)
-    a = checks.real_array("p", p, f"LegParams or {NP} real numbers (or {NP + 1} with the load)")
-    if a.shape not in ((NP,), (NP + 1,)):
-        raise ValueError(f"p must be LegParams or an array of {NP} values (or {NP + 1} with the load), got shape {a.shape}")
-    try:
-        LegParams(*a[:NP].tolist())  # every value checked as a LegParams field
-    except ValueError as e:
-        raise ValueError(f"p: {e}") from None  # names p and the field
-    if a.shape == (NP,):
-        return _loaded(a, load_x)
-    checks.real("p's load (entry 11)", float(a[NP]), -_LOAD_MAX, _LOAD_MAX, unit="N")
-    return a
-
-
-def _as_params(p) -> LegParams:
-    """``p`` as ``LegParams``: an instance as it is, an array of its 11 fields (or 12 with a load) checked."""
-    return p if isinstance(p, LegParams) else LegParams(*params_array(p)[:NP].tolist())  # params_array names p
-
-
-def _core_params(p: LegParams | np.ndarray) -> np.ndarray:
-    """The compiled core's ``leg_params`` of ``p``: a ``LegParams``' array as it is, else the first 11 values of
-    ``params_array(p)`` (a load, where one is given, is an argument of its own in the core)."""
-    return p.array if isinstance(p, LegParams) else params_array(p)[:NP]
-
-
-def _loaded(a: np.ndarray, load_x: float) -> np.ndarray:
-    out = np.empty(NP + 1)
-    out[:NP] = a
-    out[LOAD_X] = load_x
-    return out
-
-
-_F64 = np.dtype(np.float64)
-_NO_LOAD = np.zeros(1)  # the load of one robot: none (the core only reads it)
-_NO_LOAD.setflags(write=False)
-_SHAPE_Q = (NQ,)
-_SHAPE_TAU = (NU,)
-
-
-def _single_robot(q, qd, tau) -> bool:
-    """Fast-path test: ``q``, ``qd`` of shape (5,) and ``tau`` of shape (2,), all contiguous float64.
-
-    One expression, no calls (this sits on the per-evaluation path). ``dtype is`` compares with
-    numpy's float64 singleton; an equal but distinct dtype object only takes the general path.
-    """
-    return (
-        type(q) is np.ndarray
-        and type(qd) is np.ndarray
-        and type(tau) is np.ndarray
-        and q.shape == _SHAPE_Q
-        and qd.shape == _SHAPE_Q
-        and tau.shape == _SHAPE_TAU
-        and q.dtype is _F64
-        and qd.dtype is _F64
-        and tau.dtype is _F64
-        and q.flags.c_contiguous
-        and qd.flags.c_contiguous
-        and tau.flags.c_contiguous
-    )
-
-
-def _vec(x, n: int, name: str) -> np.ndarray:
-    """``x`` as a float64 array of shape ``(..., n)``. Only real numbers are taken (``leg_env.checks.real_array``:
-    no strings, bools, complex numbers or None, which numpy would convert); a wrong shape is a ``ValueError``.
-    Both name ``name``."""
-    a = x if type(x) is np.ndarray and x.dtype is _F64 else checks.real_array(name, x, f"real numbers of shape (..., {n})")
-    if a.ndim == 0 or a.shape[-1] != n:
-        raise ValueError(f"{name} must have shape (..., {n}), got {a.shape}")
-    return a
-
-
-def _batched(*named):
-    """Broadcast the leading axes of ``(name, array)`` pairs; return the lead shape and contiguous (N, n) views."""
-    try:
-        lead = np.broadcast_shapes(*(a.shape[:-1] for _, a in named))
-    except ValueError:
-        shapes = ", ".join(f"{name} {a.shape}" for name, a in named)
-        raise ValueError(f"the leading axes of {shapes} do not broadcast together") from None
-    flat = []
-    for _, a in named:
-        if a.shape[:-1] != lead:
-            a = np.broadcast_to(a, lead + a.shape[-1:])
-        flat.append(np.ascontiguousarray(a.reshape(-1, a.shape[-1])))
-    return lead, flat
 
 
 def mass_matrix(q, p: LegParams) -> np.ndarray:
     """Joint-space mass matrix ``M(q)`` (section 2), shape ``(..., 5, 5)``, symmetric positive definite."""
-    lead, (qf,) = _batched(("q", _vec(q, NQ, "q")))
+    lead, (qf,) = batched(("q", vec(q, NQ, "q")))
     M = np.empty((qf.shape[0], NQ, NQ))
-    kernels.mass_matrix(qf, _core_params(p), M)
+    kernels.mass_matrix(qf, core_params(p), M)
     return M.reshape(lead + (NQ, NQ))
 
 
 def bias_forces(q, qd, p: LegParams) -> np.ndarray:
     """``h(q, qd)``: Coriolis, centrifugal and gravity generalized forces, shape ``(..., 5)``."""
-    lead, (qf, qdf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")))
+    lead, (qf, qdf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")))
     h = np.empty((qf.shape[0], NQ))
-    kernels.bias(qf, qdf, _core_params(p), h, False)
+    kernels.bias(qf, qdf, core_params(p), h, False)
     return h.reshape(lead + (NQ,))
 
 
 def gravity_forces(q, p: LegParams) -> np.ndarray:
     """Gravity generalized forces ``dP/dq``, shape ``(..., 5)``."""
-    lead, (qf,) = _batched(("q", _vec(q, NQ, "q")))
+    lead, (qf,) = batched(("q", vec(q, NQ, "q")))
     h = np.empty((qf.shape[0], NQ))
-    kernels.bias(qf, qf, _core_params(p), h, True)
+    kernels.bias(qf, qf, core_params(p), h, True)
     return h.reshape(lead + (NQ,))
 
 
 def foot_position(q, p: LegParams) -> np.ndarray:
     """Foot position ``p_f(q)`` in the world frame (section 3), shape ``(..., 2)``."""
-    lead, (qf,) = _batched(("q", _vec(q, NQ, "q")))
+    lead, (qf,) = batched(("q", vec(q, NQ, "q")))
     out = np.empty((qf.shape[0], 2))
-    kernels.foot(qf, _core_params(p), out)
+    kernels.foot(qf, core_params(p), out)
     return out.reshape(lead + (2,))
 
 
 def com_position(q, p: LegParams) -> np.ndarray:
     """Whole-body centre of mass in the world frame, shape ``(..., 2)``."""
-    lead, (qf,) = _batched(("q", _vec(q, NQ, "q")))
+    lead, (qf,) = batched(("q", vec(q, NQ, "q")))
     out = np.empty((qf.shape[0], 2))
-    kernels.com(qf, qf, _core_params(p), out, np.empty((qf.shape[0], 2)))
+    kernels.com(qf, qf, core_params(p), out, np.empty((qf.shape[0], 2)))
     return out.reshape(lead + (2,))
 
 
 def contact_jacobian(q, p: LegParams) -> np.ndarray:
     """Contact Jacobian ``Jc = d p_f / d q`` (section 3, Problem 3), rows ``x, y``, shape ``(..., 2, 5)``."""
-    lead, (qf,) = _batched(("q", _vec(q, NQ, "q")))
+    lead, (qf,) = batched(("q", vec(q, NQ, "q")))
     Jc = np.empty((qf.shape[0], 2, NQ))
-    kernels.jacobian(qf, _core_params(p), Jc)
+    kernels.jacobian(qf, core_params(p), Jc)
     return Jc.reshape(lead + (2, NQ))
 
 
 def contact_jdot_qd(q, qd, p: LegParams) -> np.ndarray:
     """``Jcdot(q, qd) qd``, the foot's velocity-product acceleration, shape ``(..., 2)``."""
-    lead, (qf, qdf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")))
+    lead, (qf, qdf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")))
     out = np.empty((qf.shape[0], 2))
-    kernels.jdot_qd(qf, qdf, _core_params(p), out)
+    kernels.jdot_qd(qf, qdf, core_params(p), out)
     return out.reshape(lead + (2,))
 
 
@@ -262,37 +157,37 @@ def stance_dynamics(q, qd, tau, p: LegParams) -> tuple[np.ndarray, np.ndarray]:
         ``(qdd, lam)`` of shapes ``(..., 5)`` and ``(..., 2)``; ``lam = [lam_x, lam_y]`` is the
         ground's force on the foot [N].
     """
-    if _single_robot(q, qd, tau):
+    if single_robot(q, qd, tau):
         qdd, lam = np.empty(NQ), np.empty(2)
-        kernels.stance(q, qd, tau, _core_params(p), _NO_LOAD, qdd, lam)
+        kernels.stance(q, qd, tau, core_params(p), NO_LOAD, qdd, lam)
         return qdd, lam
-    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
+    lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
     n = qf.shape[0]
     qdd = np.empty((n, NQ))
     lam = np.empty((n, 2))
-    kernels.stance(qf, qdf, tf, _core_params(p), np.zeros(n), qdd, lam)
+    kernels.stance(qf, qdf, tf, core_params(p), np.zeros(n), qdd, lam)
     return qdd.reshape(lead + (NQ,)), lam.reshape(lead + (2,))
 
 
 def flight_dynamics(q, qd, tau, p: LegParams) -> np.ndarray:
     """Unconstrained forward dynamics ``M qdd + h = S^T tau`` (section 2), shape ``(..., 5)``."""
-    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
+    lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
     qdd = np.empty((qf.shape[0], NQ))
-    kernels.flight(qf, qdf, tf, _core_params(p), np.zeros(qf.shape[0]), qdd)
+    kernels.flight(qf, qdf, tf, core_params(p), np.zeros(qf.shape[0]), qdd)
     return qdd.reshape(lead + (NQ,))
 
 
 def kinetic_energy(q, qd, p: LegParams) -> np.ndarray:
     """Kinetic energy ``qd^T M qd / 2`` [J], shape ``(...)``."""
-    lead, (qf, qdf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")))
+    lead, (qf, qdf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")))
     M = mass_matrix(qf, p)
     return (0.5 * np.einsum("ni,nij,nj->n", qdf, M, qdf)).reshape(lead)
 
 
 def potential_energy(q, p: LegParams) -> np.ndarray:
     """Potential energy ``g (m_b y_b + m1 y_c1 + m2 y_c2)`` [J], shape ``(...)``."""
-    q = _vec(q, NQ, "q")
-    p = _as_params(p)
+    q = vec(q, NQ, "q")
+    p = as_params(p)
     com = com_position(q, p)
     return p.g * p.total_mass * com[..., 1]
 
@@ -310,34 +205,8 @@ def static_equilibrium(p: LegParams, knee: float = 0.8) -> tuple[np.ndarray, np.
         contact force ``[0, m g]``.
     """
     q, tau = np.empty(NQ), np.empty(NU)
-    p = _as_params(p)
+    p = as_params(p)
     knee = checks.real("knee", knee, -math.pi, math.pi, unit="rad")
     kernels.equilibrium(p.array, knee, q, tau)
     lam = np.array([0.0, p.total_mass * p.g])
     return q, tau, lam
-
-
-# The unilateral contact (modes, slip, impact map, Painleve bound) lives in leg_env.contact and is
-# re-exported here, the one place users look for the dynamics (lazily: leg_env.contact imports this module).
-_CONTACT_NAMES = (  # leg_env.contact.__all__
-    "STICK",
-    "SLIP_FORWARD",
-    "SLIP_BACKWARD",
-    "FLIGHT",
-    "MODE_NAMES",
-    "REST_SPEED",
-    "slip_dynamics",
-    "impact_map",
-    "contact_mode",
-    "mu_critical",
-    "free_foot_acceleration",
-)
-__all__ += list(_CONTACT_NAMES)
-
-
-def __getattr__(name: str):
-    if name in _CONTACT_NAMES:
-        from . import contact
-
-        return getattr(contact, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

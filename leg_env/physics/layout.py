@@ -6,7 +6,7 @@ numpy structured dtypes from that report. A batch of robots is then one structur
 and every field has its name: ``state["qd"]`` is ``(N, 5)``, ``out["terminated"]`` is ``(N,)`` bool.
 
 * ``PARAMS`` (``leg_params``): a robot's masses, inertias, lengths and gravity (``LegParams``' fields).
-* ``RECORD`` (``leg_record``): what one hybrid control step did (``leg_env.hybrid.HybridStep``).
+* ``RECORD`` (``leg_record``): what one hybrid control step did (``leg_env.physics.hybrid.HybridStep``).
 * ``ROBOT`` (``env_robot``): a robot of an env (its parameters ``p``, ``mu``, ``torque_limit`` and its
   nominal posture, holding torques and COM); a randomised batch has one per sub-env.
 * ``state_dtype(task)``, ``settings_dtype(task)``, ``out_dtype(task)``: a robot's state, a task's settings
@@ -19,14 +19,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._core import kernels
+from .._core import kernels
 
-__all__ = ["PARAMS", "RECORD", "ROBOT", "OBS", "LOG_SIZE", "MAX_TERMS", "state_dtype", "settings_dtype", "out_dtype"]
+__all__ = ["PARAMS", "RECORD", "ROBOT", "OBS", "LOG_SIZE", "MAX_TERMS", "FLAG_NAMES", "state_dtype", "settings_dtype", "out_dtype",
+           "take_rows", "put_rows"]
 
 LOG_SIZE = kernels.LOG_SIZE
 """Located events one control step can log (``2 * MAX_EVENTS``)."""
 MAX_TERMS = kernels.MAX_TERMS
 """Reward terms a task has at most (the length of ``out["terms"]``)."""
+FLAG_NAMES = ("terminated", "unilateral_violation", "friction_violation", "numerical_failure")
+"""The flags of ``out`` (bool fields), in this order wherever they are listed."""
 
 _LAYOUTS = kernels.layouts()
 _TASKS = ("stance", "push", "hop")

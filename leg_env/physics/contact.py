@@ -1,6 +1,6 @@
 r"""Unilateral contact of the point foot with the ground ``y = 0``: modes, slip, impact, Painleve bound.
 
-Notation (``leg_env.dynamics`` states the conventions): ``J = Jc`` with rows ``J_x, J_y``,
+Notation (``leg_env.physics.dynamics`` states the conventions): ``J = Jc`` with rows ``J_x, J_y``,
 ``gamma = Jcdot qd``, the contact inertia ``Lambda = J M^-1 J^T`` (2x2 SPD) and the free foot
 acceleration ``a0 = J M^-1 (S^T tau - h) + gamma``. A contact force ``lam`` (the ground's force on the
 foot) gives the foot acceleration ``a_f = a0 + Lambda lam`` (lesson section 5).
@@ -25,7 +25,7 @@ and ``a0_y < 0`` has no consistent force at all) or several may be consistent. T
 ("jam"): a foot at rest with no consistent mode sticks (the ground supplies the sticking force, even
 outside the cone); a sliding foot with ``k_sigma <= 0`` leaves the ground if ``a0_y >= 0`` and is
 otherwise stopped by a tangential impact (the sticking impulse), after which the at-rest rule
-applies. ``leg_env.hybrid`` counts every use.
+applies. ``leg_env.physics.hybrid`` counts every use.
 
 How it is computed. With the whole-body centre of mass eliminated (as in ``_flight_core``), the
 leg's absolute angles ``theta = (th1, th2)`` obey ``K theta'' = r + G^T F`` for a foot force ``F``, with
@@ -47,12 +47,24 @@ import math
 
 import numpy as np
 
-from . import checks
-from ._core import kernels
-from .dynamics import _CONTACT_NAMES, NQ, NU, _batched, _core_params, _vec
+from .. import checks
+from .._core import kernels
+from .arrays import NQ, NU, batched, core_params, vec
 from .params import LegParams
 
-__all__ = list(_CONTACT_NAMES)  # leg_env.dynamics re-exports these names
+__all__ = [
+    "STICK",
+    "SLIP_FORWARD",
+    "SLIP_BACKWARD",
+    "FLIGHT",
+    "MODE_NAMES",
+    "REST_SPEED",
+    "slip_dynamics",
+    "impact_map",
+    "contact_mode",
+    "mu_critical",
+    "free_foot_acceleration",
+]
 
 STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT = kernels.STICK, kernels.SLIP_FORWARD, kernels.SLIP_BACKWARD, kernels.FLIGHT
 MODE_NAMES = ("stick", "slip", "slip", "flight")
@@ -61,7 +73,7 @@ REST_SPEED = kernels.REST_SPEED
 """A foot slower than this [m/s] counts as at rest."""
 
 
-def _scalar_field(x, lead, name: str) -> np.ndarray:
+def scalar_field(x, lead, name: str) -> np.ndarray:
     """A per-robot scalar (``mu``, ``sigma``) broadcast to the batch, as a flat float64 array (real numbers only,
     ``leg_env.checks.real_array``)."""
     a = checks.real_array(name, x, f"a real number or one per robot of the batch {lead}")
@@ -71,8 +83,8 @@ def _scalar_field(x, lead, name: str) -> np.ndarray:
         raise ValueError(f"{name} must broadcast to the batch shape {lead}, got shape {a.shape}") from e
 
 
-def _checked_mu(mu, lead, allow_inf: bool = False) -> np.ndarray:
-    m = _scalar_field(mu, lead, "mu")
+def checked_mu(mu, lead, allow_inf: bool = False) -> np.ndarray:
+    m = scalar_field(mu, lead, "mu")
     if np.any(np.isnan(m)) or np.any(m < 0.0) or (not allow_inf and np.any(np.isinf(m))):
         raise ValueError(f"mu must be >= 0 and {'not NaN' if allow_inf else 'finite'}, got {mu!r}")
     return m
@@ -94,14 +106,14 @@ def slip_dynamics(q, qd, tau, p: LegParams, mu, sigma):
     Returns:
         ``(qdd, lam)`` of shapes ``(..., 5)`` and ``(..., 2)``; ``lam`` is the ground's force on the foot [N].
     """
-    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
-    sg = _scalar_field(sigma, lead, "sigma")
+    lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
+    sg = scalar_field(sigma, lead, "sigma")
     if not np.all(np.abs(sg) == 1.0):
         raise ValueError(f"sigma must be +1 or -1, got {sigma!r}")
-    mu_f = _checked_mu(mu, lead)
+    mu_f = checked_mu(mu, lead)
     n = qf.shape[0]
     qdd, lam = np.empty((n, NQ)), np.empty((n, 2))
-    kernels.slip(qf, qdf, tf, mu_f, sg, _core_params(p), np.zeros(n), qdd, lam)
+    kernels.slip(qf, qdf, tf, mu_f, sg, core_params(p), np.zeros(n), qdd, lam)
     return qdd.reshape(lead + (NQ,)), lam.reshape(lead + (2,))
 
 
@@ -127,11 +139,11 @@ def impact_map(q, qd, p: LegParams, mu=math.inf):
         ``(qd_plus, impulse)``: ``(..., 5)`` velocity after the impact and ``(..., 2)`` the ground's
         impulse on the foot [N s].
     """
-    lead, (qf, qdf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")))
-    mu_f = _checked_mu(mu, lead, allow_inf=True)
+    lead, (qf, qdf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")))
+    mu_f = checked_mu(mu, lead, allow_inf=True)
     n = qf.shape[0]
     qd_plus, impulse, status = np.empty((n, NQ)), np.empty((n, 2)), np.empty(n, dtype=np.int64)
-    kernels.impact(qf, qdf, mu_f, _core_params(p), qd_plus, impulse, status)
+    kernels.impact(qf, qdf, mu_f, core_params(p), qd_plus, impulse, status)
     return qd_plus.reshape(lead + (NQ,)), impulse.reshape(lead + (2,))
 
 
@@ -147,19 +159,19 @@ def contact_mode(q, qd, tau, p: LegParams, mu) -> np.ndarray:
     Returns:
         int64 array of shape ``(...)`` (0-d for one robot): the mode constants of this module.
     """
-    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
-    mu_f = _checked_mu(mu, lead)
+    lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
+    mu_f = checked_mu(mu, lead)
     out = np.empty(qf.shape[0], dtype=np.int64)
-    kernels.contact_mode(qf, qdf, tf, mu_f, _core_params(p), out)
+    kernels.contact_mode(qf, qdf, tf, mu_f, core_params(p), out)
     return out.reshape(lead)
 
 
 def free_foot_acceleration(q, qd, tau, p: LegParams) -> tuple[np.ndarray, np.ndarray]:
     """``(Lambda, a0)``: the contact inertia ``J M^-1 J^T`` ``(..., 2, 2)`` and the free foot acceleration ``(..., 2)``."""
-    lead, (qf, qdf, tf) = _batched(("q", _vec(q, NQ, "q")), ("qd", _vec(qd, NQ, "qd")), ("tau", _vec(tau, NU, "tau")))
+    lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
     n = qf.shape[0]
     Lam, a0 = np.empty((n, 2, 2)), np.empty((n, 2))
-    kernels.response(qf, qdf, tf, _core_params(p), Lam, a0)
+    kernels.response(qf, qdf, tf, core_params(p), Lam, a0)
     return Lam.reshape(lead + (2, 2)), a0.reshape(lead + (2,))
 
 
@@ -168,7 +180,7 @@ def mu_critical(q, p: LegParams) -> np.ndarray:
 
     ``inf`` where ``Lambda_xy = 0``. It depends only on the absolute leg angles.
     """
-    q = _vec(q, NQ, "q")
+    q = vec(q, NQ, "q")
     Lam, _ = free_foot_acceleration(q, np.zeros(q.shape), np.zeros(q.shape[:-1] + (NU,)), p)
     with np.errstate(divide="ignore"):
         return Lam[..., 1, 1] / np.abs(Lam[..., 0, 1])

@@ -72,8 +72,13 @@ UNILATERAL = (
 """The keys of the unilateral ground's ``info`` and the ``out`` field of each."""
 
 _MODE_NAMES = np.array(MODE_NAMES)
-_MODE_CODES = _MODE_NAMES.view(np.uint32).reshape(len(MODE_NAMES), -1)
-"""Each mode name's UCS-4 code points: the compiled pass writes a robot's row of them as its ``contact_mode``."""
+_KIND = {"d": kernels.INFO_DOUBLE, "i": kernels.INFO_INT, "?": kernels.INFO_FLAG, "v": kernels.INFO_VECTOR, "m": kernels.INFO_MODE}
+"""The compiled passes' code of each kind of value: a double, an int32 (given as int64), a byte flag (bool), two
+doubles, a contact mode (an int32 given as its name)."""
+
+
+def _kind(key: str, base: np.dtype) -> str:
+    return "m" if key == "contact_mode" else ("v" if base.shape else {"f": "d", "i": "i", "b": "?"}[base.kind])
 
 
 class InfoBuilder:
@@ -94,6 +99,18 @@ class InfoBuilder:
         self.keys = self.out_keys + self.state_keys
         """Every key of a reset's ``info``; a step's has ``reward_keys`` too."""
         self._task = task
+        self._mode_keys = tuple(key for key in self.out_keys if key == "contact_mode")
+
+    def entries(self, out_dtype: np.dtype, state_dtype: np.dtype, rewards: bool) -> list:
+        """``(key, source, byte offset, kind)`` of every key: source 0 ``out``, 1 ``state``; kind ``d``, ``i``, ``?``, ``v``
+        or ``m`` (``_KIND``)."""
+        entries = [(key, 0, out_dtype.fields[field][1], _kind(key, out_dtype.fields[field][0]))
+                   for key, field in zip(self.out_keys, self.out_fields)]  # fmt: skip
+        entries += [(key, 1, state_dtype.fields[key][1], "d") for key in self.state_keys]
+        if rewards:
+            terms = out_dtype.fields["terms"][1]
+            entries += [(key, 0, terms + 8 * k, "d") for k, key in enumerate(self.reward_keys)]
+        return entries
 
     def reader(self, batch, out: np.ndarray, state: np.ndarray) -> "RowReader":
         """A reader of the ``info`` of robot 0 of the arrays ``out`` and ``state`` that ``batch`` (their
@@ -104,37 +121,33 @@ class InfoBuilder:
         """Every key as one fresh array over the rows of ``out`` and ``state``; with ``rewards`` the reward terms.
 
         One compiled pass (``kernels.info_columns``) fills a block per type (doubles, int64 counts, bools, ``(N, 2)``
-        vectors, the contact modes' names); each key's array is its row of a block (fresh, and no two share memory)."""
-        spec, layout_ = self._column_spec(out.dtype, state.dtype, rewards)
+        vectors); each key's array is its row of a block (fresh, and no two share memory); a contact mode is its
+        name."""
+        spec, counts, keys = self._column_spec(out.dtype, state.dtype, rewards)
         n = out.shape[0]
-        (d, i, b, v, m), keys = layout_
-        doubles, ints = np.empty((d, n)), np.empty((i, n), dtype=np.int64)
-        flags, vectors = np.empty((b, n), dtype=np.bool_), np.empty((v, n, 2))
-        names = np.empty((m, n), dtype=_MODE_NAMES.dtype)
-        kernels.info_columns(spec, out, state, doubles, ints, flags, vectors, names.view(np.uint32), _MODE_CODES)
-        blocks = {"d": doubles, "i": ints, "m": names, "?": flags, "v": vectors}
-        return {key: blocks[kind][row] for key, kind, row in keys}
+        doubles, ints = np.empty((counts["d"], n)), np.empty((counts["i"], n), dtype=np.int64)
+        flags, vectors = np.empty((counts["?"], n), dtype=np.bool_), np.empty((counts["v"], n, 2))
+        kernels.info_columns(spec, out, state, doubles, ints, flags, vectors)
+        blocks = {"d": doubles, "i": ints, "m": ints, "?": flags, "v": vectors}
+        columns = {key: blocks[kind][row] for key, kind, row in keys}
+        for key in self._mode_keys:
+            modes = columns[key]
+            if modes.size and (modes.min() < 0 or modes.max() >= len(MODE_NAMES)):
+                raise ValueError(f"info: a contact mode outside 0 .. {len(MODE_NAMES) - 1} in out: {modes[(modes < 0) | (modes >= len(MODE_NAMES))][:3]}")
+            columns[key] = _MODE_NAMES[modes]
+        return columns
 
     def _column_spec(self, out_dtype: np.dtype, state_dtype: np.dtype, rewards: bool):
-        """``info_columns``' spec and the blocks' sizes and keys, for arrays of these dtypes (made once)."""
+        """``info_columns``' spec, the blocks' sizes and the keys' places, for arrays of these dtypes (made once)."""
         cache = self.__dict__.setdefault("_specs", {})
-        if rewards in cache:
-            return cache[rewards]
-        entries = []  # (key, source, offset, kind)
-        for key, field in zip(self.out_keys, self.out_fields):
-            base, offset = out_dtype.fields[field][0], out_dtype.fields[field][1]
-            kind = "m" if key == "contact_mode" else ("v" if base.shape else {"f": "d", "i": "i", "b": "?"}[base.kind])
-            entries.append((key, 0, offset, kind))
-        entries += [(key, 1, state_dtype.fields[key][1], "d") for key in self.state_keys]
-        if rewards:
-            terms = out_dtype.fields["terms"][1]
-            entries += [(key, 0, terms + 8 * k, "d") for k, key in enumerate(self.reward_keys)]
-        counts, spec, keys = {"d": 0, "i": 0, "?": 0, "v": 0, "m": 0}, [], []
-        for key, source, offset, kind in entries:
-            spec.append((source, offset, kind, counts[kind]))
-            keys.append((key, kind, counts[kind]))
-            counts[kind] += 1
-        cache[rewards] = (tuple(spec), ((counts["d"], counts["i"], counts["?"], counts["v"], counts["m"]), keys))
+        if rewards not in cache:
+            counts, spec, keys = {"d": 0, "i": 0, "?": 0, "v": 0}, [], []
+            for key, source, offset, kind in self.entries(out_dtype, state_dtype, rewards):
+                block = "i" if kind == "m" else kind
+                spec.append((source, offset, _KIND[kind], counts[block]))
+                keys.append((key, kind, counts[block]))
+                counts[block] += 1
+            cache[rewards] = (np.array(spec, dtype=np.int64).reshape(-1, 4), counts, keys)
         return cache[rewards]
 
 
@@ -147,19 +160,11 @@ class RowReader:
 
     def __init__(self, builder: InfoBuilder, batch, out: np.ndarray, state: np.ndarray):
         self._batch = batch
-        spec = []
-        for key, field in zip(builder.out_keys, builder.out_fields):
-            base, offset = out.dtype.fields[field][0], out.dtype.fields[field][1]
-            kind = "m" if key == "contact_mode" else ("v" if base.shape else {"f": "d", "i": "i", "b": "?"}[base.kind])
-            spec.append((key, 0, offset, kind))
-        for key in builder.state_keys:
-            spec.append((key, 1, state.dtype.fields[key][1], "d"))
-        terms = out.dtype.fields["terms"][1]
-        rewards = [(key, 0, terms + 8 * k, "d") for k, key in enumerate(builder.reward_keys)]
-        batch.bind_info(tuple(spec + rewards), len(spec), MODE_NAMES)  # parsed once, read at every call
-        self._vectors = 2 * sum(kind == "v" for _, _, _, kind in spec)
+        entries = builder.entries(out.dtype, state.dtype, rewards=True)
+        spec = np.array([(source, offset, _KIND[kind], 0) for _, source, offset, kind in entries], dtype=np.int64).reshape(-1, 4)
+        plain = len(entries) - len(builder.reward_keys)
+        batch.bind_info(tuple(key for key, *_ in entries), spec, plain, MODE_NAMES)  # parsed once, read at every call
+        self._vectors = 2 * sum(kind == "v" for *_, kind in entries[:plain])
 
     def __call__(self, rewards: bool = True) -> dict:
         return self._batch.info(rewards, np.empty(self._vectors))
-
-

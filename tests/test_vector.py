@@ -401,11 +401,11 @@ def test_np_random_seed_and_reset_mask_errors_follow_sync_vector_env():
 
 
 def test_info_names_each_contact_mode_and_refuses_a_corrupt_one_without_writing_it():
-    """The compiled info pass writes each robot's mode as its name; a mode outside 0..3 in ``out`` (a corrupted
-    array) is a ValueError, and bad name buffers are refused by name, never a crash."""
+    """The compiled info pass gives each robot's mode, which the builder names; a mode outside 0..3 in ``out`` (a
+    corrupted array) is a ValueError, and a spec row that would read or write outside its row or block is refused by
+    the pass, never a crash."""
     from leg_env._core import kernels
     from leg_env.physics.contact import MODE_NAMES
-    from leg_env.info import _MODE_CODES
 
     envs = gym.make_vec("leg_env/PlanarLegBalance-v0", num_envs=4)
     envs.reset(seed=0)
@@ -421,16 +421,14 @@ def test_info_names_each_contact_mode_and_refuses_a_corrupt_one_without_writing_
     with pytest.raises(ValueError, match="contact mode"):
         envs._info_builder.columns(out, state)
     out["mode"][2] = 2
-    spec, ((d, i, b, v, m), _) = envs._info_builder._column_spec(out.dtype, state.dtype, False)
-    blocks = [np.empty((d, 4)), np.empty((i, 4), dtype=np.int64), np.empty((b, 4), dtype=np.bool_), np.empty((v, 4, 2))]
-    names = np.empty((m, 4), dtype=np.array(MODE_NAMES).dtype)
-    for bad_names, bad_codes, word in (
-        (names.view(np.uint32), _MODE_CODES[:3], "codes"),
-        (names.view(np.uint32), _MODE_CODES.astype(np.int64), "codes"),
-        (names.view(np.uint32)[:, :-1], _MODE_CODES, "names"),
-        (np.zeros((m, 4, 6), dtype=np.uint32)[:, :, ::2], _MODE_CODES, "names"),
-        (names, _MODE_CODES, "names"),
-    ):
-        with pytest.raises(ValueError, match=word):
-            kernels.info_columns(spec, out, state, *blocks, bad_names, bad_codes)
+    spec, counts, _ = envs._info_builder._column_spec(out.dtype, state.dtype, False)
+    blocks = [np.empty((counts["d"], 4)), np.empty((counts["i"], 4), dtype=np.int64), np.empty((counts["?"], 4), dtype=np.bool_),
+              np.empty((counts["v"], 4, 2))]
+    for row, column, value in ((0, 1, out.dtype.itemsize - 4), (0, 0, 2), (0, 2, 7), (0, 3, counts["d"]), (0, 1, -8)):
+        bad = spec.copy()
+        bad[row, column] = value
+        before = [b.copy() for b in blocks]
+        with pytest.raises(ValueError, match="spec"):
+            kernels.info_columns(bad, out, state, *blocks)
+        assert all(np.array_equal(x, y, equal_nan=True) for x, y in zip(blocks, before))
     envs.close()

@@ -20,6 +20,12 @@ typedef struct bitgen {
     uint64_t (*next_raw)(void *st);
 } bitgen_t;
 
+#define ROBOT_LIMITS 7       /* the limits of robot_params: hip_lo, hip_hi, knee_lo, knee_hi, min_base_height, nominal_knee, unilateral */
+#define ROBOT_DRAWN_MAX 64   /* spec lines of one robot, at most */
+#define DRAWS_MAX 1000000    /* most tries of draw_robots per robot: a bound on the work of one call */
+/* the drawn fields: env_robot's doubles before q_nom (its parameters, mu, torque limits) */
+#define ROBOT_DRAWN_FIELDS ((double)(offsetof(env_robot, q_nom) / sizeof(double)))
+
 /* A drawn robot in `row` from the uniforms u of each spec line (the field's index among the doubles of
  * env_robot, its kind, low, high; kinds 0 scale, 1 offset, 2 range of the nominal `base`); then its
  * nominal posture, holding torques and COM. `limits` = (hip_lo, hip_hi, knee_lo, knee_hi,

@@ -416,8 +416,8 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
         g.t += at.s;
         g.t_left -= at.s;
         if (log != NULL && events < LEG_LOG_SIZE) {
-            log->time[events] = g.t;
-            log->kind[events] = kind;
+            log->event_time[events] = g.t;
+            log->event_kind[events] = kind;
         }
         events += 1;
         if (events >= LEG_MAX_EVENTS && !settled) {

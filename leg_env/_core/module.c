@@ -1,17 +1,21 @@
 /* leg_env._core.kernels: the compiled core of leg-env, a CPython extension module.
  *
- * One translation unit (a unity build: the physics files are included below), so that the compiler
- * inlines the small math functions across files without link-time optimisation on any platform.
+ * One translation unit (a unity build: the physics files are included below), so that the compiler inlines the
+ * small math functions across files without link-time optimisation on any platform.
  *
- * Every function takes numpy arrays (any object with the buffer protocol) and loops over robots in C
- * with the GIL released. The Python wrappers (leg_env.dynamics, contact, integrate, hybrid) broadcast
- * and validate values; this file checks every buffer once more (type, C order, writability, size),
- * so that no call, however wrong, reads or writes past an array: a mistake is a Python exception that
- * names the argument.
+ * The boundary is written once. Every entry point is a row of ENTRIES: its name, its documentation, its
+ * arguments (name, dtype, shape rule, role, accepted values) and the function of calls.c that does its work. One
+ * binder fetches every argument of a call by its row, checks it (type, C order, writability, size, the values a
+ * kernel relies on to stay in bounds and to terminate, no output sharing memory with another argument) and names
+ * the argument in every error, before anything is written; then it runs the work, with the GIL released where the
+ * row says so. kernels.table() reports the rows (leg_env._core.signatures(), which the fuzz test reads). The Python wrappers
+ * (leg_env.physics) keep what the table does not say: broadcasting and the values of the physics.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include <float.h>
+#include <stdarg.h>
 #include <math.h>
 #include <stddef.h>
 #include <string.h>
@@ -29,18 +33,122 @@
 #include "env.c"
 #include "tasks.c"
 #include "draws.c"
+#include "calls.c"
 
-/* leg_params is LegParams.array as it is: eleven doubles, no padding */
-typedef char leg_params_is_eleven_doubles[sizeof(leg_params) == 11 * sizeof(double) ? 1 : -1];
+typedef char leg_params_is_eleven_doubles[sizeof(leg_params) == LEG_N_PARAMS * sizeof(double) ? 1 : -1];
 
-/* ------------------------------------------------------------------------------------------------
- * Buffers
- * ------------------------------------------------------------------------------------------------ */
+/* ------------------------------------------------------------------------------------------ the table */
 
-#define MAX_BUFFERS 16
+enum { OPT_NONE = 1, OPT_WHOLE = 2, OPT_OPEN = 4 }; /* None is accepted (as NULL); a whole number; lo excluded */
+
+/* An argument. Arrays: 'd' float64, 'q' int64, 'f' float32, '?' bool, 'P' leg_params (float64 rows of 11), 'R'
+ * leg_record, 'S' env_state, 'B' env_robot, 'C' env_settings, 'O' env_out (structured rows). rows: 'N' one per robot (the first sets N), 'M' one shared or one per
+ * robot, '1' one, '*' any number, 'T' any number of blocks of N rows. role: 'i' read, 'o' written, 'u' both.
+ * width: values per row (0: a 2-d array's columns). lo, hi: the accepted values of a number or of an integer
+ * array's entries (lo > hi: any). Scalars: 'r' a real number, 'i' an integer, 'l' a flag (a truth value), 'g' an
+ * object its entry's check reads (a Generators). */
+typedef struct {
+    const char *name;
+    char kind, rows, role;
+    Py_ssize_t width;
+    double lo, hi;
+    int opts;
+} arg_spec;
 
 typedef struct {
-    Py_buffer views[MAX_BUFFERS];
+    const char *name, *doc;
+    void (*run)(call *);
+    int (*check)(call *);       /* what the arguments' rows cannot say, checked with the GIL before run */
+    int release;                /* run without the GIL */
+    int answers;                /* return run's yes or no (else None) */
+    arg_spec args[MAX_ARGS];
+} entry;
+
+#define ANY 1.0, 0.0
+#define IN(name, w) {#name, 'd', 'N', 'i', w, ANY, 0}
+#define OUT(name, w) {#name, 'd', 'N', 'o', w, ANY, 0}
+#define INOUT(name, w) {#name, 'd', 'N', 'u', w, ANY, 0}
+#define PARAMS {"p", 'P', 'M', 'i', LEG_N_PARAMS, ANY, 0}
+#define REAL(name, lo, hi, opts) {#name, 'r', 0, 'i', 0, lo, hi, opts}
+#define INTEGER(name, lo, hi) {#name, 'i', 0, 'i', 0, lo, hi, 0}
+#define FLAG(name) {#name, 'l', 0, 'i', 0, ANY, 0}
+#define STEP_RULE REAL(dt, 0.0, DBL_MAX, OPT_OPEN), REAL(substeps, 1.0, LEG_MAX_SUBSTEPS, OPT_WHOLE), REAL(max_angle, 0.0, INFINITY, OPT_OPEN)
+#define TASK INTEGER(task, 0, N_TASKS - 1)
+#define ENV_ARRAYS                                                                                                     \
+    {"state", 'S', 'N', 'u', 1, ANY, 0}, {"robots", 'B', 'M', 'i', 1, ANY, 0}, {"settings", 'C', '1', 'i', 1, ANY, 0},     \
+        {"out", 'O', 'N', 'o', 1, ANY, 0}, {"obs", 'f', 'N', 'o', 0, ANY, 0}
+#define ROBOT_ROW(name, role) {#name, 'B', '1', role, 1, ANY, 0}
+#define SPEC {"spec", 'd', '*', 'i', 4, ANY, 0}
+#define LIMITS {"limits", 'd', '1', 'i', ROBOT_LIMITS, ANY, 0}
+
+static int check_start(call *c);
+static int check_assess(call *c);
+static int check_step(call *c);
+static int check_robot_params(call *c);
+static int check_draws(call *c);
+static int check_info(call *c);
+
+#define RELEASED 1, 0
+#define HELD 0, 0
+#define ANSWERS 0, 1
+static const entry ENTRIES[] = {
+    {"mass_matrix", "M(q), (N, 5, 5).", k_mass_matrix, NULL, RELEASED, {IN(q, 5), PARAMS, OUT(M, 25)}},
+    {"bias", "h(q, qd), (N, 5); gravity_only: dP/dq.", k_bias, NULL, RELEASED, {IN(q, 5), IN(qd, 5), PARAMS, OUT(h, 5), FLAG(gravity_only)}},
+    {"foot", "The foot position, (N, 2).", k_foot, NULL, RELEASED, {IN(q, 5), PARAMS, OUT(out, 2)}},
+    {"jacobian", "The contact Jacobian Jc, (N, 2, 5).", k_jacobian, NULL, RELEASED, {IN(q, 5), PARAMS, OUT(Jc, 10)}},
+    {"jdot_qd", "Jcdot qd, (N, 2).", k_jdot_qd, NULL, RELEASED, {IN(q, 5), IN(qd, 5), PARAMS, OUT(out, 2)}},
+    {"com", "The whole-body COM and its velocity, (N, 2) each.", k_com, NULL, RELEASED,
+     {IN(q, 5), IN(qd, 5), PARAMS, OUT(position, 2), OUT(velocity, 2)}},
+    {"stance", "The pinned foot's KKT solve: qdd and lam under a horizontal load on the torso's COM.", k_stance, NULL, RELEASED,
+     {IN(q, 5), IN(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), OUT(qdd, 5), OUT(lam, 2)}},
+    {"flight", "The unconstrained dynamics: qdd.", k_flight, NULL, RELEASED, {IN(q, 5), IN(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), OUT(qdd, 5)}},
+    {"slip", "The sliding foot's dynamics in direction sigma.", k_slip, NULL, RELEASED,
+     {IN(q, 5), IN(qd, 5), IN(tau, 2), IN(mu, 1), IN(sigma, 1), PARAMS, IN(load, 1), OUT(qdd, 5), OUT(lam, 2)}},
+    {"impact", "The plastic impact map: qd after it, the impulse and how it ended (leg_impact).", k_impact, NULL, RELEASED,
+     {IN(q, 5), IN(qd, 5), IN(mu, 1), PARAMS, OUT(qd_plus, 5), OUT(impulse, 2), {"status", 'q', 'N', 'o', 1, ANY, 0}}},
+    {"contact_mode", "The consistent contact mode under the torques.", k_contact_mode, NULL, RELEASED,
+     {IN(q, 5), IN(qd, 5), IN(tau, 2), IN(mu, 1), PARAMS, {"out", 'q', 'N', 'o', 1, ANY, 0}}},
+    {"response", "The contact inertia Lam (N, 2, 2) and the free foot acceleration a0 (N, 2).", k_response, NULL, RELEASED,
+     {IN(q, 5), IN(qd, 5), IN(tau, 2), PARAMS, OUT(Lam, 4), OUT(a0, 2)}},
+    {"equilibrium", "The static stance equilibrium at the knee angle: q (5,) and tau (2,).", k_equilibrium, NULL, HELD,
+     {{"p", 'P', '1', 'i', LEG_N_PARAMS, ANY, 0}, REAL(knee, 1.0, 0.0, 0), {"q", 'd', '1', 'o', 5, ANY, 0}, {"tau", 'd', '1', 'o', 2, ANY, 0}}},
+    {"turn", "(sin, cos) of theta + d by the integrator's angle addition, (N, 2).", k_turn, NULL, RELEASED, {IN(theta, 1), IN(d, 1), OUT(out, 2)}},
+    {"project", "The foot onto its anchor with Jc qd = 0, moving the base: q and qd in place.", k_project, NULL, RELEASED,
+     {INOUT(q, 5), INOUT(qd, 5), PARAMS, IN(anchor, 2)}},
+    {"rk4_step", "One RK4 control step of the pinned (stance) or free model in place, and the mean contact force.", k_rk4_step, NULL,
+     RELEASED, {INOUT(q, 5), INOUT(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), IN(anchor, 2), STEP_RULE, FLAG(stance), OUT(lam_mean, 2)}},
+    {"hybrid_step", "One control step on the unilateral ground in place (q, qd, mode, anchor), what it did in record.", k_hybrid_step,
+     NULL, RELEASED,
+     {INOUT(q, 5), INOUT(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), {"mu", 'd', 'N', 'i', 1, 0.0, DBL_MAX, 0},
+      {"mode", 'q', 'N', 'u', 1, LEG_STICK, LEG_FLIGHT, 0}, INOUT(anchor, 2), STEP_RULE, {"record", 'R', 'N', 'o', 1, ANY, 0}}},
+    {"start", "Robots put on their contact (at the nominal posture plus noise, or where the state has them if noise is None) and "
+              "evaluated by the task.", k_start, check_start, HELD,
+     {TASK, ENV_ARRAYS, {"noise", 'd', 'N', 'i', 6, ANY, OPT_NONE}, REAL(scale, 0.0, DBL_MAX, 0)}},
+    {"assess", "The task after a control step of every robot.", k_assess, check_assess, HELD, {TASK, ENV_ARRAYS}},
+    {"step", "A control step of robots lo .. hi - 1 and the task after it, block by block.", k_step, check_step, RELEASED,
+     {TASK, INTEGER(lo, 0, PY_SSIZE_T_MAX), INTEGER(hi, 0, PY_SSIZE_T_MAX), ENV_ARRAYS}},
+    {"robot_params", "A drawn robot in row from the uniforms u: whether it is accepted.", k_robot_params, check_robot_params, ANSWERS,
+     {{"u", 'd', '*', 'i', 1, ANY, 0}, SPEC, ROBOT_ROW(base, 'i'), LIMITS, ROBOT_ROW(row, 'o')}},
+    {"draw_uniform", "out[k] = the next out.shape[1] uniforms of generator rows[k].", k_draw_uniform, check_draws, HELD,
+     {{"generators", 'g', 0, 'u', 0, ANY, 0}, {"rows", 'q', 'N', 'i', 1, 0.0, PY_SSIZE_T_MAX, 0}, OUT(out, 0)}},
+    {"draw_robots", "robots[rows[k]] drawn from generator rows[k], up to max_draws tries; rejected[k] the refused tries.",
+     k_draw_robots, check_draws, HELD,
+     {{"generators", 'g', 0, 'u', 0, ANY, 0}, {"rows", 'q', 'N', 'i', 1, 0.0, PY_SSIZE_T_MAX, 0}, SPEC, ROBOT_ROW(base, 'i'), LIMITS,
+      INTEGER(max_draws, 1, DRAWS_MAX), {"robots", 'B', '*', 'u', 1, ANY, 0}, {"rejected", 'q', 'N', 'o', 1, ANY, 0}}},
+    {"info_columns", "Every row's info keys, each into its row of a block by spec (source, offset, kind, row).", k_info_columns,
+     check_info, HELD,
+     {{"spec", 'q', '*', 'i', 4, 0.0, PY_SSIZE_T_MAX, 0}, {"out", 'O', 'N', 'i', 1, ANY, 0}, {"state", 'S', 'N', 'i', 1, ANY, 0},
+      {"doubles", 'd', 'T', 'o', 1, ANY, 0}, {"ints", 'q', 'T', 'o', 1, ANY, 0}, {"flags", '?', 'T', 'o', 1, ANY, 0},
+      {"vectors", 'd', 'T', 'o', 2, ANY, 0}}},
+};
+#define N_ENTRIES ((Py_ssize_t)(sizeof ENTRIES / sizeof ENTRIES[0]))
+
+/* ------------------------------------------------------------------------------------------ the binder */
+
+typedef struct {
+    Py_buffer views[MAX_ARGS];
+    const char *names[MAX_ARGS]; /* each view's argument */
+    int written[MAX_ARGS];       /* whether the call writes it */
     int n;
 } held;
 
@@ -51,864 +159,381 @@ static void release_all(held *h)
     h->n = 0;
 }
 
-enum kind { F64, I64, F32, BOOL, U32, RECORD };
-
-static const char *const KIND_NAME[] = {"float64", "int64", "float32", "bool", "uint32", "leg_record"};
-static const char KIND_CODE[] = {'d', 'q', 'f', '?', 'I', 0};
-static const Py_ssize_t KIND_SIZE[] = {8, 8, 4, 1, 4, (Py_ssize_t)sizeof(leg_record)};
-
-static int format_is(const Py_buffer *v, char code)
+/* an array kind's item: its size, struct format code (0: a struct, not checked) and name */
+static int item_of(char kind, Py_ssize_t *size, char *code, const char **name)
 {
-    const char *f = v->format;
+    static const struct { char kind, code; Py_ssize_t size; const char *name; } ITEMS[] = {
+        {'d', 'd', 8, "float64"}, {'P', 'd', 8, "float64"}, {'q', 'q', 8, "int64"}, {'f', 'f', 4, "float32"}, {'?', '?', 1, "bool"},
+        {'R', 0, sizeof(leg_record), "leg_record"}, {'S', 0, sizeof(env_state), "env_state"}, {'B', 0, sizeof(env_robot), "env_robot"},
+        {'C', 0, sizeof(env_settings), "env_settings"}, {'O', 0, sizeof(env_out), "env_out"}};
+    for (size_t k = 0; k < sizeof ITEMS / sizeof ITEMS[0]; k++)
+        if (ITEMS[k].kind == kind) {
+            *size = ITEMS[k].size, *code = ITEMS[k].code, *name = ITEMS[k].name;
+            return 1;
+        }
+    return 0;
+}
+
+static int format_is(const char *f, char code)
+{
     if (f == NULL)
         return 0;
-    if (*f == '@' || *f == '=')
+    if (*f == '@' || *f == '=' || (PY_LITTLE_ENDIAN && *f == '<') || (!PY_LITTLE_ENDIAN && (*f == '>' || *f == '!')))
         f++;
-#if PY_LITTLE_ENDIAN
-    else if (*f == '<')
-        f++;
-#else
-    else if (*f == '>' || *f == '!')
-        f++;
-#endif
     if (code == 'q') /* a 64-bit signed integer: 'q', or 'l' where long has 64 bits */
         return (f[0] == 'q' || (f[0] == 'l' && sizeof(long) == 8)) && f[1] == '\0';
     return f[0] == code && f[1] == '\0';
 }
 
-/* The buffer of `obj`: C-contiguous, of the kind, writable if asked. NULL with a ValueError naming `name`. */
-static Py_buffer *view_of(PyObject *obj, const char *name, enum kind kind, int writable, held *h)
+static int in_range(double v, const arg_spec *a)
 {
-    if (h->n >= MAX_BUFFERS) {
-        PyErr_SetString(PyExc_RuntimeError, "leg_env._core.kernels: too many buffers in one call");
-        return NULL;
+    return a->lo > a->hi || ((a->opts & OPT_OPEN ? v > a->lo : v >= a->lo) && v <= a->hi);
+}
+
+/* 0, with an exception of type `type` (PyErr_Format's arguments) */
+static int error(PyObject *type, const char *format, ...)
+{
+    va_list args;
+    va_start(args, format);
+    PyErr_FormatV(type, format, args);
+    va_end(args);
+    return 0;
+}
+
+static int bad_value(const arg_spec *a, const char *what)
+{
+    return error(PyExc_ValueError, "%s must be %s in %s%g, %g], got %s", a->name, a->opts & OPT_WHOLE ? "a whole number" : "a value",
+                        a->opts & OPT_OPEN ? "(" : "[", a->lo, a->hi, what);
+}
+
+/* Argument j of the call: an array's buffer, or a number. 0 with an exception naming it. */
+static int fetch_arg(const arg_spec *a, PyObject *obj, int j, call *c, held *h)
+{
+    if (a->kind == 'r') {
+        const double v = PyFloat_AsDouble(obj);
+        if (v == -1.0 && PyErr_Occurred())
+            return PyErr_Clear(), error(PyExc_TypeError, "%s must be a real number, got %.80R", a->name, obj);
+        if (!in_range(v, a) || ((a->opts & OPT_WHOLE) && v != floor(v))) {
+            char text[40];
+            PyOS_snprintf(text, sizeof text, "%.17g", v);
+            return bad_value(a, text);
+        }
+        c->x[j] = v;
+        return 1;
     }
-    const int flags = PyBUF_C_CONTIGUOUS | (writable ? PyBUF_WRITABLE : 0) | (kind == RECORD ? 0 : PyBUF_FORMAT);
+    if (a->kind == 'l') {
+        if ((c->k[j] = PyObject_IsTrue(obj)) < 0)
+            return PyErr_Clear(), error(PyExc_TypeError, "%s must be true or false, got %.80R", a->name, obj);
+        return 1;
+    }
+    if (a->kind == 'i') {
+        PyObject *index = PyNumber_Index(obj);
+        if (index == NULL)
+            return PyErr_Clear(), error(PyExc_TypeError, "%s must be an integer, got %.80R", a->name, obj);
+        c->k[j] = PyLong_AsSsize_t(index);
+        Py_DECREF(index);
+        if ((c->k[j] == -1 && PyErr_Occurred()) || !in_range((double)c->k[j], a))
+            return PyErr_Clear(), bad_value(a, "another");
+        return 1;
+    }
+    if ((a->opts & OPT_NONE) && obj == Py_None) {
+        c->a[j] = NULL;
+        c->rows[j] = c->cols[j] = 0;
+        return 1;
+    }
+    Py_ssize_t size = 0;
+    char code = 0;
+    const char *type = "?";
+    item_of(a->kind, &size, &code, &type);
     Py_buffer *v = &h->views[h->n];
-    if (PyObject_GetBuffer(obj, v, flags) < 0) {
-        PyErr_Clear();
-        PyErr_Format(PyExc_ValueError, "%s must be a C-contiguous%s %s array, got %.80R", name, writable ? ", writable" : "",
-                     KIND_NAME[kind], (PyObject *)Py_TYPE(obj));
-        return NULL;
+    if (PyObject_GetBuffer(obj, v, PyBUF_C_CONTIGUOUS | (a->role != 'i' ? PyBUF_WRITABLE : 0) | (code ? PyBUF_FORMAT : 0)) < 0)
+        return PyErr_Clear(), error(PyExc_ValueError, "%s must be a C-contiguous%s %s array, got %.80R", a->name,
+                                    a->role != 'i' ? ", writable" : "", type, (PyObject *)Py_TYPE(obj));
+    h->names[h->n] = a->name;
+    h->written[h->n++] = a->role != 'i';
+    if (v->itemsize != size || (code && !format_is(v->format, code)) || (!code && v->ndim != 1))
+        return error(PyExc_ValueError, "%s must be a %s%s array (got format %s, item size %zd, %d dimensions)", a->name,
+                             code ? "" : "1-d ", type, v->format ? v->format : "?", v->itemsize, v->ndim);
+    const Py_ssize_t items = v->len / size;
+    c->a[j] = v->buf;
+    c->cols[j] = a->width;
+    if (a->kind == 'f' || (a->width == 0 && a->rows != 'T')) { /* a matrix: its columns are its own */
+        if (v->ndim != 2 || v->shape == NULL)
+            return error(PyExc_ValueError, "%s must be a 2-d array, got %d dimensions", a->name, v->ndim);
+        c->rows[j] = v->shape[0];
+        c->cols[j] = v->shape[1];
+    } else if (a->rows == 'T') { /* blocks of N rows: (R, N) or (R, N, width) */
+        const Py_ssize_t block = c->n * a->width;
+        c->rows[j] = v->ndim >= 2 ? v->shape[0] : (block > 0 ? items / block : 0);
+        if (items != c->rows[j] * block)
+            return error(PyExc_ValueError, "%s must have shape (R, %zd%s), got %zd values", a->name, c->n, a->width > 1 ? ", 2" : "", items);
+        return 1;
+    } else {
+        if (items % a->width != 0)
+            return error(PyExc_ValueError, "%s must have shape (N, %zd), got %zd values", a->name, a->width, items);
+        c->rows[j] = items / a->width;
     }
-    h->n++;
-    if (v->itemsize != KIND_SIZE[kind] || (kind != RECORD && !format_is(v, KIND_CODE[kind]))) {
-        PyErr_Format(PyExc_ValueError, "%s must be a %s array (got format %s, item size %zd)", name, KIND_NAME[kind],
-                     v->format ? v->format : "?", v->itemsize);
-        return NULL;
-    }
-    return v;
-}
-
-/* The data of `obj`, a C-contiguous buffer of `count` items of the kind (count < 0: any multiple of
- * -count, returned in *rows as count / -count). NULL with a Python exception naming `name` otherwise. */
-static void *buffer_of(PyObject *obj, const char *name, enum kind kind, Py_ssize_t count, int writable, held *h,
-                       Py_ssize_t *rows)
-{
-    Py_buffer *v = view_of(obj, name, kind, writable, h);
-    if (v == NULL)
-        return NULL;
-    const Py_ssize_t items = v->len / v->itemsize;
-    if (count < 0) {
-        if (items % (-count) != 0) {
-            PyErr_Format(PyExc_ValueError, "%s must have shape (N, %zd), got %zd values", name, -count, items);
-            return NULL;
-        }
-        *rows = items / (-count);
-    } else if (items != count) {
-        PyErr_Format(PyExc_ValueError, "%s must have %zd values, got %zd", name, count, items);
-        return NULL;
-    }
-    return v->buf;
-}
-
-/* The data of `obj`, a 2-d C-contiguous buffer of the kind: its rows and columns in *rows, *cols. */
-static void *matrix_of(PyObject *obj, const char *name, enum kind kind, int writable, held *h, Py_ssize_t *rows,
-                       Py_ssize_t *cols)
-{
-    Py_buffer *v = view_of(obj, name, kind, writable, h);
-    if (v == NULL)
-        return NULL;
-    if (v->ndim != 2 || v->shape == NULL) {
-        PyErr_Format(PyExc_ValueError, "%s must be a 2-d array, got %d dimensions", name, v->ndim);
-        return NULL;
-    }
-    *rows = v->shape[0];
-    *cols = v->shape[1];
-    return v->buf;
-}
-
-#define F64_IN(obj, name, count) ((const double *)buffer_of((obj), (name), F64, (count), 0, &h, NULL))
-#define F64_OUT(obj, name, count) ((double *)buffer_of((obj), (name), F64, (count), 1, &h, NULL))
-#define I64_OUT(obj, name, count) ((int64_t *)buffer_of((obj), (name), I64, (count), 1, &h, NULL))
-
-/* The robots' parameters: one row shared by every robot, or a row each (a randomised batch). Every
- * value must be a physical one: a non-positive or non-finite mass, inertia or length is refused, so
- * that no division in the kernels is by zero by construction of the parameters. */
-static const leg_params *params_of(PyObject *obj, Py_ssize_t n, Py_ssize_t *stride, held *h)
-{
-    Py_ssize_t rows = 0;
-    const leg_params *P = (const leg_params *)buffer_of(obj, "p", F64, -11, 0, h, &rows);
-    if (P == NULL)
-        return NULL;
-    if (rows != 1 && rows != n) {
-        PyErr_Format(PyExc_ValueError, "p must have 1 row or one per robot (%zd), got %zd", n, rows);
-        return NULL;
-    }
-    for (Py_ssize_t i = 0; i < rows; i++) {
-        const double *f = (const double *)&P[i];
-        for (int j = 0; j < 10; j++)
-            if (!(f[j] > 0.0 && f[j] < INFINITY)) {
-                PyErr_Format(PyExc_ValueError, "p: masses, inertias and lengths must be positive and finite (row %zd)", i);
-                return NULL;
-            }
-        if (!(f[10] >= 0.0 && f[10] < INFINITY)) {
-            PyErr_Format(PyExc_ValueError, "p: g must be finite and >= 0 (row %zd)", i);
-            return NULL;
+    const Py_ssize_t r = c->rows[j];
+    c->step[j] = 1;
+    if (a->rows == 'N' && c->n < 0)
+        c->n = r;
+    else if (a->rows == 'N' && r != c->n)
+        return error(PyExc_ValueError, "%s must have one row per robot (%zd rows of %zd values), got %zd rows", a->name, c->n,
+                             c->cols[j], r);
+    else if ((a->rows == '1' || a->rows == 'M') && r != 1 && !(a->rows == 'M' && r == c->n && r > 0))
+        return error(PyExc_ValueError, "%s must have 1 row%s of %zd values, got %zd", a->name, a->rows == 'M' ? " or one per robot" : "",
+                             c->cols[j], r);
+    if (a->rows == '1' || (a->rows == 'M' && r == 1))
+        c->step[j] = 0;
+    for (Py_ssize_t k = 0; strchr("qdP", a->kind) && (a->lo <= a->hi || a->kind == 'P') && k < items; k++) {
+        const double f = a->kind == 'q' ? (double)((const int64_t *)v->buf)[k] : ((const double *)v->buf)[k];
+        if (a->kind == 'P' && !(k % LEG_N_PARAMS == LEG_N_PARAMS - 1 ? f >= 0.0 && f < INFINITY : f > 0.0 && f < INFINITY))
+            return error(PyExc_ValueError, "p: masses, inertias and lengths must be positive and finite, g finite and >= 0 "
+                         "(row %zd, field %zd)", k / LEG_N_PARAMS, k % LEG_N_PARAMS); /* every division of the dynamics by them */
+        if (a->kind != 'P' && !in_range(f, a)) {
+            char text[60];
+            PyOS_snprintf(text, sizeof text, "%.17g at entry %zd", f, k);
+            return bad_value(a, text);
         }
     }
-    *stride = rows == 1 ? 0 : 1;
-    return P;
-}
-
-static int n_args(Py_ssize_t nargs, Py_ssize_t want, const char *fn)
-{
-    if (nargs != want) {
-        PyErr_Format(PyExc_TypeError, "%s takes %zd arguments, got %zd", fn, want, nargs);
-        return 0;
-    }
     return 1;
 }
 
-static int as_double(PyObject *obj, const char *name, double *out)
+/* No array the call writes shares memory with another of its arrays: a kernel reads its inputs while it writes. */
+static int no_overlap(const held *h)
 {
-    *out = PyFloat_AsDouble(obj);
-    if (*out == -1.0 && PyErr_Occurred()) {
-        PyErr_Clear();
-        PyErr_Format(PyExc_TypeError, "%s must be a real number, got %.80R", name, obj);
-        return 0;
-    }
+    for (int x = 0; x < h->n; x++)
+        for (int y = x + 1; y < h->n; y++) {
+            const Py_buffer *u = &h->views[x], *w = &h->views[y];
+            if ((h->written[x] || h->written[y]) && u->len > 0 && w->len > 0 && (const char *)u->buf < (const char *)w->buf + w->len
+                && (const char *)w->buf < (const char *)u->buf + u->len)
+                return error(PyExc_ValueError, "%s and %s must not share memory (%s is written)", h->names[x], h->names[y],
+                                     h->written[x] ? h->names[x] : h->names[y]);
+        }
     return 1;
 }
 
-/* The truth of `obj` (a flag argument); 0 with a TypeError naming `name` if it has none (an array of
- * several values, or an object whose __bool__ raises). */
-static int as_bool(PyObject *obj, const char *name, int *out)
+/* The arguments of a call by its entry's row, fetched and checked into c (buffers held in h); 0 with an exception. */
+static int bind(const entry *e, PyObject *const *args, Py_ssize_t nargs, call *c, held *h)
 {
-    *out = PyObject_IsTrue(obj);
-    if (*out < 0) {
-        PyErr_Clear();
-        PyErr_Format(PyExc_TypeError, "%s must be true or false, got %.80R", name, obj);
-        return 0;
-    }
-    return 1;
+    Py_ssize_t want = 0;
+    while (want < MAX_ARGS && e->args[want].name != NULL)
+        want++;
+    if (nargs != want)
+        return error(PyExc_TypeError, "%s takes %zd arguments, got %zd", e->name, want, nargs);
+    c->n = -1;
+    c->result = 0;
+    for (Py_ssize_t j = 0; j < nargs; j++)
+        if (!((c->o[j] = args[j]) && e->args[j].kind == 'g') && !fetch_arg(&e->args[j], args[j], (int)j, c, h))
+            return 0;
+    if (c->n < 0)
+        c->n = 1;
+    return no_overlap(h) && (e->check == NULL || e->check(c));
 }
 
-/* The step rule's settings, checked: dt > 0 finite, 1 <= substeps <= LEG_MAX_SUBSTEPS, max_angle > 0. */
-static int step_rule(PyObject *const *args, double *dt, int *substeps, double *max_angle)
-{
-    double s;
-    if (!as_double(args[0], "dt", dt) || !as_double(args[1], "substeps", &s) || !as_double(args[2], "max_angle", max_angle))
-        return 0;
-    if (!(*dt > 0.0 && *dt < INFINITY)) {
-        PyErr_SetString(PyExc_ValueError, "dt must be positive and finite");
-        return 0;
-    }
-    if (!(s >= 1.0 && s <= LEG_MAX_SUBSTEPS && s == floor(s))) {
-        PyErr_Format(PyExc_ValueError, "substeps must be a whole number in [1, %d]", LEG_MAX_SUBSTEPS);
-        return 0;
-    }
-    if (!(*max_angle > 0.0)) {
-        PyErr_SetString(PyExc_ValueError, "max_angle must be positive (inf for fixed steps)");
-        return 0;
-    }
-    *substeps = (int)s;
-    return 1;
-}
-
-#define BEGIN                                                                                                          \
+/* A call's (or a method's) arguments by its entry: `call c` and `held h` bound, or the function returns NULL. */
+#define BIND(e)                                                                                                        \
+    call c;                                                                                                            \
     held h;                                                                                                            \
     h.n = 0;                                                                                                           \
-    Py_ssize_t n = 0, ps = 0;                                                                                          \
-    (void)ps;                                                                                                          \
-    (void)n;
+    memset(c.a, 0, sizeof c.a);                                                                                        \
+    if (!bind(&(e), args, nargs, &c, &h))                                                                              \
+        return release_all(&h), NULL;
 
-#define FAIL                                                                                                           \
-    fail:                                                                                                              \
-    release_all(&h);                                                                                                   \
-    return NULL;
-
-#define ROBOTS(obj) /* q (N, 5) of the first argument sets the number of robots */                                    \
-    const double *q = (const double *)buffer_of((obj), "q", F64, -LEG_NQ, 0, &h, &n);                                  \
-    if (q == NULL)                                                                                                     \
-        goto fail;
-
-#define CHECK(x)                                                                                                       \
-    if ((x) == NULL)                                                                                                   \
-        goto fail;
-
-#define DONE                                                                                                           \
-    release_all(&h);                                                                                                   \
-    Py_RETURN_NONE;
-
-/* ------------------------------------------------------------------------------------------------
- * The dynamics (leg_env.dynamics)
- * ------------------------------------------------------------------------------------------------ */
-
-static PyObject *py_mass_matrix(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+/* Every entry point: self is its row's index. */
+static PyObject *dispatch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    BEGIN
-    if (!n_args(nargs, 3, "mass_matrix"))
-        return NULL;
-    ROBOTS(args[0])
-    const leg_params *P = params_of(args[1], n, &ps, &h);
-    CHECK(P)
-    double *M = F64_OUT(args[2], "M", n * LEG_NQ * LEG_NQ);
-    CHECK(M)
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++)
-        mass_matrix_one(P + i * ps, q + i * LEG_NQ, M + i * LEG_NQ * LEG_NQ);
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
-}
-
-static PyObject *py_bias(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 5, "bias"))
-        return NULL;
-    ROBOTS(args[0])
-    const double *qd = F64_IN(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const leg_params *P = params_of(args[2], n, &ps, &h);
-    CHECK(P)
-    double *out = F64_OUT(args[3], "h", n * LEG_NQ);
-    CHECK(out)
-    int gravity_only;
-    if (!as_bool(args[4], "gravity_only", &gravity_only))
-        goto fail;
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++)
-        bias_one(P + i * ps, q + i * LEG_NQ, qd + i * LEG_NQ, gravity_only, out + i * LEG_NQ);
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
-}
-
-/* foot(q, p, out), jacobian(q, p, Jc): functions of the configuration only */
-#define CONFIGURATION_FUNCTION(pyname, name, fn, width, outname)                                                       \
-    static PyObject *pyname(PyObject *self, PyObject *const *args, Py_ssize_t nargs)                                   \
-    {                                                                                                                  \
-        BEGIN                                                                                                          \
-        if (!n_args(nargs, 3, name))                                                                                   \
-            return NULL;                                                                                               \
-        ROBOTS(args[0])                                                                                                \
-        const leg_params *P = params_of(args[1], n, &ps, &h);                                                          \
-        CHECK(P)                                                                                                       \
-        double *out = F64_OUT(args[2], outname, n * (width));                                                          \
-        CHECK(out)                                                                                                     \
-        Py_BEGIN_ALLOW_THREADS for (Py_ssize_t i = 0; i < n; i++) fn(P + i * ps, q + i * LEG_NQ, out + i * (width));   \
-        Py_END_ALLOW_THREADS DONE FAIL                                                                                 \
+    const entry *e = &ENTRIES[PyLong_AsSsize_t(self)];
+    BIND(*e)
+    if (e->release) {
+        Py_BEGIN_ALLOW_THREADS
+        e->run(&c);
+        Py_END_ALLOW_THREADS
+    } else {
+        e->run(&c);
     }
-
-CONFIGURATION_FUNCTION(py_foot, "foot", foot_one, 2, "out")
-CONFIGURATION_FUNCTION(py_jacobian, "jacobian", jacobian_one, 2 * LEG_NQ, "Jc")
-
-static PyObject *py_jdot_qd(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 4, "jdot_qd"))
-        return NULL;
-    ROBOTS(args[0])
-    const double *qd = F64_IN(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const leg_params *P = params_of(args[2], n, &ps, &h);
-    CHECK(P)
-    double *out = F64_OUT(args[3], "out", n * 2);
-    CHECK(out)
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++)
-        jdot_qd_one(P + i * ps, q + i * LEG_NQ, qd + i * LEG_NQ, out + i * 2);
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
+    release_all(&h);
+    return e->answers ? PyBool_FromLong(c.result) : Py_NewRef(Py_None);
 }
 
-/* com(q, qd, p, position, velocity): the whole-body centre of mass and its velocity */
-static PyObject *py_com(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+/* ------------------------------------------------------------------------------------------ the checks */
+
+/* The values an environment's step relies on: its settings (a step that terminates) and, if `modes`, every robot's
+ * contact mode (and the one an undone step restores); the observation's width for the task. The robots' rows are
+ * checked where they are written (LegParams, leg_env.randomize), not at every step: a non-physical robot gives a
+ * numerical failure, never a fault. */
+static int env_values(const env_batch *b, int task, int modes)
 {
-    BEGIN
-    if (!n_args(nargs, 5, "com"))
-        return NULL;
-    ROBOTS(args[0])
-    const double *qd = F64_IN(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const leg_params *P = params_of(args[2], n, &ps, &h);
-    CHECK(P)
-    double *pos = F64_OUT(args[3], "position", n * 2);
-    CHECK(pos)
-    double *vel = F64_OUT(args[4], "velocity", n * 2);
-    CHECK(vel)
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++)
-        com_one(P + i * ps, q + i * LEG_NQ, qd + i * LEG_NQ, pos + i * 2, vel + i * 2);
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
+    const env_settings *s = b->settings;
+    if (!(s->dt > 0.0 && s->dt < INFINITY && s->substeps >= 1 && s->substeps <= LEG_MAX_SUBSTEPS && s->max_angle > 0.0 && s->max_rate > 0.0))
+        return error(PyExc_ValueError, "settings: dt, substeps, max_angle or max_rate out of range");
+    for (Py_ssize_t i = 0; modes && i < b->n; i++)
+        if (b->state[i].mode < LEG_STICK || b->state[i].mode > LEG_FLIGHT || b->state[i].prev_mode < LEG_STICK || b->state[i].prev_mode > LEG_FLIGHT)
+            return error(PyExc_ValueError, "state row %zd: the contact modes must be 0, 1, 2 or 3, got %d (prev_mode %d)", i,
+                                 (int)b->state[i].mode, (int)b->state[i].prev_mode);
+    if (task == TASK_HOP && s->task.hop.observe_apex && !s->task.hop.observe_progress)
+        return error(PyExc_ValueError, "obs cannot fit task %d with these settings: observe_apex needs observe_progress", task);
+    if (b->obs_cols != task_obs_dim(task, s))
+        return error(PyExc_ValueError, "obs must have shape (%zd, %zd) for task %d and its settings (unilateral, observe_progress, "
+                             "observe_apex, observe_com), got (%zd, %zd)", b->n, task_obs_dim(task, s), task, b->n, b->obs_cols);
+    return 1;
 }
 
-static PyObject *py_energy(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+static int env_ok(const call *c, int first, int modes)
 {
-    BEGIN
-    if (!n_args(nargs, 4, "energy"))
-        return NULL;
-    ROBOTS(args[0])
-    const double *qd = F64_IN(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const leg_params *P = params_of(args[2], n, &ps, &h);
-    CHECK(P)
-    double *out = F64_OUT(args[3], "out", n);
-    CHECK(out)
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++) {
-        double s1, co1, s2, co2;
-        const double *qi = q + i * LEG_NQ, *v = qd + i * LEG_NQ;
-        leg_trig(qi, &s1, &co1, &s2, &co2);
-        const double w1 = v[2] + v[3];
-        out[i] = energy_core(P + i * ps, s1, co1, s2, co2, qi[1], v[0], v[1], v[2], w1, w1 + v[4]);
+    const env_batch b = batch_at(c, first);
+    return env_values(&b, (int)c->k[0], modes);
+}
+
+static int check_start(call *c) { return env_ok(c, 1, 0); }
+static int check_assess(call *c) { return env_ok(c, 1, 1); }
+
+static int check_step(call *c)
+{
+    if (!(c->k[1] <= c->k[2] && c->k[2] <= c->n))
+        return error(PyExc_ValueError, "rows lo .. hi must satisfy 0 <= lo <= hi <= %zd, got %zd .. %zd", c->n, c->k[1], c->k[2]);
+    return env_ok(c, 3, 1);
+}
+
+/* A randomisation's spec: (F, 4) rows (the field's index among env_robot's doubles, kind, low, high), every index a
+ * drawn field's (a parameter, mu or a torque limit). */
+static int spec_ok(const double *spec, Py_ssize_t rows)
+{
+    if (rows > ROBOT_DRAWN_MAX)
+        return error(PyExc_ValueError, "spec must have at most %d rows, got %zd", ROBOT_DRAWN_MAX, rows);
+    for (Py_ssize_t f = 0; f < rows; f++) {
+        const double col = spec[4 * f], kind = spec[4 * f + 1];
+        if (!(col >= 0.0 && col < ROBOT_DRAWN_FIELDS && col == floor(col)) || !(kind == 0.0 || kind == 1.0 || kind == 2.0))
+            return error(PyExc_ValueError, "spec row %zd: the field must be a drawn one's index in [0, %g) and kind 0, 1 or 2", f,
+                                 ROBOT_DRAWN_FIELDS);
     }
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
+    return 1;
 }
 
-/* stance(q, qd, tau, p, load, qdd, lam), flight(q, qd, tau, p, load, qdd); load: the horizontal force on
- * the torso's COM of each robot [N] */
-static PyObject *mode_dynamics(PyObject *const *args, Py_ssize_t nargs, int mode, const char *fn)
+static int check_robot_params(call *c)
 {
-    BEGIN
-    const int with_lam = mode != LEG_FLIGHT;
-    if (!n_args(nargs, with_lam ? 7 : 6, fn))
-        return NULL;
-    ROBOTS(args[0])
-    const double *qd = F64_IN(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const double *tau = F64_IN(args[2], "tau", n * LEG_NU);
-    CHECK(tau)
-    const leg_params *P = params_of(args[3], n, &ps, &h);
-    CHECK(P)
-    const double *load = F64_IN(args[4], "load", n);
-    CHECK(load)
-    double *qdd = F64_OUT(args[5], "qdd", n * LEG_NQ);
-    CHECK(qdd)
-    double *lam = NULL;
-    if (with_lam) {
-        lam = F64_OUT(args[6], "lam", n * 2);
-        CHECK(lam)
-    }
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++) {
-        double s1, co1, s2, co2;
-        const double *v = qd + i * LEG_NQ;
-        leg_trig(q + i * LEG_NQ, &s1, &co1, &s2, &co2);
-        const double w1 = v[2] + v[3], w2 = w1 + v[4];
-        const double *t = tau + i * LEG_NU;
-        const leg_accel A = mode == LEG_STICK ? stance_core(P + i * ps, s1, co1, s2, co2, w1, w2, t[0], t[1], load[i])
-                                              : flight_core(P + i * ps, s1, co1, s2, co2, w1, w2, t[0], t[1], load[i]);
-        double *o = qdd + i * LEG_NQ;
-        o[0] = A.xdd;
-        o[1] = A.ydd;
-        o[2] = A.thbdd;
-        o[3] = A.q1dd;
-        o[4] = A.q2dd;
-        if (lam) {
-            lam[2 * i] = A.lam_x;
-            lam[2 * i + 1] = A.lam_y;
-        }
-    }
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
+    if (c->rows[0] != c->rows[1])
+        return error(PyExc_ValueError, "u must have one value per spec row (%zd), got %zd", c->rows[1], c->rows[0]);
+    return spec_ok((const double *)c->a[1], c->rows[1]);
 }
 
-static PyObject *py_stance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    return mode_dynamics(args, nargs, LEG_STICK, "stance");
-}
-
-static PyObject *py_flight(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    return mode_dynamics(args, nargs, LEG_FLIGHT, "flight");
-}
-
-static PyObject *py_equilibrium(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 4, "equilibrium"))
-        return NULL;
-    n = 1;
-    (void)n;
-    const leg_params *P = params_of(args[0], 1, &ps, &h);
-    CHECK(P)
-    double knee;
-    if (!as_double(args[1], "knee", &knee))
-        goto fail;
-    double *q = F64_OUT(args[2], "q", LEG_NQ);
-    CHECK(q)
-    double *tau = F64_OUT(args[3], "tau", LEG_NU);
-    CHECK(tau)
-    equilibrium_one(P, knee, q, tau, NULL);
-    DONE
-    FAIL
-}
-
-/* ------------------------------------------------------------------------------------------------
- * The contact (leg_env.contact)
- * ------------------------------------------------------------------------------------------------ */
-
-/* slip(q, qd, tau, mu, sigma, p, load, qdd, lam) */
-static PyObject *py_slip(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 9, "slip"))
-        return NULL;
-    ROBOTS(args[0])
-    const double *qd = F64_IN(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const double *tau = F64_IN(args[2], "tau", n * LEG_NU);
-    CHECK(tau)
-    const double *mu = F64_IN(args[3], "mu", n);
-    CHECK(mu)
-    const double *sigma = F64_IN(args[4], "sigma", n);
-    CHECK(sigma)
-    const leg_params *P = params_of(args[5], n, &ps, &h);
-    CHECK(P)
-    const double *load = F64_IN(args[6], "load", n);
-    CHECK(load)
-    double *qdd = F64_OUT(args[7], "qdd", n * LEG_NQ);
-    CHECK(qdd)
-    double *lam = F64_OUT(args[8], "lam", n * 2);
-    CHECK(lam)
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++) {
-        double s1, co1, s2, co2;
-        const double *v = qd + i * LEG_NQ;
-        leg_trig(q + i * LEG_NQ, &s1, &co1, &s2, &co2);
-        const double w1 = v[2] + v[3], w2 = w1 + v[4];
-        const leg_accel A =
-            slip_core(P + i * ps, s1, co1, s2, co2, w1, w2, tau[2 * i], tau[2 * i + 1], load[i], mu[i], sigma[i]);
-        double *o = qdd + i * LEG_NQ;
-        o[0] = A.xdd;
-        o[1] = A.ydd;
-        o[2] = A.thbdd;
-        o[3] = A.q1dd;
-        o[4] = A.q2dd;
-        lam[2 * i] = A.lam_x;
-        lam[2 * i + 1] = A.lam_y;
-    }
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
-}
-
-/* impact(q, qd, mu, p, qd_plus, impulse, status) */
-static PyObject *py_impact(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 7, "impact"))
-        return NULL;
-    ROBOTS(args[0])
-    const double *qd = F64_IN(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const double *mu = F64_IN(args[2], "mu", n);
-    CHECK(mu)
-    const leg_params *P = params_of(args[3], n, &ps, &h);
-    CHECK(P)
-    double *qd_plus = F64_OUT(args[4], "qd_plus", n * LEG_NQ);
-    CHECK(qd_plus)
-    double *impulse = F64_OUT(args[5], "impulse", n * 2);
-    CHECK(impulse)
-    int64_t *status = I64_OUT(args[6], "status", n);
-    CHECK(status)
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++) {
-        const leg_params *Pi = P + i * ps;
-        double s1, co1, s2, co2, vfx, vfy, Px, Py, d[LEG_NQ];
-        const double *v = qd + i * LEG_NQ;
-        leg_trig(q + i * LEG_NQ, &s1, &co1, &s2, &co2);
-        const double w1 = v[2] + v[3], w2 = w1 + v[4];
-        const leg_response R = foot_response(Pi, s1, co1, s2, co2);
-        foot_velocity(Pi, s1, co1, s2, co2, v[0], v[1], w1, w2, &vfx, &vfy);
-        status[i] = impact_core(vfx, vfy, mu[i], R.Lxx, R.Lxy, R.Lyy, &Px, &Py);
-        impulse_velocity(Pi, &R, s1, co1, s2, co2, Px, Py, d);
-        for (int j = 0; j < LEG_NQ; j++)
-            qd_plus[i * LEG_NQ + j] = v[j] + d[j];
-        impulse[2 * i] = Px;
-        impulse[2 * i + 1] = Py;
-    }
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
-}
-
-/* contact_mode(q, qd, tau, mu, p, out) */
-static PyObject *py_contact_mode(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 6, "contact_mode"))
-        return NULL;
-    ROBOTS(args[0])
-    const double *qd = F64_IN(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const double *tau = F64_IN(args[2], "tau", n * LEG_NU);
-    CHECK(tau)
-    const double *mu = F64_IN(args[3], "mu", n);
-    CHECK(mu)
-    const leg_params *P = params_of(args[4], n, &ps, &h);
-    CHECK(P)
-    int64_t *out = I64_OUT(args[5], "out", n);
-    CHECK(out)
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++)
-        out[i] = contact_mode_one(P + i * ps, q + i * LEG_NQ, qd + i * LEG_NQ, tau[2 * i], tau[2 * i + 1], mu[i]);
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
-}
-
-/* response(q, qd, tau, p, Lam, a0): the contact inertia and the free foot acceleration */
-static PyObject *py_response(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 6, "response"))
-        return NULL;
-    ROBOTS(args[0])
-    const double *qd = F64_IN(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const double *tau = F64_IN(args[2], "tau", n * LEG_NU);
-    CHECK(tau)
-    const leg_params *P = params_of(args[3], n, &ps, &h);
-    CHECK(P)
-    double *Lam = F64_OUT(args[4], "Lam", n * 4);
-    CHECK(Lam)
-    double *a0 = F64_OUT(args[5], "a0", n * 2);
-    CHECK(a0)
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++) {
-        double s1, co1, s2, co2;
-        const double *v = qd + i * LEG_NQ;
-        leg_trig(q + i * LEG_NQ, &s1, &co1, &s2, &co2);
-        const double w1 = v[2] + v[3], w2 = w1 + v[4];
-        const leg_response R = foot_response(P + i * ps, s1, co1, s2, co2);
-        const leg_free u = free_terms(P + i * ps, &R, s1, co1, s2, co2, w1, w2, tau[2 * i], tau[2 * i + 1], 0.0);
-        Lam[4 * i] = R.Lxx;
-        Lam[4 * i + 1] = R.Lxy;
-        Lam[4 * i + 2] = R.Lxy;
-        Lam[4 * i + 3] = R.Lyy;
-        a0[2 * i] = u.a0x;
-        a0[2 * i + 1] = u.a0y;
-    }
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
-}
-
-/* ------------------------------------------------------------------------------------------------
- * Time stepping (leg_env.integrate, leg_env.hybrid)
- * ------------------------------------------------------------------------------------------------ */
-
-/* turn(theta, d, out): (sin(theta + d), cos(theta + d)) by turn() from sin theta, cos theta; (N, 2) */
-static PyObject *py_turn(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 3, "turn"))
-        return NULL;
-    const double *theta = (const double *)buffer_of(args[0], "theta", F64, -1, 0, &h, &n);
-    CHECK(theta)
-    const double *d = F64_IN(args[1], "d", n);
-    CHECK(d)
-    double *out = F64_OUT(args[2], "out", 2 * n);
-    CHECK(out)
-    for (Py_ssize_t i = 0; i < n; i++)
-        turn(sin(theta[i]), cos(theta[i]), d[i], &out[2 * i], &out[2 * i + 1]);
-    DONE
-    FAIL
-}
-
-/* project(q, qd, p, anchor): q and qd in place */
-static PyObject *py_project(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 4, "project"))
-        return NULL;
-    double *q = (double *)buffer_of(args[0], "q", F64, -LEG_NQ, 1, &h, &n);
-    CHECK(q)
-    double *qd = F64_OUT(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const leg_params *P = params_of(args[2], n, &ps, &h);
-    CHECK(P)
-    const double *anchor = F64_IN(args[3], "anchor", n * 2);
-    CHECK(anchor)
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++)
-        project_one(P + i * ps, q + i * LEG_NQ, qd + i * LEG_NQ, anchor + 2 * i);
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
-}
-
-/* rk4_step(q, qd, tau, p, load, anchor, dt, substeps, max_angle, stance, lam_mean): one control step
- * of the pinned (stance) or free (flight) model in place */
-static PyObject *py_rk4_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 11, "rk4_step"))
-        return NULL;
-    double *q = (double *)buffer_of(args[0], "q", F64, -LEG_NQ, 1, &h, &n);
-    CHECK(q)
-    double *qd = F64_OUT(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const double *tau = F64_IN(args[2], "tau", n * LEG_NU);
-    CHECK(tau)
-    const leg_params *P = params_of(args[3], n, &ps, &h);
-    CHECK(P)
-    const double *load = F64_IN(args[4], "load", n);
-    CHECK(load)
-    const double *anchor = F64_IN(args[5], "anchor", n * 2);
-    CHECK(anchor)
-    double dt, max_angle;
-    int substeps;
-    if (!step_rule(args + 6, &dt, &substeps, &max_angle))
-        goto fail;
-    int stance;
-    if (!as_bool(args[9], "stance", &stance))
-        goto fail;
-    double *lam = F64_OUT(args[10], "lam_mean", n * 2);
-    CHECK(lam)
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++) {
-        double *qi = q + i * LEG_NQ, s1, co1, s2, co2;
-        const leg_drive u = {tau[2 * i], tau[2 * i + 1], load[i], 0.0};
-        leg_trig(qi, &s1, &co1, &s2, &co2);
-        rk4_control_step(P + i * ps, &u, qi, qd + i * LEG_NQ, anchor + 2 * i, dt, substeps, max_angle, stance, s1,
-                         co1, s2, co2, lam + 2 * i);
-    }
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
-}
-
-/* hybrid_step(q, qd, tau, p, load, mu, mode, anchor, dt, substeps, max_angle, record): one control step
- * on the unilateral ground in place (q, qd, mode, anchor) with what it did in `record` */
-static PyObject *py_hybrid_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    BEGIN
-    if (!n_args(nargs, 12, "hybrid_step"))
-        return NULL;
-    double *q = (double *)buffer_of(args[0], "q", F64, -LEG_NQ, 1, &h, &n);
-    CHECK(q)
-    double *qd = F64_OUT(args[1], "qd", n * LEG_NQ);
-    CHECK(qd)
-    const double *tau = F64_IN(args[2], "tau", n * LEG_NU);
-    CHECK(tau)
-    const leg_params *P = params_of(args[3], n, &ps, &h);
-    CHECK(P)
-    const double *load = F64_IN(args[4], "load", n);
-    CHECK(load)
-    const double *mu = F64_IN(args[5], "mu", n);
-    CHECK(mu)
-    int64_t *mode = I64_OUT(args[6], "mode", n);
-    CHECK(mode)
-    double *anchor = F64_OUT(args[7], "anchor", n * 2);
-    CHECK(anchor)
-    double dt, max_angle;
-    int substeps;
-    if (!step_rule(args + 8, &dt, &substeps, &max_angle))
-        goto fail;
-    leg_record *rec = (leg_record *)buffer_of(args[11], "record", RECORD, n, 1, &h, NULL);
-    CHECK(rec)
-    for (Py_ssize_t i = 0; i < n; i++) {
-        if (mode[i] < LEG_STICK || mode[i] > LEG_FLIGHT) {
-            PyErr_Format(PyExc_ValueError, "mode must be one of 0-3 (STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT), got %lld at row %zd",
-                         (long long)mode[i], i);
-            goto fail;
-        }
-        if (!(mu[i] >= 0.0 && mu[i] < INFINITY)) {
-            PyErr_Format(PyExc_ValueError, "mu must be finite and >= 0, got %g at row %zd", mu[i], i);
-            goto fail;
-        }
-    }
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++) {
-        double *qi = q + i * LEG_NQ, s1, co1, s2, co2;
-        const leg_drive u = {tau[2 * i], tau[2 * i + 1], load[i], mu[i]};
-        leg_trig(qi, &s1, &co1, &s2, &co2);
-        for (int j = 0; j < LEG_LOG_SIZE; j++) { /* the log after the last event: none */
-            rec[i].log.kind[j] = -1;
-            rec[i].log.time[j] = NAN;
-        }
-        mode[i] = hybrid_control_step(P + i * ps, &u, qi, qd + i * LEG_NQ, (int)mode[i], anchor + 2 * i, dt, substeps,
-                                      max_angle, s1, co1, s2, co2, &rec[i].tally, &rec[i].log);
-    }
-    Py_END_ALLOW_THREADS
-    DONE
-    FAIL
-}
-
-#include "module_env.c"
-
-/* ------------------------------------------------------------------------------------------------
- * Layouts: every struct's fields, from which leg_env.layout builds the numpy dtypes
- * ------------------------------------------------------------------------------------------------ */
-
+static PyTypeObject GeneratorsType;
 typedef struct {
-    const char *name;
-    size_t offset;
-    const char *type; /* a numpy type ("f8", "i4", "?" for a byte flag) or a struct's name */
-    size_t count;     /* 1 for a scalar, else the array's length */
-} field;
+    PyObject_HEAD Py_ssize_t n;
+    PyObject **owners; /* the BitGenerators (NULL: not set) */
+    bitgen_t **bg;     /* their C interfaces */
+} GeneratorsObject;
 
-#define F(type, member, code, count) {#member, offsetof(type, member), code, count}
-#define TASK(type, member, name, code, count) {name, offsetof(type, member), code, count}
-#define NAMED(type, member, name, code, count) {name, offsetof(type, member), code, count} /* a nested member */
-/* the fields of a leg_tally member `tally` of `type`, under their own names (leg_record and env_out hold one) */
-#define TALLY_FIELDS(type)                                                                                              \
-    NAMED(type, tally.impulse, "impulse", "f8", 2), NAMED(type, tally.kick, "kick", "f8", 2),                           \
-    NAMED(type, tally.stick_time, "stick_time", "f8", 1), NAMED(type, tally.slip_time, "slip_time", "f8", 1),           \
-    NAMED(type, tally.flight_time, "flight_time", "f8", 1), NAMED(type, tally.slip_distance, "slip_distance", "f8", 1), \
-    NAMED(type, tally.work, "work", "f8", 1), NAMED(type, tally.work_load, "work_load", "f8", 1),                       \
-    NAMED(type, tally.slip_dissipation, "slip_dissipation", "f8", 1),                                                 \
-    NAMED(type, tally.impact_dissipation, "impact_dissipation", "f8", 1), NAMED(type, tally.events, "events", "i4", 1), \
-    NAMED(type, tally.painleve, "painleve", "i4", 1), NAMED(type, tally.settles, "settles", "i4", 1),                   \
-    NAMED(type, tally.rk4_steps, "rk4_steps", "i4", 1)
-
-static const field PARAMS_FIELDS[] = {
-    F(leg_params, m_b, "f8", 1), F(leg_params, m1, "f8", 1), F(leg_params, m2, "f8", 1), F(leg_params, I_b, "f8", 1),
-    F(leg_params, I1, "f8", 1),  F(leg_params, I2, "f8", 1), F(leg_params, l1, "f8", 1), F(leg_params, l2, "f8", 1),
-    F(leg_params, c1, "f8", 1),  F(leg_params, c2, "f8", 1), F(leg_params, g, "f8", 1),  {NULL, 0, NULL, 0}};
-
-static const field RECORD_FIELDS[] = {
-    TALLY_FIELDS(leg_record),
-    NAMED(leg_record, log.kind, "event_kind", "i4", LEG_LOG_SIZE), NAMED(leg_record, log.time, "event_time", "f8", LEG_LOG_SIZE),
-    {NULL, 0, NULL, 0}};
-
-static const field STATE_FIELDS[] = {
-    F(env_state, q, "f8", LEG_NQ), F(env_state, qd, "f8", LEG_NQ), F(env_state, anchor, "f8", 2), F(env_state, action, "f8", 2),
-    F(env_state, trig, "f8", 4), F(env_state, load, "f8", 1), F(env_state, prev_q, "f8", LEG_NQ),
-    F(env_state, prev_qd, "f8", LEG_NQ), F(env_state, prev_anchor_x, "f8", 1), F(env_state, prev_trig, "f8", 4),
-    F(env_state, mode, "i4", 1), F(env_state, prev_mode, "i4", 1), {NULL, 0, NULL, 0}};
-static const field STATE_PUSH_FIELDS[] = {
-    TASK(env_state, task.push.steps, "steps", "i4", 1), TASK(env_state, task.push.start, "push_start", "i4", PUSH_MAX),
-    TASK(env_state, task.push.x_com0, "x_com0", "f8", 1), TASK(env_state, task.push.force, "push_force", "f8", PUSH_MAX),
-    {NULL, 0, NULL, 0}};
-static const field STATE_HOP_FIELDS[] = {
-    TASK(env_state, task.hop.command, "command", "f8", 1), TASK(env_state, task.hop.x_com0, "x_com0", "f8", 1),
-    TASK(env_state, task.hop.flight_run, "flight_run", "f8", 1), TASK(env_state, task.hop.ground_time, "ground_time", "f8", 1),
-    TASK(env_state, task.hop.banked, "banked", "f8", 1), TASK(env_state, task.hop.pending, "pending", "f8", 1),
-    TASK(env_state, task.hop.arc_kernel, "arc_kernel", "f8", 1), TASK(env_state, task.hop.held, "held", "f8", 1),
-    TASK(env_state, task.hop.arc_apex, "arc_apex", "f8", 1), TASK(env_state, task.hop.apex, "apex", "f8", 1),
-    TASK(env_state, task.hop.next_commands, "next_commands", "f8", HOP_COMMANDS),
-    TASK(env_state, task.hop.command_age, "command_age", "i4", 1),
-    TASK(env_state, task.hop.next_command, "next_command", "i4", 1),
-    {NULL, 0, NULL, 0}};
-
-static const field ROBOT_FIELDS[] = {
-    F(env_robot, p, "leg_params", 1), F(env_robot, mu, "f8", 1), F(env_robot, torque_limit, "f8", LEG_NU),
-    F(env_robot, q_nom, "f8", LEG_NQ), F(env_robot, tau_nom, "f8", LEG_NU), F(env_robot, com_nom, "f8", 2), {NULL, 0, NULL, 0}};
-
-static const field SETTINGS_FIELDS[] = {
-    F(env_settings, dt, "f8", 1), F(env_settings, max_angle, "f8", 1), F(env_settings, max_rate, "f8", 1),
-    F(env_settings, alive_bonus, "f8", 1), F(env_settings, w_position, "f8", 1), F(env_settings, w_angle, "f8", 1),
-    F(env_settings, w_velocity, "f8", 1), F(env_settings, w_unilateral, "f8", 1), F(env_settings, w_friction, "f8", 1),
-    F(env_settings, w_ctrl, "f8", 1), F(env_settings, min_base_height, "f8", 1), F(env_settings, max_torso_angle, "f8", 1),
-    F(env_settings, hip_range, "f8", 2), F(env_settings, knee_range, "f8", 2), F(env_settings, contact_loss_threshold, "f8", 1),
-    F(env_settings, substeps, "i4", 1), F(env_settings, unilateral, "?", 1), F(env_settings, terminate_on_contact_loss, "?", 1),
-    {NULL, 0, NULL, 0}};
-static const field SETTINGS_PUSH_FIELDS[] = {
-    TASK(env_settings, task.push.w_com, "w_com", "f8", 1), TASK(env_settings, task.push.push_steps, "push_steps", "i4", 1),
-    TASK(env_settings, task.push.observe_com, "observe_com", "?", 1),
-    {NULL, 0, NULL, 0}};
-static const field SETTINGS_HOP_FIELDS[] = {
-    TASK(env_settings, task.hop.w_height, "w_height", "f8", 1), TASK(env_settings, task.hop.height_scale, "height_scale", "f8", 1),
-    TASK(env_settings, task.hop.w_drift, "w_drift", "f8", 1), TASK(env_settings, task.hop.w_tilt, "w_tilt", "f8", 1),
-    TASK(env_settings, task.hop.w_impact, "w_impact", "f8", 1), TASK(env_settings, task.hop.w_slip, "w_slip", "f8", 1),
-    TASK(env_settings, task.hop.height_scale_fine, "height_scale_fine", "f8", 1),
-    TASK(env_settings, task.hop.w_drift_near, "w_drift_near", "f8", 1),
-    TASK(env_settings, task.hop.drift_near_cap, "drift_near_cap", "f8", 1),
-    TASK(env_settings, task.hop.w_limit, "w_limit", "f8", 1), TASK(env_settings, task.hop.limit_margin, "limit_margin", "f8", 1),
-    TASK(env_settings, task.hop.min_flight, "min_flight", "f8", 1),
-    TASK(env_settings, task.hop.max_ground_time, "max_ground_time", "f8", 1),
-    TASK(env_settings, task.hop.flight_height, "flight_height", "?", 1),
-    TASK(env_settings, task.hop.observe_progress, "observe_progress", "?", 1),
-    TASK(env_settings, task.hop.pay_on_landing, "pay_on_landing", "?", 1),
-    TASK(env_settings, task.hop.pay_hops_only, "pay_hops_only", "?", 1),
-    TASK(env_settings, task.hop.pay_on_next_hop, "pay_on_next_hop", "?", 1),
-    TASK(env_settings, task.hop.hold_height, "hold_height", "?", 1),
-    TASK(env_settings, task.hop.observe_apex, "observe_apex", "?", 1),
-    TASK(env_settings, task.hop.command_steps, "command_steps", "i4", 1),
-    {NULL, 0, NULL, 0}};
-
-static const field OUT_FIELDS[] = {
-    F(env_out, lam, "f8", 2), F(env_out, base_drift, "f8", 1), F(env_out, foot_error, "f8", 1), F(env_out, normal_force, "f8", 1),
-    TALLY_FIELDS(env_out),
-    F(env_out, energy, "f8", 1), F(env_out, foot_height, "f8", 1), F(env_out, com, "f8", 2), F(env_out, com_velocity, "f8", 2),
-    F(env_out, terms, "f8", MAX_TERMS),
-    F(env_out, mode, "i4", 1), F(env_out, ending, "i4", 1), F(env_out, terminated, "?", 1), F(env_out, unilateral_violation, "?", 1),
-    F(env_out, friction_violation, "?", 1), F(env_out, numerical_failure, "?", 1), {NULL, 0, NULL, 0}};
-static const field OUT_PUSH_FIELDS[] = {
-    TASK(env_out, task.push.push_force, "push_force", "f8", 1), TASK(env_out, task.push.work_push, "work_push", "f8", 1),
-    {NULL, 0, NULL, 0}};
-
-static PyObject *layout_of(const field *fields, size_t itemsize)
+/* draw_uniform and draw_robots: a Generators whose rows are set, in range; draw_robots' spec and robots' rows. */
+static int check_draws(call *c)
 {
-    PyObject *list = PyList_New(0);
-    if (list == NULL)
-        return NULL;
-    for (const field *f = fields; f->name; f++) {
-        PyObject *item = Py_BuildValue("(snsn)", f->name, (Py_ssize_t)f->offset, f->type, (Py_ssize_t)f->count);
-        if (item == NULL || PyList_Append(list, item) < 0) {
-            Py_XDECREF(item);
-            Py_DECREF(list);
-            return NULL;
-        }
-        Py_DECREF(item);
+    if (!Py_IS_TYPE((PyObject *)c->o[0], &GeneratorsType))
+        return error(PyExc_TypeError, "generators must be a Generators, got %.80R", (PyObject *)Py_TYPE((PyObject *)c->o[0]));
+    const GeneratorsObject *G = (const GeneratorsObject *)c->o[0];
+    const int robots = c->a[6] != NULL; /* draw_robots */
+    for (Py_ssize_t k = 0; k < c->n; k++) {
+        const int64_t row = ((const int64_t *)c->a[1])[k];
+        if (row >= G->n || G->bg[row] == NULL)
+            return error(PyExc_ValueError, "rows[%zd] = %lld is not a set row of generators", k, (long long)row);
+        if (robots && row >= c->rows[6])
+            return error(PyExc_ValueError, "rows[%zd] = %lld is not a row of robots", k, (long long)row);
     }
-    return Py_BuildValue("(nN)", (Py_ssize_t)itemsize, list);
+    c->o[0] = G->bg; /* what the draws read: the held pointers */
+    return !robots || spec_ok((const double *)c->a[2], c->rows[2]);
 }
 
-/* layouts(): {struct: (itemsize, [(field, offset, numpy type or struct, count)])}; "env_state.push" and
- * the like are a task's fields of the struct's union (offsets from the struct's start) */
+/* info's spec rows (source 0 out, 1 state; byte offset; kind; row of its block) read inside their struct and write
+ * inside their block (the rows of each kind's block: `rows`, or none to check). */
+static int info_spec_ok(const int64_t *spec, Py_ssize_t m, const Py_ssize_t *rows)
+{
+    static const char *const BLOCKS[N_INFO_KINDS] = {"doubles", "ints", "flags", "vectors", "ints"};
+    for (Py_ssize_t k = 0; k < m; k++) {
+        const int64_t *e = spec + 4 * k;
+        if (!(e[0] == 0 || e[0] == 1) || !(e[2] >= 0 && e[2] < N_INFO_KINDS))
+            return error(PyExc_ValueError, "spec row %zd: the source must be 0 (out) or 1 (state) and the kind 0 .. %d", k, N_INFO_KINDS - 1);
+        if (e[1] < 0 || e[1] + (int64_t)INFO_BYTES[e[2]] > (e[0] == 0 ? (int64_t)sizeof(env_out) : (int64_t)sizeof(env_state)))
+            return error(PyExc_ValueError, "spec row %zd reads outside its %s row", k, e[0] == 0 ? "out" : "state");
+        if (rows != NULL && e[3] >= rows[e[2]])
+            return error(PyExc_ValueError, "spec row %zd writes row %lld of %s, which has %zd", k, (long long)e[3], BLOCKS[e[2]], rows[e[2]]);
+    }
+    return 1;
+}
+
+static int check_info(call *c)
+{
+    const Py_ssize_t rows[N_INFO_KINDS] = {c->rows[3], c->rows[4], c->rows[5], c->rows[6], c->rows[4]};
+    return info_spec_ok((const int64_t *)c->a[0], c->rows[0], rows);
+}
+
+#include "objects.c"
+
+/* ------------------------------------------------------------------------------------------ reports */
+
+static int put(PyObject *dict, const char *key, PyObject *value) /* steals value */
+{
+    const int ok = value != NULL && PyDict_SetItemString(dict, key, value) == 0;
+    Py_XDECREF(value);
+    return ok;
+}
+
+/* table(): {name: (doc, releases_gil, answers, ((name, kind, rows, role, width, itemsize, lo, hi, opts), ...))}, every row
+ * of the table of entry points as the binder reads it (leg_env._core.signatures() names its parts) */
+static PyObject *py_table(PyObject *self, PyObject *unused)
+{
+    PyObject *out = PyDict_New();
+    for (Py_ssize_t k = 0; out != NULL && k < N_ENTRIES; k++) {
+        const entry *e = &ENTRIES[k];
+        PyObject *args = PyTuple_New(0);
+        for (int j = 0; args != NULL && j < MAX_ARGS && e->args[j].name != NULL; j++) {
+            const arg_spec *a = &e->args[j];
+            Py_ssize_t size = 0;
+            char code;
+            const char *type;
+            item_of(a->kind, &size, &code, &type);
+            PyObject *row = Py_BuildValue("((sCCCnnddi))", a->name, a->kind, a->rows ? a->rows : ' ', a->role, a->width, size, a->lo, a->hi, a->opts);
+            Py_XSETREF(args, row ? PySequence_Concat(args, row) : NULL);
+            Py_XDECREF(row);
+        }
+        if (args == NULL || !put(out, e->name, Py_BuildValue("(siiN)", e->doc, e->release, e->answers, args)))
+            Py_CLEAR(out);
+    }
+    return out;
+}
+
+static const struct {
+    const char *name;
+    const field_layout *fields;
+    size_t size;
+} STRUCTS[] = {
+#define STRUCT(name, type, FIELDS, path) {name, (const field_layout[]){FIELDS(FIELD_LAYOUT, type, path){NULL, 0, NULL, 0, NULL}}, sizeof(type)}
+    STRUCT("leg_params", leg_params, LEG_PARAMS_FIELDS, ),
+    STRUCT("leg_record", leg_record, LEG_RECORD_FIELDS, ),
+    STRUCT("env_state", env_state, ENV_STATE_FIELDS, ),
+    STRUCT("env_state.push", env_state, PUSH_STATE_FIELDS, task.push.),
+    STRUCT("env_state.hop", env_state, HOP_STATE_FIELDS, task.hop.),
+    STRUCT("env_robot", env_robot, ENV_ROBOT_FIELDS, ),
+    STRUCT("env_settings", env_settings, ENV_SETTINGS_FIELDS, ),
+    STRUCT("env_settings.push", env_settings, PUSH_SETTINGS_FIELDS, task.push.),
+    STRUCT("env_settings.hop", env_settings, HOP_SETTINGS_FIELDS, task.hop.),
+    STRUCT("env_out", env_out, ENV_OUT_FIELDS, ),
+    STRUCT("env_out.push", env_out, PUSH_OUT_FIELDS, task.push.),
+};
+
+/* layouts(): {struct: (itemsize, [(field, offset, numpy type or struct, count, doc)])}; "env_state.push" and the like
+ * are a task's fields of the struct's union (offsets from the struct's start) */
 static PyObject *py_layouts(PyObject *self, PyObject *unused)
 {
-    static const struct {
-        const char *name;
-        const field *fields;
-        size_t size;
-    } structs[] = {
-        {"leg_params", PARAMS_FIELDS, sizeof(leg_params)},
-        {"leg_record", RECORD_FIELDS, sizeof(leg_record)},
-        {"env_state", STATE_FIELDS, sizeof(env_state)},
-        {"env_state.push", STATE_PUSH_FIELDS, sizeof(env_state)},
-        {"env_state.hop", STATE_HOP_FIELDS, sizeof(env_state)},
-        {"env_robot", ROBOT_FIELDS, sizeof(env_robot)},
-        {"env_settings", SETTINGS_FIELDS, sizeof(env_settings)},
-        {"env_settings.push", SETTINGS_PUSH_FIELDS, sizeof(env_settings)},
-        {"env_settings.hop", SETTINGS_HOP_FIELDS, sizeof(env_settings)},
-        {"env_out", OUT_FIELDS, sizeof(env_out)},
-        {"env_out.push", OUT_PUSH_FIELDS, sizeof(env_out)},
-    };
     PyObject *dict = PyDict_New();
-    if (dict == NULL)
-        return NULL;
-    for (size_t k = 0; k < sizeof(structs) / sizeof(structs[0]); k++) {
-        PyObject *layout = layout_of(structs[k].fields, structs[k].size);
-        if (layout == NULL || PyDict_SetItemString(dict, structs[k].name, layout) < 0) {
-            Py_XDECREF(layout);
-            Py_DECREF(dict);
-            return NULL;
+    for (size_t k = 0; dict != NULL && k < sizeof STRUCTS / sizeof STRUCTS[0]; k++) {
+        PyObject *list = PyList_New(0);
+        for (const field_layout *f = STRUCTS[k].fields; list != NULL && f->name; f++) {
+            PyObject *item = Py_BuildValue("(snsns)", f->name, (Py_ssize_t)f->offset, f->type, (Py_ssize_t)f->count, f->doc);
+            if (item == NULL || PyList_Append(list, item) < 0)
+                Py_CLEAR(list);
+            Py_XDECREF(item);
         }
-        Py_DECREF(layout);
+        if (list == NULL || !put(dict, STRUCTS[k].name, Py_BuildValue("(nN)", (Py_ssize_t)STRUCTS[k].size, list)))
+            Py_CLEAR(dict);
     }
     return dict;
 }
@@ -916,114 +541,88 @@ static PyObject *py_layouts(PyObject *self, PyObject *unused)
 /* observation(): {name: column} of the observation's entries (obs_index of env.h) and the widths */
 static PyObject *py_observation(PyObject *self, PyObject *unused)
 {
-    return Py_BuildValue(
-        "{sisisisisisisisisisisisisisisisisisisisisisisisisisisisisi}", "base_x", OBS_BASE_X, "base_y", OBS_BASE_Y, "th_b", OBS_TH_B, "q1",
-        OBS_Q1, "q2", OBS_Q2, "vx_b", OBS_VX_B, "vy_b", OBS_VY_B, "w_b", OBS_W_B, "w_q1", OBS_W_Q1, "w_q2", OBS_W_Q2, "lam_x",
-        OBS_LAM_X, "lam_y", OBS_LAM_Y, "foot_height", OBS_FOOT_HEIGHT, "foot_vx", OBS_FOOT_VX, "foot_vy", OBS_FOOT_VY, "contact",
-        OBS_CONTACT, "slip", OBS_SLIP, "impulse_y", OBS_IMPULSE_Y, "command", OBS_COMMAND, "pinned_dim", OBS_PINNED_DIM,
-        "unilateral_dim", OBS_UNILATERAL_DIM, "hop_dim", OBS_HOP_DIM, "com_drift", OBS_COM_DRIFT, "ground_time", OBS_GROUND_TIME, "hop_progress_dim", OBS_PROGRESS_DIM,
-        "last_apex", OBS_LAST_APEX, "hop_apex_dim", OBS_MAX_DIM, "push_com_drift", OBS_PUSH_COM_DRIFT, "push_com_dim", OBS_PUSH_DIM);
+#define OBS(name, NAME) {#name, NAME}
+    static const struct { const char *name; int column; } COLUMNS[] = {
+        OBS(base_x, OBS_BASE_X), OBS(base_y, OBS_BASE_Y), OBS(th_b, OBS_TH_B), OBS(q1, OBS_Q1), OBS(q2, OBS_Q2), OBS(vx_b, OBS_VX_B),
+        OBS(vy_b, OBS_VY_B), OBS(w_b, OBS_W_B), OBS(w_q1, OBS_W_Q1), OBS(w_q2, OBS_W_Q2), OBS(lam_x, OBS_LAM_X), OBS(lam_y, OBS_LAM_Y),
+        OBS(foot_height, OBS_FOOT_HEIGHT), OBS(foot_vx, OBS_FOOT_VX), OBS(foot_vy, OBS_FOOT_VY), OBS(contact, OBS_CONTACT), OBS(slip, OBS_SLIP),
+        OBS(impulse_y, OBS_IMPULSE_Y), OBS(command, OBS_COMMAND), OBS(com_drift, OBS_COM_DRIFT), OBS(ground_time, OBS_GROUND_TIME),
+        OBS(last_apex, OBS_LAST_APEX), OBS(push_com_drift, OBS_PUSH_COM_DRIFT), OBS(pinned_dim, OBS_PINNED_DIM),
+        OBS(unilateral_dim, OBS_UNILATERAL_DIM), OBS(hop_dim, OBS_HOP_DIM), OBS(hop_progress_dim, OBS_PROGRESS_DIM),
+        OBS(hop_apex_dim, OBS_MAX_DIM), OBS(push_com_dim, OBS_PUSH_DIM)};
+    PyObject *dict = PyDict_New();
+    for (size_t k = 0; dict != NULL && k < sizeof COLUMNS / sizeof COLUMNS[0]; k++)
+        if (!put(dict, COLUMNS[k].name, PyLong_FromLong(COLUMNS[k].column)))
+            Py_CLEAR(dict);
+    return dict;
 }
 
-/* ------------------------------------------------------------------------------------------------ */
+/* ------------------------------------------------------------------------------------------ the module */
 
-#define FAST(name, fn, doc) {name, (PyCFunction)(void (*)(void))fn, METH_FASTCALL, doc}
-
-static PyMethodDef methods[] = {
-    FAST("mass_matrix", py_mass_matrix, "mass_matrix(q, p, M): M(q), (N, 5, 5)."),
-    FAST("bias", py_bias, "bias(q, qd, p, h, gravity_only): h(q, qd), (N, 5)."),
-    FAST("foot", py_foot, "foot(q, p, out): the foot position, (N, 2)."),
-    FAST("jacobian", py_jacobian, "jacobian(q, p, Jc): the contact Jacobian, (N, 2, 5)."),
-    FAST("jdot_qd", py_jdot_qd, "jdot_qd(q, qd, p, out): Jcdot qd, (N, 2)."),
-    FAST("com", py_com, "com(q, qd, p, position, velocity): the whole-body COM and its velocity, (N, 2) each."),
-    FAST("energy", py_energy, "energy(q, qd, p, out): kinetic plus potential energy (y = 0 at zero potential), (N,)."),
-    FAST("stance", py_stance, "stance(q, qd, tau, p, load, qdd, lam): the pinned-foot KKT solve."),
-    FAST("flight", py_flight, "flight(q, qd, tau, p, load, qdd): the unconstrained dynamics."),
-    FAST("equilibrium", py_equilibrium, "equilibrium(p, knee, q, tau): the static stance equilibrium."),
-    FAST("slip", py_slip, "slip(q, qd, tau, mu, sigma, p, load, qdd, lam): the sliding dynamics."),
-    FAST("impact", py_impact, "impact(q, qd, mu, p, qd_plus, impulse, status): the plastic impact map."),
-    FAST("contact_mode", py_contact_mode, "contact_mode(q, qd, tau, mu, p, out): the consistent mode."),
-    FAST("response", py_response, "response(q, qd, tau, p, Lam, a0): contact inertia and free foot acceleration."),
-    FAST("turn", py_turn, "turn(theta, d, out): sin and cos of theta + d by angle addition, as the integrator turns."),
-    FAST("project", py_project, "project(q, qd, p, anchor): the foot onto its anchor, in place."),
-    FAST("rk4_step", py_rk4_step,
-         "rk4_step(q, qd, tau, p, load, anchor, dt, substeps, max_angle, stance, lam_mean): one RK4 control step."),
-    FAST("hybrid_step", py_hybrid_step,
-         "hybrid_step(q, qd, tau, p, load, mu, mode, anchor, dt, substeps, max_angle, record): one hybrid control step."),
-    FAST("physics_range", py_physics_range, "physics_range(lo, hi, state, robots, settings, out): one control step of rows lo .. hi - 1."),
-    FAST("assess", py_assess, "assess(task, state, robots, settings, out, obs): the task after a control step."),
-    FAST("step", py_step, "step(task, lo, hi, state, robots, settings, out, obs): physics_range then assess of rows lo .. hi - 1, block by block."),
-    FAST("start", py_start,
-         "start(task, state, robots, settings, out, obs, noise, scale): robots put on their contact (at the nominal posture "
-         "plus noise, or as the state has them if noise is None) and evaluated."),
-    FAST("perturbed_starts", py_perturbed_starts, "perturbed_starts(noise, scale, q_nom, p, q, qd, anchor)."),
-    FAST("robot_params", py_robot_params, "robot_params(u, spec, base, limits, row) -> accepted."),
-    FAST("info_columns", py_info_columns,
-         "info_columns(spec, out, state, doubles, ints, flags, vectors, names, codes): every row's info keys, a block row per "
-         "key."),
-    FAST("draw_uniform", py_draw_uniform, "draw_uniform(generators, rows, out): uniforms from each row's generator."),
-    FAST("draw_robots", py_draw_robots, "draw_robots(generators, rows, spec, base, limits, max_draws, robots, rejected)."),
-    {"layouts", (PyCFunction)py_layouts, METH_NOARGS, "layouts(): {struct: (itemsize, [(field, offset, size)])}."},
+static PyMethodDef REPORTS[] = {
+    {"table", (PyCFunction)py_table, METH_NOARGS, "table(): every entry point's row of the table the binder reads."},
+    {"layouts", (PyCFunction)py_layouts, METH_NOARGS, "layouts(): {struct: (itemsize, [(field, offset, type, count, doc)])}."},
     {"observation", (PyCFunction)py_observation, METH_NOARGS, "observation(): the observation's columns by name."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "kernels",
-    "The compiled core of leg-env: the planar leg's dynamics, contact and time stepping in C.", -1, methods,
+    PyModuleDef_HEAD_INIT, "kernels", "The compiled core of leg-env: the planar leg's dynamics, contact and time stepping in C.", -1, REPORTS,
 };
+
+static PyMethodDef ENTRY_METHODS[N_ENTRIES]; /* every entry point: dispatch, with its row's index as self */
+static char ENTRY_DOCS[N_ENTRIES][512];
+
+#define ENDING_NAME(NAME, name) #name,
+static const char *const ENDING_NAMES[N_ENDINGS] = {ENV_ENDINGS(ENDING_NAME)};
 
 PyMODINIT_FUNC PyInit_kernels(void)
 {
+    static const struct { const char *name; long value; } INTS[] = {
+        {"MAX_SUBSTEPS", LEG_MAX_SUBSTEPS}, {"LOG_SIZE", LEG_LOG_SIZE}, {"MAX_EVENTS", LEG_MAX_EVENTS}, {"MAX_TERMS", MAX_TERMS},
+        {"PUSH_MAX", PUSH_MAX}, {"MAX_ROWS", MAX_ROWS}, {"STICK", LEG_STICK}, {"SLIP_FORWARD", LEG_SLIP_FORWARD},
+        {"SLIP_BACKWARD", LEG_SLIP_BACKWARD}, {"FLIGHT", LEG_FLIGHT}, {"LIFTOFF", LEG_LIFTOFF}, {"SLIP_ONSET", LEG_SLIP_ONSET},
+        {"SLIDING_STOP", LEG_SLIDING_STOP}, {"TOUCHDOWN", LEG_TOUCHDOWN}, {"INFO_DOUBLE", INFO_DOUBLE}, {"INFO_INT", INFO_INT},
+        {"INFO_FLAG", INFO_FLAG}, {"INFO_VECTOR", INFO_VECTOR}, {"INFO_MODE", INFO_MODE}};
+    static const struct { const char *name; double value; } DOUBLES[] = {
+        {"GROUND_TOL", LEG_GROUND_TOL}, {"SETTLE_SPEED", LEG_SETTLE_SPEED}, {"ROOT_TIME", LEG_ROOT_TIME}, {"REST_SPEED", LEG_REST_SPEED},
+        {"TURN_MAX", LEG_TURN_MAX}};
     if (PyType_Ready(&BatchType) < 0 || PyType_Ready(&GeneratorsType) < 0)
         return NULL;
     name_capsule = PyUnicode_InternFromString("capsule");
     name_bit_generator = PyUnicode_InternFromString("bit_generator");
-    if (name_capsule == NULL || name_bit_generator == NULL)
-        return NULL;
-    PyObject *m = PyModule_Create(&module);
-    if (m == NULL)
-        return NULL;
-    Py_INCREF(&BatchType);
-    if (PyModule_AddObject(m, "Batch", (PyObject *)&BatchType) < 0) {
-        Py_DECREF(&BatchType);
-        Py_DECREF(m);
-        return NULL;
-    }
-    Py_INCREF(&GeneratorsType);
-    if (PyModule_AddObject(m, "Generators", (PyObject *)&GeneratorsType) < 0) {
-        Py_DECREF(&GeneratorsType);
-        Py_DECREF(m);
-        return NULL;
-    }
-    if (PyModule_AddIntConstant(m, "MAX_SUBSTEPS", LEG_MAX_SUBSTEPS) < 0 || PyModule_AddIntConstant(m, "LOG_SIZE", LEG_LOG_SIZE) < 0
-        || PyModule_AddIntConstant(m, "MAX_EVENTS", LEG_MAX_EVENTS) < 0 || PyModule_AddIntConstant(m, "MAX_TERMS", MAX_TERMS) < 0
-        || PyModule_AddIntConstant(m, "PUSH_MAX", PUSH_MAX) < 0
-        || PyModule_AddObject(m, "GROUND_TOL", PyFloat_FromDouble(LEG_GROUND_TOL)) < 0
-        || PyModule_AddObject(m, "SETTLE_SPEED", PyFloat_FromDouble(LEG_SETTLE_SPEED)) < 0
-        || PyModule_AddObject(m, "ROOT_TIME", PyFloat_FromDouble(LEG_ROOT_TIME)) < 0
-        || PyModule_AddObject(m, "REST_SPEED", PyFloat_FromDouble(LEG_REST_SPEED)) < 0
-        || PyModule_AddIntConstant(m, "STICK", LEG_STICK) < 0 || PyModule_AddIntConstant(m, "SLIP_FORWARD", LEG_SLIP_FORWARD) < 0
-        || PyModule_AddIntConstant(m, "SLIP_BACKWARD", LEG_SLIP_BACKWARD) < 0 || PyModule_AddIntConstant(m, "FLIGHT", LEG_FLIGHT) < 0
-        || PyModule_AddIntConstant(m, "LIFTOFF", LEG_LIFTOFF) < 0 || PyModule_AddIntConstant(m, "SLIP_ONSET", LEG_SLIP_ONSET) < 0
-        || PyModule_AddIntConstant(m, "SLIDING_STOP", LEG_SLIDING_STOP) < 0 || PyModule_AddIntConstant(m, "TOUCHDOWN", LEG_TOUCHDOWN) < 0
-        || PyModule_AddObject(m, "TURN_MAX", PyFloat_FromDouble(LEG_TURN_MAX)) < 0) {
-        Py_DECREF(m);
-        return NULL;
-    }
-    PyObject *endings = PyTuple_New(N_ENDINGS);
-    for (int k = 0; endings != NULL && k < N_ENDINGS; k++) {
-        PyObject *name = PyUnicode_FromString(ENDING_NAMES[k]);
-        if (name == NULL) {
-            Py_CLEAR(endings);
-            break;
+    PyObject *m = name_capsule && name_bit_generator ? PyModule_Create(&module) : NULL;
+    if (m == NULL || PyModule_AddObjectRef(m, "Batch", (PyObject *)&BatchType) < 0 || PyModule_AddObjectRef(m, "Generators", (PyObject *)&GeneratorsType) < 0)
+        goto fail;
+    for (Py_ssize_t k = 0; k < N_ENTRIES; k++) {
+        const entry *e = &ENTRIES[k];
+        int used = PyOS_snprintf(ENTRY_DOCS[k], sizeof ENTRY_DOCS[k], "%s(", e->name); /* the signature inspect reads, then the doc */
+        for (int j = 0; j < MAX_ARGS && e->args[j].name; j++)
+            used += PyOS_snprintf(ENTRY_DOCS[k] + used, sizeof ENTRY_DOCS[k] - used, "%s%s", j ? ", " : "", e->args[j].name);
+        PyOS_snprintf(ENTRY_DOCS[k] + used, sizeof ENTRY_DOCS[k] - used, ")\n--\n\n%s", e->doc);
+        ENTRY_METHODS[k] = (PyMethodDef){e->name, (PyCFunction)(void (*)(void))dispatch, METH_FASTCALL, ENTRY_DOCS[k]};
+        PyObject *index = PyLong_FromSsize_t(k), *fn = index ? PyCFunction_NewEx(&ENTRY_METHODS[k], index, PyModule_GetNameObject(m)) : NULL;
+        Py_XDECREF(index);
+        if (fn == NULL || PyModule_AddObject(m, e->name, fn) < 0) {
+            Py_XDECREF(fn);
+            goto fail;
         }
-        PyTuple_SET_ITEM(endings, k, name);
     }
+    for (size_t k = 0; k < sizeof INTS / sizeof INTS[0]; k++)
+        if (PyModule_AddIntConstant(m, INTS[k].name, INTS[k].value) < 0)
+            goto fail;
+    for (size_t k = 0; k < sizeof DOUBLES / sizeof DOUBLES[0]; k++)
+        if (!put(PyModule_GetDict(m), DOUBLES[k].name, PyFloat_FromDouble(DOUBLES[k].value)))
+            goto fail;
+    PyObject *endings = PyTuple_New(N_ENDINGS);
+    for (int k = 0; endings != NULL && k < N_ENDINGS; k++)
+        PyTuple_SET_ITEM(endings, k, PyUnicode_FromString(ENDING_NAMES[k]));
     if (endings == NULL || PyModule_AddObject(m, "ENDINGS", endings) < 0) {
         Py_XDECREF(endings);
-        Py_DECREF(m);
-        return NULL;
+        goto fail;
     }
     return m;
+fail:
+    Py_XDECREF(m);
+    return NULL;
 }

@@ -1,18 +1,20 @@
 /* The planar floating-base leg: the structs every kernel of the compiled core shares.
  *
- * Conventions (leg_env.dynamics states them for users, the lesson's sections 1-5):
+ * Conventions (leg_env.physics.dynamics states them for users, the lesson's sections 1-5):
  *   q = [x_b, y_b, th_b, q1, q2]: torso COM position (the hip sits there), torso angle, hip angle
  *   (thigh relative to torso), knee angle (shank relative to thigh). Absolute link angles
  *   th1 = th_b + q1, th2 = th1 + q2.  M(q) qdd + h(q, qd) = S^T tau + Jc^T lam, h holding Coriolis,
  *   centrifugal and gravity terms; lam = [lam_x, lam_y] is the ground's force on the foot.
  *
- * Every layout here is mirrored once by a numpy dtype in leg_env/physics/layout.py, which checks the field
- * names, offsets and sizes against leg_core_layouts() (module.c) at import.
+ * The structs Python reads are field lists (fields.h): leg_env.physics.layout builds their numpy dtypes from the
+ * layouts the compiled module reports (kernels.layouts()), so that each layout is written here only.
  */
 #ifndef LEG_ROBOT_H
 #define LEG_ROBOT_H
 
 #include <stdint.h>
+
+#include "fields.h"
 
 /* Inlined into every caller: the RK4 stages of one contact mode then compile to straight-line code of that
  * mode's dynamics (the compiler's own heuristics leave the three-mode dispatch out of line). */
@@ -46,13 +48,22 @@ static inline double leg_fmin(double a, double b)
 #define LEG_NU 2 /* actuated joints */
 
 /* Masses [kg], inertias [kg m^2], lengths [m] and gravity [m/s^2]: LegParams, field for field. */
+#define LEG_PARAMS_FIELDS(X, S, P)                                                                                     \
+    X(S, P, F64, m_b, , "torso mass [kg]")                                                                             \
+    X(S, P, F64, m1, , "thigh mass [kg]")                                                                              \
+    X(S, P, F64, m2, , "shank mass [kg]")                                                                              \
+    X(S, P, F64, I_b, , "torso rotational inertia about its COM [kg m^2]")                                            \
+    X(S, P, F64, I1, , "thigh rotational inertia about its COM [kg m^2]")                                             \
+    X(S, P, F64, I2, , "shank rotational inertia about its COM [kg m^2]")                                             \
+    X(S, P, F64, l1, , "thigh length, hip to knee [m]")                                                                \
+    X(S, P, F64, l2, , "shank length, knee to foot [m]")                                                               \
+    X(S, P, F64, c1, , "hip to thigh COM [m]")                                                                         \
+    X(S, P, F64, c2, , "knee to shank COM [m]")                                                                        \
+    X(S, P, F64, g, , "gravity along -y [m/s^2]; 0: none")
 typedef struct {
-    double m_b, m1, m2; /* torso, thigh, shank masses */
-    double I_b, I1, I2; /* rotational inertias about each link's COM */
-    double l1, l2;      /* thigh (hip to knee) and shank (knee to foot) lengths */
-    double c1, c2;      /* hip to thigh COM, knee to shank COM */
-    double g;           /* gravity along -y; 0: none */
+    LEG_PARAMS_FIELDS(FIELD_DECLARE, , )
 } leg_params;
+#define LEG_N_PARAMS 11 /* leg_params is LegParams.array as it is: eleven doubles, no padding */
 
 /* What is held over a control step besides the state: joint torques, a horizontal force on the
  * torso's COM (a push), and the ground's friction coefficient. */
@@ -95,33 +106,41 @@ typedef struct {
     double lam_x, lam_y;                /* ground force on the foot [N] */
 } leg_accel;
 
-/* What one hybrid control step adds up (leg_env.hybrid.HybridStep's sums and counts); an environment's
+/* What one hybrid control step adds up (leg_env.physics.hybrid.HybridStep's sums and counts); an environment's
  * env_out holds one, which the step writes in place. */
+#define LEG_TALLY_FIELDS(X, S, P)                                                                                      \
+    X(S, P, F64, impulse, [2], "integral of the contact force over the continuous modes [N s]")                       \
+    X(S, P, F64, kick, [2], "sum of impact (and tangential) impulses on the foot [N s]")                              \
+    X(S, P, F64, stick_time, , "time in stick [s]")                                                                    \
+    X(S, P, F64, slip_time, , "time sliding [s]")                                                                      \
+    X(S, P, F64, flight_time, , "time in flight [s]")                                                                  \
+    X(S, P, F64, slip_distance, , "distance slid [m]")                                                                 \
+    X(S, P, F64, work, , "actuator work [J]")                                                                          \
+    X(S, P, F64, work_load, , "work of the horizontal force on the torso's COM [J]")                                   \
+    X(S, P, F64, slip_dissipation, , "energy dissipated by sliding friction [J]")                                      \
+    X(S, P, F64, impact_dissipation, , "kinetic energy lost in impulses [J]")                                          \
+    X(S, P, I32, events, , "located transitions")                                                                      \
+    X(S, P, I32, painleve, , "uses of the Painleve rule")                                                              \
+    X(S, P, I32, settles, , "Zeno settles")                                                                            \
+    X(S, P, I32, rk4_steps, , "RK4 steps integrated, the re-integrations that located the events included")
 typedef struct {
-    double impulse[2];          /* integral of the contact force over the continuous modes [N s] */
-    double kick[2];             /* sum of impact (and tangential) impulses [N s] */
-    double stick_time, slip_time, flight_time; /* [s] */
-    double slip_distance;       /* [m] */
-    double work;                /* actuator work [J] */
-    double work_load;           /* work of the horizontal force on the torso's COM [J] */
-    double slip_dissipation;    /* energy dissipated by sliding friction [J] */
-    double impact_dissipation;  /* kinetic energy lost in impulses [J] */
-    int32_t events;             /* located transitions */
-    int32_t painleve;           /* uses of the Painleve rule */
-    int32_t settles;            /* Zeno settles */
-    int32_t rk4_steps;          /* RK4 steps integrated, the re-integrations that located the events included */
+    LEG_TALLY_FIELDS(FIELD_DECLARE, , )
 } leg_tally;
 
 /* The located transitions of one hybrid control step, in order. */
+#define LEG_LOG_FIELDS(X, S, P)                                                                                        \
+    X(S, P, I32, event_kind, [LEG_LOG_SIZE], "leg_event of each located transition, -1 after the last")               \
+    X(S, P, F64, event_time, [LEG_LOG_SIZE], "its time since the step's start [s], NaN after the last")
 typedef struct {
-    int32_t kind[LEG_LOG_SIZE]; /* leg_event of each located transition, -1 after the last */
-    double time[LEG_LOG_SIZE];  /* its time since the step's start [s], NaN after the last */
+    LEG_LOG_FIELDS(FIELD_DECLARE, , )
 } leg_log;
 
-/* What one hybrid control step did (leg_env.hybrid.HybridStep). */
+/* What one hybrid control step did (leg_env.physics.hybrid.HybridStep). */
+#define LEG_RECORD_FIELDS(X, S, P)                                                                                     \
+    X(S, P, TALLY, tally, , "what the step added up")                                                                  \
+    X(S, P, LOG, log, , "the events it located")
 typedef struct {
-    leg_tally tally;
-    leg_log log;
+    LEG_RECORD_FIELDS(FIELD_DECLARE, , )
 } leg_record;
 
 #endif

@@ -11,12 +11,6 @@
 #define PUSH_TERMS 6   /* the balance task's and com */
 #define HOP_TERMS 8    /* alive, height, drift, tilt, impact, slip, ctrl, limit */
 
-/* The names of the endings (env_ending, in its order): kernels.ENDINGS, leg_env.ENDINGS. */
-static const char *const ENDING_NAMES[N_ENDINGS] = {
-    "none",     "torso_angle", "base_height",     "hip_low",      "hip_high",
-    "knee_low", "knee_high",   "base_below_knee", "contact_lost", "numerical_failure",
-};
-
 /* m g of the robot, or 1 without gravity (the observed force is then in newtons). */
 static inline double weight_of(const leg_params *P)
 {
@@ -156,9 +150,8 @@ static void fail_row(const env_batch *b, Py_ssize_t i, double *terms, int n_term
 }
 
 /* Evaluate robot i after physics_range stepped it: its balance terms into `terms` (n_terms zeroed on a
- * failure). A numerical failure of the physics pays nothing and ends the episode; so does an
- * observation that does not fit float32: the step is undone and the observation left at the last good
- * one. Returns whether the robot was evaluated (no numerical failure). */
+ * failure). A numerical failure of the physics pays nothing and ends the episode. Returns whether the robot was
+ * evaluated (no numerical failure); a task then writes its own terms and columns. */
 static int evaluate(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *shared, double *terms, int n_terms)
 {
     env_out *o = out_row(b, i);
@@ -166,31 +159,35 @@ static int evaluate(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *
         fail_row(b, i, terms, n_terms);
         return 0;
     }
-    env_state *s = state_row(b, i);
-    float *obs = b->obs + i * b->obs_cols;
-    float kept[OBS_MAX_DIM];
-    for (Py_ssize_t j = 0; j < b->obs_cols; j++)
-        kept[j] = obs[j];
+    const env_state *s = state_row(b, i);
     const double a0 = leg_fmin(1.0, leg_fmax(-1.0, s->action[0])), a1 = leg_fmin(1.0, leg_fmax(-1.0, s->action[1]));
     stance_assess(b, i, shared, a0, a1, terms);
+    return 1;
+}
+
+/* After a task wrote robot i's observation: if an entry is not finite (the state is, but a column overflowed
+ * float32), it is a numerical failure: the step is undone, the observation left at the one kept before the task
+ * wrote it, and the episode ends paying nothing. */
+static void guard_observation(const env_batch *b, Py_ssize_t i, const float *kept, int n_terms)
+{
+    env_out *o = out_row(b, i);
+    float *obs = b->obs + i * b->obs_cols;
     uint32_t non_finite = 0; /* an all-ones exponent: inf or NaN (a test of the bits, with no chain of additions) */
     for (Py_ssize_t j = 0; j < b->obs_cols; j++) {
         uint32_t bits;
         memcpy(&bits, obs + j, sizeof bits);
         non_finite |= (bits & 0x7f800000u) == 0x7f800000u;
     }
-    if (!non_finite)
-        return 1;
-    /* the state is finite, but the observation overflowed float32 */
-    for (Py_ssize_t j = 0; j < b->obs_cols; j++)
-        obs[j] = kept[j];
+    if (!non_finite || o->numerical_failure)
+        return;
+    env_state *s = state_row(b, i);
+    memcpy(obs, kept, b->obs_cols * sizeof(float));
     undo_step(s);
     o->lam[0] = 0.0;
     o->lam[1] = 0.0;
     zero_record(o);
     o->mode = s->mode;
-    fail_row(b, i, terms, n_terms);
-    return 0;
+    fail_row(b, i, o->terms, n_terms);
 }
 
 /* ---------------------------------------------------------------- push recovery (leg_env.tasks.push) */
@@ -199,14 +196,14 @@ static int evaluate(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *
 static inline double push_load_at(const push_state *t, int32_t n, int32_t push_steps)
 {
     for (int j = 0; j < PUSH_MAX; j++) {
-        const int32_t start = t->start[j];
+        const int32_t start = t->push_start[j];
         if (start <= n && (int64_t)n < (int64_t)start + push_steps)
-            return t->force[j];
+            return t->push_force[j];
     }
     return 0.0;
 }
 
-static void push_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *shared)
+static void push_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *shared, const float *kept)
 {
     env_state *s = state_row(b, i);
     env_out *o = out_row(b, i);
@@ -218,9 +215,11 @@ static void push_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inert
         if (b->settings->task.push.observe_com) /* the last column (the width is checked against the settings) */
             b->obs[(i + 1) * b->obs_cols - 1] = (float)dx;
     }
+    guard_observation(b, i, kept, PUSH_TERMS);
     o->task.push.push_force = force;
     o->task.push.work_push = force * (s->q[0] - s->prev_q[0]); /* exact: F constant over the step (0 if undone) */
-    t->steps += 1;
+    if (t->steps < INT32_MAX) /* a counter that stops, not one that wraps: no push after 2^31 - 1 steps */
+        t->steps += 1;
     s->load = push_load_at(t, t->steps, b->settings->task.push.push_steps);
 }
 
@@ -300,7 +299,7 @@ static void next_hop_command(const env_batch *b, Py_ssize_t i, hop_state *t)
     b->obs[i * b->obs_cols + OBS_COMMAND] = (float)t->command;
 }
 
-static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *shared)
+static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *shared, const float *kept)
 {
     const env_robot *r = robot_row(b, i);
     const leg_params *P = &r->p;
@@ -333,8 +332,8 @@ static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inerti
     terms[0] = stance_terms[0]; /* alive: the balance task's health predicate */
     if (t->ground_time > c->task.hop.max_ground_time) /* and hopping */
         terms[0] = 0.0;
-    if (s->mode == LEG_FLIGHT) /* in flight E_v / (m g) is the arc's apex height above the ground */
-        t->arc_apex = e_v / (m * g) - y_stand;
+    if (s->mode == LEG_FLIGHT) /* in flight E_v / (m g) is the arc's apex height above the ground (no apex without gravity) */
+        t->arc_apex = g > 0.0 ? e_v / (m * g) - y_stand : 0.0;
     if (landed && flight_length >= c->task.hop.min_flight)
         t->apex = t->arc_apex;
     terms[1] = 0.0;
@@ -382,6 +381,7 @@ static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inerti
     if (o->terminated) /* terminated: nothing but the penalties */
         terms[1] = 0.0;
     next_hop_command(b, i, t);
+    guard_observation(b, i, kept, HOP_TERMS); /* after every column is written */
 }
 
 static void hop_start(const env_batch *b, Py_ssize_t i)
@@ -436,13 +436,17 @@ static void task_assess(int task, const env_batch *b, Py_ssize_t lo, Py_ssize_t 
         one = flight_inertia(&b->robots[0].p);
         shared = &one;
     }
+    float kept[OBS_MAX_DIM];
     for (Py_ssize_t i = lo; i < hi; i++) {
-        if (task == TASK_PUSH)
-            push_assess(b, i, shared);
-        else if (task == TASK_HOP)
-            hop_assess(b, i, shared);
-        else
+        memcpy(kept, b->obs + i * b->obs_cols, b->obs_cols * sizeof(float));
+        if (task == TASK_PUSH) {
+            push_assess(b, i, shared, kept);
+        } else if (task == TASK_HOP) {
+            hop_assess(b, i, shared, kept);
+        } else {
             evaluate(b, i, shared, out_row(b, i)->terms, STANCE_TERMS);
+            guard_observation(b, i, kept, STANCE_TERMS);
+        }
     }
 }
 

@@ -28,6 +28,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .. import checks
+from .._core import kernels
 from ..physics.params import LegParams
 from .. import tasks
 from ..info import InfoBuilder
@@ -40,7 +41,7 @@ from .single import LegEnv, checked_config_change, explicit_start, render_marks,
 __all__ = ["LegVectorEnv"]
 
 _RESET_OPTIONS = ("qpos", "qvel", "reset_mask", "params")
-MAX_ENVS = 2**31 - 1  # bound of num_envs and render_envs
+MAX_ENVS = kernels.MAX_ROWS  # bound of num_envs and render_envs: the most rows of the compiled core's tables, 2^26
 MAX_THREADS = 256  # bound of num_threads
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "task", "_info_builder")  # rebuilt by _bind, never pickled
 _UNPICKLED = _VIEWS + ("_pool",)  # the thread pool is made anew where it is used

@@ -1,8 +1,8 @@
 """The numpy dtypes of the compiled core's structs, built from the structs themselves.
 
-Each layout is declared once, in C (``leg_env/_core/robot.h`` and ``env.h``): the compiled module reports
-every struct's fields (name, byte offset, type, length) and the item size, and this module builds the
-numpy structured dtypes from that report. A batch of robots is then one structured array per struct,
+Each layout is declared once, in C (``leg_env/_core/robot.h`` and ``env.h``, one list of fields per struct): the
+compiled module reports every struct's fields (name, byte offset, type, length, what it holds) and the item size,
+and this module builds the numpy structured dtypes from that report. A batch of robots is then one structured array per struct,
 and every field has its name: ``state["qd"]`` is ``(N, 5)``, ``out["terminated"]`` is ``(N,)`` bool.
 
 * ``PARAMS`` (``leg_params``): a robot's masses, inertias, lengths and gravity (``LegParams``' fields).
@@ -21,7 +21,7 @@ import numpy as np
 
 from .._core import kernels
 
-__all__ = ["PARAMS", "RECORD", "ROBOT", "OBS", "LOG_SIZE", "MAX_TERMS", "FLAG_NAMES", "state_dtype", "settings_dtype", "out_dtype",
+__all__ = ["PARAMS", "RECORD", "ROBOT", "OBS", "LOG_SIZE", "MAX_TERMS", "FLAG_NAMES", "FIELD_DOCS", "state_dtype", "settings_dtype", "out_dtype",
            "take_rows", "put_rows"]
 
 LOG_SIZE = kernels.LOG_SIZE
@@ -32,6 +32,9 @@ FLAG_NAMES = ("terminated", "unilateral_violation", "friction_violation", "numer
 """The flags of ``out`` (bool fields), in this order wherever they are listed."""
 
 _LAYOUTS = kernels.layouts()
+FIELD_DOCS: dict[str, dict[str, str]] = {struct: {name: doc for name, _, _, _, doc in fields} for struct, (_, fields) in _LAYOUTS.items()}
+"""What each field of each struct holds, with its unit (``FIELD_DOCS["env_state"]["qd"]``, a task's own fields under
+``"env_state.hop"`` and the like), written once in C beside the field (``leg_env/_core/robot.h``, ``env.h``)."""
 _TASKS = ("stance", "push", "hop")
 
 
@@ -40,7 +43,7 @@ def _dtype(struct: str, task: str | None = None) -> np.dtype:
     itemsize, fields = _LAYOUTS[struct]
     extra = _LAYOUTS.get(f"{struct}.{task}", (itemsize, []))[1] if task else []
     names, formats, offsets = [], [], []
-    for name, offset, kind, count in list(fields) + list(extra):
+    for name, offset, kind, count, _ in list(fields) + list(extra):
         base = _DTYPES[kind] if kind in _DTYPES else np.dtype(kind)
         names.append(name)
         formats.append(base if count == 1 else (base, (count,)))

@@ -19,7 +19,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from train.evaluate import EvalArgs, PolicyLoadError, evaluate, load_policy, run_episodes
 from train.ppo import ENV_ID, TrainArgs, resolve_config, train
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "policies" / "ppo_stance"
 TINY = ["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]  # 128 env steps per PPO iteration
 STEPS = 256

@@ -18,7 +18,7 @@ from train import ppo as ppo_cli
 from train.evaluate import EvalArgs, evaluate, load_policy
 from train.ppo import TrainArgs, train
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TINY = ["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]  # 128 env steps per PPO iteration
 ITERATION = 128
 NO_NORMALIZE = [*TINY, "normalize:false"]

@@ -11,7 +11,7 @@ import pytest
 from train.evaluate import load_policy, run_episodes
 from train.residual import ResidualPolicy
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = {  # policy folder: the task it was trained and is evaluated on
     "ppo_balance": "leg_env/PlanarLegBalance-v0",
     "ppo_push_v1": "leg_env/PlanarLegPush-v1",

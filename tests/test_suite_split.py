@@ -168,7 +168,7 @@ def unmarked_stack_tests(path: Path, stack: set[str], users: set[str], at_import
         and any(_is_sb3_mark(n) for n in ast.walk(node.value))
         for node in tree.body
     )  # fmt: skip
-    functions = {node.name: (node, tree) for node in conftest.body if isinstance(node, ast.FunctionDef)}
+    functions = {node.name: (node, conftest) for node in conftest.body if isinstance(node, ast.FunctionDef)}
     functions |= {node.name: (node, tree) for node in tree.body if isinstance(node, ast.FunctionDef)}
     bound = {tree: _bindings(tree), conftest: _bindings(conftest)}
 
@@ -185,11 +185,15 @@ def unmarked_stack_tests(path: Path, stack: set[str], users: set[str], at_import
             modules += used_modules(argument.arg, seen)
         return modules
 
-    for name, (function, home) in functions.items():
-        if home is tree and name.startswith("test_"):
-            uses = needs(used_modules(name, set()))
-            if uses and not module_marked and not any(_is_sb3_mark(d) for d in function.decorator_list):
-                found.append(f"{path.name}::{name} uses {', '.join(uses)} without @pytest.mark.sb3")
+    tests = [(name, function, []) for name, (function, home) in functions.items() if home is tree and name.startswith("test_")]
+    for cls in (node for node in tree.body if isinstance(node, ast.ClassDef) and node.name.startswith("Test")):
+        for method in (node for node in cls.body if isinstance(node, ast.FunctionDef) and node.name.startswith("test_")):
+            functions[f"{cls.name}.{method.name}"] = (method, tree)
+            tests.append((f"{cls.name}.{method.name}", method, cls.decorator_list))
+    for name, function, outer_marks in tests:
+        uses = needs(used_modules(name, set()))
+        if uses and not module_marked and not any(_is_sb3_mark(d) for d in [*function.decorator_list, *outer_marks]):
+            found.append(f"{path.name}::{name} uses {', '.join(uses)} without @pytest.mark.sb3")
     return found
 
 
@@ -231,12 +235,14 @@ def test_the_check_finds_an_unmarked_test_and_a_module_level_import(stack_and_us
         "def test_by_helper():\n    helper()\n\n"
         "def test_by_fixture(trained):\n    pass\n\n"
         "def test_by_import():\n    from stable_baselines3 import PPO\n\n"
-        "@pytest.mark.sb3\ndef test_marked():\n    from stable_baselines3 import PPO\n"
+        "@pytest.mark.sb3\ndef test_marked():\n    from stable_baselines3 import PPO\n\n"
+        "class TestGroup:\n    def test_in_a_class(self):\n        from train.curves import main\n"
     )
     assert unmarked_stack_tests(module, stack, users, at_import) == [
         "test_example.py::test_by_helper uses leg_env.sb3 without @pytest.mark.sb3",
         "test_example.py::test_by_fixture uses train.ppo without @pytest.mark.sb3",
         "test_example.py::test_by_import uses stable_baselines3 without @pytest.mark.sb3",
+        "test_example.py::TestGroup.test_in_a_class uses train.curves without @pytest.mark.sb3",
     ]
     module.write_text("import pytest\nfrom train.residual import ResidualVecEnv\n\npytestmark = pytest.mark.sb3\n\ndef test_x():\n    ResidualVecEnv\n")
     assert unmarked_stack_tests(module, stack, users, at_import) == [

@@ -1,5 +1,7 @@
-"""Shared test set-up: one thread per pool (torch and the vector env share 2 cores), headless rendering."""
+"""Shared test set-up: one thread per pool (torch and the vector env share 2 cores), headless rendering, and the
+``sb3`` mark on every test of ``tests/sb3/``."""
 import os
+from pathlib import Path
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
@@ -17,6 +19,16 @@ except ImportError:  # pragma: no cover - torch is a test dependency
     pass
 
 from leg_env.physics.params import LegParams  # noqa: E402
+
+SB3_FOLDER = Path(__file__).resolve().parent / "sb3"
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark ``sb3`` every test of ``tests/sb3/`` (the modules that need the training stack throughout), so that
+    ``-m "not sb3"`` selects the suite that runs without Stable-Baselines3 (pyproject's markers)."""
+    for item in items:
+        if SB3_FOLDER in item.path.resolve().parents:
+            item.add_marker(pytest.mark.sb3)
 
 
 @pytest.fixture

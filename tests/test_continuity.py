@@ -292,6 +292,7 @@ def test_controller_actions(index):
     _predict_check(index)
 
 
+@pytest.mark.sb3
 @pytest.mark.parametrize("index", [i for i, s in enumerate(META["policy"]) if s.get("sb3")],
                          ids=[_policy_id(s) for s in META["policy"] if s.get("sb3")])
 def test_shipped_policy_sb3_actions(index):

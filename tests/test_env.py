@@ -149,6 +149,7 @@ def test_gymnasium_check_env():
     assert unexpected == []
 
 
+@pytest.mark.sb3
 @pytest.mark.parametrize("wrapped", [False, True])
 def test_sb3_check_env(wrapped):
     from stable_baselines3.common.env_checker import check_env

@@ -104,6 +104,7 @@ def test_rejected_reset_changes_nothing_in_the_vector_env(options):
     np.testing.assert_array_equal(envs.reset()[0], twin.reset()[0])
 
 
+@pytest.mark.sb3
 @pytest.mark.parametrize("options", BAD_OPTIONS[:-1], ids=repr)
 def test_rejected_reset_changes_nothing_in_the_sb3_adapter(options):
     from leg_env.sb3 import make_sb3_vec_env
@@ -142,6 +143,7 @@ def test_vector_step_before_reset_raises_and_changes_nothing(mode):
         envs.step(np.zeros((3, 2)))
 
 
+@pytest.mark.sb3
 def test_sb3_step_before_reset_raises_and_changes_nothing():
     from leg_env.sb3 import make_sb3_vec_env
 

@@ -109,6 +109,7 @@ def test_a_batch_needs_one_seed_per_sub_env():
         run_episodes(Recorder(), [1, 2], record=2)
 
 
+@pytest.mark.sb3
 def test_evaluate_the_push_curve_and_the_training_evaluation_agree_on_the_same_episodes():
     """The three callers of the runner score the same seeds the same: train.evaluate's episodes, the periodic
     evaluation's (seeds seed + i) and the push curve's survival at one force."""
@@ -129,6 +130,7 @@ def test_evaluate_the_push_curve_and_the_training_evaluation_agree_on_the_same_e
     assert 0.0 < summary["survival_rate"] < 1.0  # the force is one that some of the episodes fall from
 
 
+@pytest.mark.sb3
 def test_the_training_evaluation_reports_the_hop_measures_as_train_evaluate_does():
     """On the hop task the periodic evaluation adds the measures of Solved, the same as train.evaluate's on the same
     seeds; on another task it adds none."""

@@ -111,6 +111,7 @@ def test_batch_equals_single_robots_and_episode_start_restarts_a_row():
     np.testing.assert_array_equal(batch.steps[1:], before[1:] + 1)
 
 
+@pytest.mark.sb3
 def test_residual_on_the_gated_controller_reloads_as_the_sum(tmp_path):
     from train.ppo import TrainArgs, train
     from train.residual import ResidualPolicy
@@ -127,6 +128,7 @@ def test_residual_on_the_gated_controller_reloads_as_the_sum(tmp_path):
     np.testing.assert_allclose(policy.predict(obs)[0], expected, atol=1e-6)
 
 
+@pytest.mark.sb3
 def test_shipped_stance_v1_policy_loads_and_survives():
     """policies/ppo_stance_v1: the residual network on the gated controller, rebuilt from its config.yaml, stands
     from an ordinary start and recovers two starts the LQR falls from (a backward hop)."""

@@ -4,6 +4,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tarfile
 import tomllib
 import zipfile
 from pathlib import Path
@@ -61,3 +62,24 @@ def test_pyproject_declares_an_spdx_licence():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert project["license"] == "MIT" and project["license-files"] == ["LICENSE"]
     assert not any("License ::" in c for c in project.get("classifiers", []))  # PEP 639: the expression replaces them
+
+
+def test_the_sdist_leaves_out_the_research_records(tmp_path):
+    """``research/`` (the probe configurations, their learning pages and what they taught) sits beside the package in a
+    checkout; the sdist built with it there carries none of it (MANIFEST.in prunes it), only the package's files."""
+    src = tmp_path / "src"
+    src.mkdir()
+    for name in ("pyproject.toml", "setup.py", "MANIFEST.in", "README.md", "LICENSE"):
+        shutil.copy(ROOT / name, src / name)
+    ignore = shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc", "*.so", "*.egg-info")
+    for folder in ("leg_env", "research"):
+        shutil.copytree(ROOT / folder, src / folder, ignore=ignore)
+    assert (src / "research" / "README.md").is_file()
+    hook = f"import setuptools.build_meta as backend; print(backend.build_sdist({str(tmp_path / 'dist')!r}))"
+    result = subprocess.run([sys.executable, "-c", hook], cwd=src, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    (sdist,) = (tmp_path / "dist").glob("leg_env-*.tar.gz")
+    with tarfile.open(sdist) as tar:
+        names = [name.split("/", 1)[1] for name in tar.getnames() if "/" in name]
+    assert "leg_env/__init__.py" in names and "leg_env/_core/module.c" in names
+    assert [n for n in names if n.startswith("research")] == []

@@ -265,6 +265,7 @@ def test_pickled_randomised_env_continues_identically():
             assert_same(env.reset(), clone.reset(), "reset")
 
 
+@pytest.mark.sb3
 def test_sb3_adapter_takes_randomize_and_reports_the_robots():
     from leg_env.sb3 import make_sb3_vec_env
 

@@ -28,6 +28,7 @@ def test_zoo_file_has_an_entry_per_task():
     assert set(leg_env.ENV_IDS) <= set(entries)
 
 
+@pytest.mark.sb3
 @pytest.mark.parametrize("env_id", TASK_IDS)
 def test_train_and_evaluate_take_any_task(env_id, tmp_path):
     out = train(TrainArgs(out=tmp_path / "run", env_id=env_id, params=list(TINY), total_timesteps=128, eval_freq=128,
@@ -168,6 +169,7 @@ def _ppo_on(env_id: str, net_arch=(16, 16)):
                policy_kwargs={"net_arch": list(net_arch)})  # fmt: skip
 
 
+@pytest.mark.sb3
 def test_warm_start_copies_a_policy_and_pads_new_inputs(tmp_path):
     import torch
 
@@ -189,6 +191,7 @@ def test_warm_start_copies_a_policy_and_pads_new_inputs(tmp_path):
         copy_policy(target, tmp_path / "nowhere")
 
 
+@pytest.mark.sb3
 def test_clone_controller_fits_the_lqr(monkeypatch):
     import train.warmstart as warmstart
 
@@ -209,6 +212,7 @@ def test_clone_controller_fits_the_lqr(monkeypatch):
     assert rms < 0.05 and held_out < 0.15 and held_out < before / 2  # fits its data, and carries over to fresh states
 
 
+@pytest.mark.sb3
 def test_residual_env_applies_the_controller_plus_the_scaled_correction():
     from leg_env.sb3 import make_sb3_vec_env
     from train.residual import ResidualVecEnv, residual_action
@@ -226,6 +230,7 @@ def test_residual_env_applies_the_controller_plus_the_scaled_correction():
         np.testing.assert_array_equal(obs_w, obs_p)
 
 
+@pytest.mark.sb3
 def test_residual_run_reloads_as_the_sum(tmp_path):
     from train.residual import ResidualPolicy
 

@@ -93,6 +93,7 @@ def test_gymnasium_env_checker(env_id):
     check_env(env, skip_render_check=False)
 
 
+@pytest.mark.sb3
 @pytest.mark.parametrize("env_id", NEW_IDS)
 def test_sb3_env_checker(env_id):
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
@@ -215,6 +216,7 @@ def test_threaded_batch_is_bitwise_the_serial_one():
     assert lines == [f"{env_id} SAME" for env_id in NEW_IDS], out.stdout
 
 
+@pytest.mark.sb3
 @pytest.mark.parametrize("env_id", NEW_IDS)
 def test_sb3_adapter_contract(env_id):
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize

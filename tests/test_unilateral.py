@@ -267,12 +267,14 @@ def test_gymnasium_checker_passes():
     gym_check_env(gym.make(leg_env.ENV_ID, **UNI).unwrapped, skip_render_check=True)
 
 
+@pytest.mark.sb3
 def test_sb3_checker_passes():
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
     sb3_check_env(gym.make(leg_env.ENV_ID, **UNI).unwrapped, warn=False)
 
 
+@pytest.mark.sb3
 def test_sb3_adapter_carries_the_contact_keys():
     from leg_env.sb3 import make_sb3_vec_env
 

@@ -9,6 +9,7 @@ import gymnasium as gym
 import imageio_ffmpeg
 import numpy as np
 import pygame
+import pytest
 
 import leg_env
 
@@ -68,6 +69,7 @@ def test_record_video_records_every_sub_env_at_the_real_rate(tmp_path):
         assert np.abs(tile.astype(int) - frame).mean() < 8.0  # each tile is its sub-env (h264 is lossy)
 
 
+@pytest.mark.sb3
 def test_vec_video_recorder_on_the_sb3_adapter(tmp_path):
     from stable_baselines3.common.vec_env import VecVideoRecorder  # SB3 only here: the RLlib venv runs the rest
 

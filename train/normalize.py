@@ -5,7 +5,7 @@ and normalises each ended env's ``terminal_observation`` by itself (a deep copy,
 ended env). With 1024 envs early in training, when some 30 episodes end at every step, that walk took a tenth of the
 rollout here. ``BatchVecNormalize`` normalises the ended envs' terminal observations as one array and the step's
 observations without the deep copy that ``normalize_obs`` makes before replacing it: the same element-wise
-operations on the same numbers, so the same bits (``tests/test_train.py`` compares both with SB3's on the same
+operations on the same numbers, so the same bits (``tests/sb3/test_train.py`` compares both with SB3's on the same
 steps). Everything else is SB3's: the statistics, their updates, ``normalize_obs`` for callers, ``save`` and
 ``load``. A saved one is a plain ``VecNormalize`` (it pickles as SB3's class), so its files load without this module.
 """

@@ -253,16 +253,11 @@ a return of 916-955 (IQM 934 [919, 953]), above the gated controller's 908 (96% 
 it must (flight charged 52 per episode, the gated controller 28) and holds its torso within 4 degrees of level
 (RMS). In its first 42M steps, while the charge rises, a seed's training evaluations can drop for a few million
 steps before they recover. At 45M steps every seed already survived every held-out start, but the named seed's
-return was 563, below both controllers' (``PlanarLegBalance-v0-45M``): the runs were continued to 60M steps
-from their 45M checkpoints, a length chosen after seeing that seed.
+return was 563, below both controllers': the runs were continued to 60M steps from their 45M checkpoints, a
+length chosen after seeing that seed.
 
-What was tried, each a probe of plain PPO from scratch (the numbers are on the documentation's page "The
-unilateral balance from scratch: what was tried", ``docs/balance_probes.md``): the update in bfloat16 (every
-seed survives at least 99% of the starts, four of five above the gated controller's return; the configuration
-stays float32, where all five are), 4 epochs of 16384 per rollout (returns of 412-947), a late flight charge ending at 3 instead of 10
-(every seed below the gated controller's return), the configuration before the curriculum (two seeds of five
-never learnt the step back), and the shapings that led to the curriculum: more weight on the torso's angle, an
-entropy bonus, flight charges, alive bonuses, wider starts, a decaying learning rate, fewer epochs.
+What was tried on the way, and what each probe found, is kept with the research records
+(``research/balance_probes.md``).
 
 ## Version History
 ``PlanarLegBalance-v0`` is this task on the unilateral ground (``contact="unilateral"``) with a reset

@@ -13,7 +13,7 @@ from train.evaluate import load_policy
 from train.export import ExportError, export_onnx, main
 from train.ppo import TrainArgs, train
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "policies" / "ppo_stance"
 HOP = ROOT / "policies" / "ppo_hop_v3"
 NUM_OBS = 1000

@@ -228,7 +228,7 @@ def test_stopping_a_parallel_sweep_stops_every_worker_at_a_checkpoint(tmp_path):
     command = [sys.executable, "-m", "train.curves", "--env-id", "leg_env/PlanarLegBalance-v0", "--seeds", "2", "--jobs", "2",
                "--total-timesteps", "100000000", "--eval-freq", "100000000", "--episodes", "2", "--runs", str(runs),
                "--out", str(tmp_path / "page"), "--params", *TINY]
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     for how in (signal.SIGTERM, signal.SIGKILL):
         before = {seed: _checkpoints(runs, seed) for seed in (0, 1)}
         sweep = subprocess.Popen(command, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)

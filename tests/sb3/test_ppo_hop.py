@@ -10,7 +10,7 @@ from policies.hopper import HopperController
 from train.evaluate import load_policy, run_episodes
 from train.residual import ResidualPolicy
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "policies" / "ppo_hop"
 ENV_ID = "leg_env/PlanarLegHop-v0"
 SEEDS = [10_000, 10_001, 10_055]  # evaluation seeds (never used in training); the hopper alone falls on the last two

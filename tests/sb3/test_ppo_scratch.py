@@ -11,7 +11,7 @@ import pytest
 from train.evaluate import load_policy, run_episodes
 from train.residual import ResidualPolicy
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = {  # policy folder: the task it was trained and is evaluated on
     "ppo_balance": "leg_env/PlanarLegBalance-v0",
     "ppo_push_v1": "leg_env/PlanarLegPush-v1",
@@ -126,6 +126,25 @@ def test_shipped_balance_policy_is_its_configuration():
 
     args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegBalance-v0", seed=2, eval_freq=3_000_000, eval_episodes=64)
     assert_resolves_to_shipped(args, "ppo_balance")
+
+
+def test_shipped_hop_v3_policy_is_its_configuration():
+    """``policies/ppo_hop_v3`` was trained by the ``PlanarLegHop-v3`` entry of ``train/hyperparams/ppo.yml`` as it is
+    now: its card's command resolves to the shipped run's configuration, every key of it (the curricula, the discount
+    schedule, the noise floor, the command's products, the bfloat16 update, the selection from 63M steps). The run read
+    that entry from a probe file of the same content, whose path its ``config.yaml`` keeps as recorded
+    (``hyperparams_file``): the one key that differs."""
+    import yaml
+
+    from train.ppo import TrainArgs, resolve_config
+
+    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegHop-v3", seed=5, eval_freq=3_000_000, eval_episodes=32,
+                     select_after=63_000_000, update_precision="bfloat16")  # fmt: skip
+    assert_resolves_to_shipped(args, "ppo_hop_v3")
+    shipped = yaml.safe_load((ROOT / "policies" / "ppo_hop_v3" / "config.yaml").read_text())
+    resolved = resolve_config(args)
+    assert set(resolved) == set(shipped)
+    assert [key for key in shipped if resolved[key] != shipped[key]] == ["hyperparams_file"]
 
 
 def assert_resolves_to_shipped(args, name: str) -> None:

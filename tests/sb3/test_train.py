@@ -16,10 +16,11 @@ import pytest
 import yaml
 from stable_baselines3.common.callbacks import BaseCallback
 
+from test_train_hardening import stop_with_a_checkpoint
 from train.evaluate import EvalArgs, PolicyLoadError, evaluate, load_policy, run_episodes
 from train.ppo import ENV_ID, TrainArgs, resolve_config, train
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "policies" / "ppo_stance"
 TINY = ["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]  # 128 env steps per PPO iteration
 STEPS = 256
@@ -198,17 +199,11 @@ def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(tmp_path):
     # a Ctrl-C at a terminal: SIGINT at its default action in the child, even when this suite runs as a
     # background job (a shell starts those with SIGINT ignored, and Python then installs no handler)
     proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
-    try:
-        deadline = time.time() + 120
-        while not list((out / "tb").rglob("events.out.tfevents.*")) and time.time() < deadline:
-            time.sleep(0.2)
-        time.sleep(3.0)  # let it train a few iterations
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-    assert proc.returncode == 130, err
-    assert "checkpoint saved" in err
+    deadline = time.time() + 120
+    while not list((out / "tb").rglob("events.out.tfevents.*")) and time.time() < deadline:
+        time.sleep(0.2)
+    time.sleep(3.0)  # let it train a few iterations
+    stop_with_a_checkpoint(proc, signal.SIGINT)
     progress = json.loads(next((out / "checkpoints").glob("0*/progress.json")).read_text())
     assert progress["num_timesteps"] > 0
     target = progress["num_timesteps"] + 128
@@ -561,138 +556,6 @@ def test_a_noise_floor_holds_up_the_policys_noise_at_every_rollout():
     for bad in ([], [[0, -0.1]], [[0, 0.0]], [[10, 0.1], [5, 0.2]], [[0, [0.1, 0.2]]], "0.1"):
         with pytest.raises(ValueError, match="noise floor"):
             NoiseFloor(bad)
-
-
-def _hop_entry(path: str) -> dict:
-    """The ``leg_env/PlanarLegHop-v3`` entry of the hyperparameter file at ``path`` (relative to the repository)."""
-    from train.hyperparameters import load_hyperparams
-
-    return load_hyperparams(ROOT / path, "leg_env/PlanarLegHop-v3")
-
-
-def _without_callbacks(entry: dict) -> dict:
-    return {k: v for k, v in entry.items() if k != "callback"}
-
-
-def _assert_page_trains(page: str, hyperparams: str) -> None:
-    """The learning page ``page`` records ``hyperparams`` as its file and seed 5 as the seed named before training."""
-    plan = json.loads((ROOT / "benchmarks" / "results" / "learning" / page / "plan.json").read_text())
-    assert plan["hyperparams"] == hyperparams and plan["shipped_seed"] == 5
-
-
-RISING = "train/hyperparams/probes/hop_v3_rising_discount.yml"
-CURRICULA = "train/hyperparams/probes/hop_v3_curricula.yml"
-
-
-def test_the_decaying_rate_probe_is_the_rising_discount_probe_with_a_learning_rate_schedule():
-    """``train/hyperparams/probes/hop_v3_rising_discount_decay.yml`` is the rising-discount probe's entry with one
-    callback more, a learning rate that decays from 45M steps."""
-    rising, probe = _hop_entry(RISING), _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_decay.yml")
-    schedule = {"train.callbacks.LearningRateSchedule": {"points": [[45_000_000, 3.0e-4], [63_000_000, 3.0e-5]]}}
-    assert probe["callback"] == [*rising["callback"], schedule]
-    assert _without_callbacks(probe) == _without_callbacks(rising)
-    assert probe["learning_rate"] == 3.0e-4  # the schedule's first value: the runs are the rising discount's until 45M
-    _assert_page_trains("PlanarLegHop-v3-rising-discount-decay", "train/hyperparams/probes/hop_v3_rising_discount_decay.yml")
-
-
-def test_the_earlier_alive_bonus_probe_is_the_rising_discount_probe_with_its_bonus_raised_at_45m():
-    """``train/hyperparams/probes/hop_v3_rising_discount_alive45.yml`` is the rising-discount probe's entry with the
-    alive bonus's rise moved from 60M steps to 45M, every other schedule and setting the same."""
-    rising, probe = _hop_entry(RISING), _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_alive45.yml")
-    (config, *others), (rising_config, *rising_others) = probe["callback"], rising["callback"]
-    assert others == rising_others
-    schedule = dict(config["train.callbacks.ConfigSchedule"]["schedule"])
-    assert schedule.pop("alive_bonus") == [[45_000_000, 1.0], [46_000_000, 2.0]]
-    rising_schedule = dict(rising_config["train.callbacks.ConfigSchedule"]["schedule"])
-    assert rising_schedule.pop("alive_bonus") == [[60_000_000, 1.0], [61_000_000, 2.0]]
-    assert schedule == rising_schedule
-    assert _without_callbacks(probe) == _without_callbacks(rising)
-
-
-def test_the_capped_drift_probe_moves_the_drift_charges_rise_to_a_capped_near_start_charge():
-    """``hop_v3_rising_discount_drift_cap.yml`` is the rising-discount probe's entry with the drift weight's schedule
-    replaced by a near-start charge of the same rise above the task's 10 per m^2 (so that near the start the charge is
-    the rising discount's), capped at 1 a step; ``..._drift_cap_kl.yml`` is that with PPO's ``target_kl``,
-    ``..._drift_cap_floor.yml`` with a floor under the action noise."""
-    rising, probe = _hop_entry(RISING), _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap.yml")
-    (config, *others), (rising_config, *rising_others) = probe["callback"], rising["callback"]
-    assert others == rising_others
-    schedule = dict(config["train.callbacks.ConfigSchedule"]["schedule"])
-    rising_schedule = dict(rising_config["train.callbacks.ConfigSchedule"]["schedule"])
-    near, total = schedule.pop("drift_near_weight"), rising_schedule.pop("drift_com_weight")
-    assert [at for at, _ in near] == [at for at, _ in total] and all(w + 10.0 == t for (_, w), (_, t) in zip(near, total))
-    assert schedule == rising_schedule
-    env_kwargs = dict(probe["env_kwargs"])
-    assert env_kwargs.pop("drift_near_cap") == 1.0 and env_kwargs == rising["env_kwargs"]
-    assert "drift_com_weight" not in env_kwargs  # the task's 10 per m^2
-    assert {k: v for k, v in probe.items() if k not in ("callback", "env_kwargs")} == {k: v for k, v in rising.items() if k not in ("callback", "env_kwargs")}
-    kl = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap_kl.yml")
-    assert kl.pop("target_kl") == 0.01 and kl == probe
-    cap2 = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap2.yml")
-    assert cap2["env_kwargs"].pop("drift_near_cap") == 2.0
-    floor = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_drift_cap_floor.yml")
-    assert floor["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[0, 0.1]]}}]
-    assert _without_callbacks(floor) == _without_callbacks(probe)
-    probe["env_kwargs"].pop("drift_near_cap")
-    assert cap2 == probe
-
-
-def test_the_joint_limit_probe_is_the_rising_discount_probe_with_a_charge_near_the_ranges_ends():
-    rising, probe = _hop_entry(RISING), _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_limits.yml")
-    env_kwargs = dict(probe.pop("env_kwargs"))
-    assert env_kwargs.pop("limit_weight") == 400.0 and env_kwargs.pop("limit_margin") == 0.05
-    assert env_kwargs == rising.pop("env_kwargs") and probe == rising
-
-
-def test_the_rising_discount_probe_is_the_curricula_entry_with_a_discount_schedule():
-    """``train/hyperparams/probes/hop_v3_rising_discount.yml``, the configuration of the hop task's rising-discount
-    learning page, is the configuration before it (``probes/hop_v3_curricula.yml``) with one callback more, and the
-    page records that file; the probes built on it are checked against their parents in the same way."""
-    parent, probe = _hop_entry(CURRICULA), _hop_entry(RISING)
-    assert probe["callback"] == [*parent["callback"], {"train.callbacks.DiscountSchedule": {"points": [[36_000_000, 0.995], [45_000_000, 0.998]]}}]
-    assert _without_callbacks(probe) == _without_callbacks(parent)
-    _assert_page_trains("PlanarLegHop-v3-rising-discount", RISING)
-    floor = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor.yml")
-    assert floor["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[0, 0.1]]}}]
-    assert _without_callbacks(floor) == _without_callbacks(probe)
-    _assert_page_trains("PlanarLegHop-v3-rising-discount-floor", "train/hyperparams/probes/hop_v3_rising_discount_floor.yml")
-    lower = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor007.yml")
-    assert lower["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[0, 0.07]]}}]
-    assert _without_callbacks(lower) == _without_callbacks(probe)
-    gains = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor_gains.yml")
-    _assert_page_trains("PlanarLegHop-v3-rising-discount-floor-gains", "train/hyperparams/probes/hop_v3_rising_discount_floor_gains.yml")
-    assert gains.pop("policy_kwargs") == {**floor.pop("policy_kwargs"), "features_extractor_class": "train.features.CommandGains"}
-    assert gains == floor
-    anneal = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor_anneal.yml")
-    assert anneal["callback"] == [*probe["callback"], {"train.callbacks.NoiseFloor": {"points": [[63_000_000, 0.1], [72_000_000, 0.05]]}},
-                                  {"train.callbacks.LearningRateSchedule": {"points": [[63_000_000, 3.0e-4], [72_000_000, 3.0e-5]]}}]  # fmt: skip
-    assert _without_callbacks(anneal) == _without_callbacks(probe) and anneal["learning_rate"] == 3.0e-4
-    floor_gains = _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor_gains.yml")
-    for name, key, value, parent_value in [
-        ("fine", "height_scale", [[20_000_000, 0.10], [45_000_000, 0.05], [63_000_000, 0.05], [72_000_000, 0.025]], [[20_000_000, 0.10], [45_000_000, 0.05]]),
-        ("early", "command_range", [[6_000_000, [0.02, 0.06]], [20_000_000, [0.05, 0.15]]], [[6_000_000, [0.02, 0.06]], [36_000_000, [0.05, 0.15]]]),
-    ]:  # fmt: skip
-        variant = _hop_entry(f"train/hyperparams/probes/hop_v3_rising_discount_floor_gains_{name}.yml")
-        (config, *others), (parent_config, *parent_others) = variant["callback"], floor_gains["callback"]
-        assert others == parent_others and _without_callbacks(variant) == _without_callbacks(floor_gains)
-        schedule = dict(config["train.callbacks.ConfigSchedule"]["schedule"])
-        parent_schedule = dict(parent_config["train.callbacks.ConfigSchedule"]["schedule"])
-        assert schedule.pop(key) == value and parent_schedule.pop(key) == parent_value
-        assert schedule == parent_schedule
-    _assert_page_trains("PlanarLegHop-v3-rising-discount-floor-gains-early", "train/hyperparams/probes/hop_v3_rising_discount_floor_gains_early.yml")
-
-
-def test_the_hop_entry_is_the_earlier_commands_probe_and_the_shipped_policy_trained_it():
-    """ppo.yml's ``PlanarLegHop-v3`` entry, the hop task's shipped configuration, is the entry its learning page
-    trained (``probes/hop_v3_rising_discount_floor_gains_early.yml``), and ``policies/ppo_hop_v3`` is that page's seed
-    5, named before training, trained on that entry."""
-    import yaml
-
-    assert _hop_entry("train/hyperparams/ppo.yml") == _hop_entry("train/hyperparams/probes/hop_v3_rising_discount_floor_gains_early.yml")
-    config = yaml.safe_load((ROOT / "policies" / "ppo_hop_v3" / "config.yaml").read_text())
-    assert config["hyperparams_file"] == "train/hyperparams/probes/hop_v3_rising_discount_floor_gains_early.yml"
-    assert config["seed"] == 5 and config["env_id"] == "leg_env/PlanarLegHop-v3"
-    assert config["ppo"]["policy_kwargs"]["features_extractor_class"] == "train.features.CommandGains"
 
 
 def test_zoo_callback_entries():

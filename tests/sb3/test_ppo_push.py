@@ -14,7 +14,7 @@ from train.evaluate import load_policy
 from train.residual import ResidualPolicy
 from train.task_metrics import push_survival
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "policies" / "ppo_push"
 ENV_ID = "leg_env/PlanarLegPush-v0"
 

@@ -18,7 +18,7 @@ from train import ppo as ppo_cli
 from train.evaluate import EvalArgs, evaluate, load_policy
 from train.ppo import TrainArgs, train
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TINY = ["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]  # 128 env steps per PPO iteration
 ITERATION = 128
 NO_NORMALIZE = [*TINY, "normalize:false"]
@@ -64,6 +64,19 @@ def start_training(out: Path, params=TINY) -> subprocess.Popen:
         time.sleep(0.2)
     time.sleep(1.0)  # a few iterations
     return proc
+
+
+def stop_with_a_checkpoint(proc: subprocess.Popen, how: int = signal.SIGTERM) -> str:
+    """Send ``how`` to a training process and return its stderr, once it has exited as a stopped run does: status
+    130, a checkpoint saved."""
+    try:
+        proc.send_signal(how)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert "checkpoint saved" in err
+    return err
 
 
 def steps_of(folder: Path) -> int:
@@ -113,14 +126,7 @@ def test_normalize_false_trains_checkpoints_resumes_and_evaluates(tmp_path):
 
 def test_normalize_false_sigterm_saves_a_checkpoint_and_resumes(tmp_path):
     out = tmp_path / "run"
-    proc = start_training(out, params=NO_NORMALIZE)
-    try:
-        proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-    assert proc.returncode == 130, err
-    assert "checkpoint saved" in err
+    stop_with_a_checkpoint(start_training(out, params=NO_NORMALIZE))
     (checkpoint,) = (out / "checkpoints").glob("0*")
     assert not (checkpoint / "vecnormalize.pkl").exists()
     steps = json.loads((checkpoint / "progress.json").read_text())["num_timesteps"]

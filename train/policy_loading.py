@@ -92,7 +92,7 @@ BASELINES = {"lqr": _lqr, "hopper": _hopper, "gated": _gated, "stepping": _stepp
 def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None):
     """A policy with ``predict(obs)`` from a run/policy folder (or its ``model.zip``), or a baseline's name.
 
-    A folder written by ``python -m train.rllib``, or one of its checkpoints, loads as a
+    A folder written by ``python -m train.rllib``, its ``best/`` or ``last/``, or one of its checkpoints, loads as a
     ``train.rllib.RLlibPolicy`` (needs the ``rllib`` extra).
 
     A baseline (``BASELINES``: ``"lqr"``, ``"hopper"``, ``"gated"``, ``"stepping"``) is built for the env ``env_id`` made with ``env_kwargs``. For a folder,
@@ -111,10 +111,10 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
         env = gym.make(env_id or ENV_ID, **kwargs).unwrapped  # the task's params and config, checked
         return BASELINES[path.lower()](env.params, env.config)
 
-    from train.rllib import RLlibPolicy, is_rllib_checkpoint, is_rllib_run
+    from train.rllib import RLlibPolicy, is_rllib_checkpoint, is_rllib_policy, is_rllib_run
 
     path = Path(path)
-    if is_rllib_run(path) or is_rllib_checkpoint(path):  # python -m train.rllib's run folder or checkpoint
+    if is_rllib_run(path) or is_rllib_checkpoint(path) or is_rllib_policy(path):  # python -m train.rllib's
         try:
             policy = RLlibPolicy.load(path)
         except FileNotFoundError as e:

@@ -217,7 +217,7 @@ def _ppo_settings(hp: dict, n_envs: int) -> dict:
             ppo[name] = hp.pop(key)
     if "grad_clip" in ppo:
         ppo["grad_clip_by"] = "global_norm"
-    if "clip_range" in ppo and not isinstance(ppo["clip_param"], (int, float)):
+    if "clip_param" in ppo and not isinstance(ppo["clip_param"], (int, float)):
         raise ValueError(f"clip_range must be a number for train.rllib, got {ppo['clip_param']!r}")
     if hp.get("clip_range_vf") is not None:
         ppo["vf_clip_param"] = float(hp["clip_range_vf"])

@@ -159,6 +159,8 @@ def test_unmapped_keys_are_errors_or_recorded(tmp_path):
     resolve_config(RLlibArgs(out=tmp_path, params=["bounds_loss_coef:0.0", "target_kl:null", "use_sde:false"]))  # off: nothing to refuse
     with pytest.raises(ValueError, match="norm_obs"):
         resolve_config(RLlibArgs(out=tmp_path, params=["normalize:{norm_obs: true}"]))
+    with pytest.raises(ValueError, match="clip_range must be a number"):  # a Zoo schedule of it has no counterpart
+        resolve_config(RLlibArgs(out=tmp_path, params=["clip_range:lin_0.2"]))
     config = resolve_config(RLlibArgs(out=tmp_path, num_env_runners=3))
     assert config["scaling"]["num_envs_per_env_runner"] == 11  # ceil(32 / 3)
     assert config["learning_rate"] == "lin_3.0e-4" and config["total_timesteps"] == 4_000_000

@@ -1,5 +1,6 @@
 """The one batched episode runner: every evaluation of a policy (``train.evaluate``, the push curve, the periodic
-evaluation during training, the learning curves' held-out scores) runs its episodes through ``run_batch``.
+evaluation during training, the learning curves' held-out scores, ``train.falls``' audit of a policy as it is
+trained) runs its episodes through ``run_batch``.
 
 One episode per seed, all in one native batch (``gymnasium.make_vec`` of a leg-env id), sub-env ``i`` seeded
 with ``seeds[i]``: the same episode, step for step, as ``gymnasium.make(env_id)`` reset with that seed (the
@@ -56,14 +57,15 @@ def make_batch(env_id: str, episodes: int, env_kwargs: dict | None = None, recor
     return gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point", **kwargs)
 
 
-def policy_predict(policy) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """``(obs, episode_start) -> actions`` of anything with SB3's ``predict``, deterministic; a policy with a
-    ``reset()`` (a controller keeping a state per robot) is reset here, before its first call."""
+def policy_predict(policy, deterministic: bool = True) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``(obs, episode_start) -> actions`` of anything with SB3's ``predict``, deterministic unless asked (then the
+    policy draws its actions, as in training); a policy with a ``reset()`` (a controller keeping a state per robot)
+    is reset here, before its first call."""
     if hasattr(policy, "reset"):
         policy.reset()
 
     def predict(obs, episode_start):
-        action, _ = policy.predict(obs, episode_start=episode_start, deterministic=True)
+        action, _ = policy.predict(obs, episode_start=episode_start, deterministic=deterministic)
         return action
 
     return predict

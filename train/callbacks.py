@@ -9,7 +9,8 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from train.run import HOP_EVAL_KEYS, Every, evaluate_now  # evaluate_now: train.run's, also named here
+from train.episodes import HOP_EVAL_KEYS, evaluate_now  # evaluate_now: train.episodes', also named here
+from train.run import Every
 
 __all__ = [
     "RewardTermsLogger",

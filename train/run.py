@@ -16,7 +16,7 @@ A run writes one folder::
     train.lock             present while a process trains into the folder (``train.runfolder``)
 
 and each trainer its own files besides (``train.ppo``: ``tb/``; ``train.rllib``: ``progress.json``,
-``runners.json``). An invocation goes through the same steps with either trainer, each a method of ``Run``:
+``runners.json``). An invocation goes through the same steps with either trainer:
 
 1. ``open_run``: torch's threads set, the folder locked, and a fresh start, a resume or a refusal decided
    (``train.runfolder.prepare_run_folder``: a folder holding another configuration is never overwritten without
@@ -25,11 +25,11 @@ and each trainer its own files besides (``train.ppo``: ``tb/``; ``train.rllib``:
    counter, optimiser, statistics, evaluation history) and the run records the invocation in ``config.yaml``
    and ``command.txt``;
 3. ``Run.begin``, then while the trainer trains, ``Run.evaluate`` every ``--eval-freq`` env steps: deterministic
-   episodes of the policy as it is (seeds ``EVAL_SEED + i``, ``train.episodes.run_batch``), each result a
+   episodes of the policy as it is (seeds ``EVAL_SEED + i``, ``train.episodes.evaluate_now``), each result a
    candidate for ``best/`` (survival rate, then mean return); checkpoints every ``--checkpoint-freq``, with
    ``Run.stamp``'s progress;
-4. ``Run.finish``: an evaluation at the last step, ``last/``, the selected policy copied to the top of the
-   folder, ``evaluations.json`` and the learning curve. A Ctrl-C or a ``kill`` (SIGTERM) saves a checkpoint
+4. ``Run.evaluate_last``: an evaluation at the last step; the trainer's last checkpoint; ``Run.finish``:
+   ``last/``, the selected policy copied to the top of the folder, ``evaluations.json`` and the learning curve. A Ctrl-C or a ``kill`` (SIGTERM) saves a checkpoint
    instead (``Run.interrupted``); running the same command again resumes.
 """
 
@@ -43,7 +43,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from leg_env import ENV_ID  # importing leg_env registers the ids
@@ -59,13 +58,10 @@ from train.cli import interrupt, parse_args
 from train.hyperparameters import DEFAULT_HYPERPARAMS, display_path, parse_override
 from train.runfolder import RunFolderError, RunKind, prepare_run_folder, run_locked, runnable_command
 
-__all__ = ["RunArgs", "Run", "open_run", "main", "machine", "evaluate_now", "check_select_after", "Every", "EVAL_SEED",
-           "HOP_EVAL_KEYS", "notice"]
+__all__ = ["RunArgs", "Run", "open_run", "main", "machine", "check_select_after", "Every", "EVAL_SEED", "notice"]
 
 EVAL_SEED = 20_000
 """Seed of the in-training evaluation episodes (training envs use small seeds, ``train.evaluate`` 10_000+)."""
-HOP_EVAL_KEYS = ("hops_per_episode", "mean_abs_apex_error", "mean_apex_error", "mean_drift_10s")
-"""The hop task's measures that the in-training evaluation adds (``evaluate_now``)."""
 SUMMARY_KEYS = ("timesteps", "mean_return", "std_return", "survival_rate", "rms_base_drift")
 """What ``best/``'s and ``last/``'s ``info.json`` keep of their evaluation."""
 
@@ -177,51 +173,6 @@ class Every:
         return True
 
 
-class _Drift:
-    """The squared base drift summed over every step of the episodes (a ``train.episodes.Watcher``)."""
-
-    def start(self, envs, obs, info) -> None:
-        self.sum_sq = 0.0
-
-    def step(self, envs, obs, actions, info, active) -> None:
-        d = info["base_drift"][active]
-        self.sum_sq += float(np.dot(d, d))
-
-
-def evaluate_now(policy, envs, seed: int) -> dict:
-    """One deterministic episode of ``policy`` (SB3's ``predict`` on raw observations) in each sub-env of the
-    native batch ``envs``, sub-env ``i`` seeded ``seed + i`` (``train.episodes.run_batch``), summarised.
-
-    Returns per-episode ``returns`` and ``lengths``, their means, the survival rate (episodes ended by the time
-    limit, not by a fall) and the RMS base drift over all steps [m]; on the hop task also its measures of Solved
-    (``train.task_metrics.HopTracker``, as ``train.evaluate`` reports them): ``hops_per_episode``,
-    ``mean_abs_apex_error`` and ``mean_apex_error`` [m] (nan without a hop), ``mean_drift_10s`` [m] (nan if no
-    episode ran to its end) and ``apex_error_by_command`` (``HopTracker.by_command``).
-    """
-    from leg_env.tasks.hop import HopConfig
-    from train.episodes import policy_predict, run_batch
-    from train.task_metrics import HopTracker
-
-    drift = _Drift()
-    hop = HopTracker() if isinstance(envs.config, HopConfig) else None
-    batch = run_batch(policy_predict(policy), envs, range(seed, seed + envs.num_envs), [drift] if hop is None else [drift, hop])
-    result = {
-        "mean_return": float(batch.returns.mean()),
-        "std_return": float(batch.returns.std()),
-        "mean_length": float(batch.lengths.mean()),
-        "survival_rate": batch.survival_rate,
-        "rms_base_drift": float(np.sqrt(drift.sum_sq / batch.lengths.sum())),
-        "returns": batch.returns.round(4).tolist(),
-        "lengths": batch.lengths.tolist(),
-    }
-    if hop is not None:
-        hop.end(batch.survived)
-        summary = hop.summary()
-        result.update({key: summary[key] for key in HOP_EVAL_KEYS})
-        result["apex_error_by_command"] = summary["apex_error_by_command"]
-    return result
-
-
 def notice(message: str) -> None:
     """A line for the user on stderr."""
     print(message, file=sys.stderr, flush=True)
@@ -294,6 +245,8 @@ class Run:
     def evaluate(self, steps: int) -> dict:
         """Evaluate the policy now, record the result in ``history``, keep the policy in ``best/`` if it is the best
         candidate so far, print a line (``verbose``); returns the result."""
+        from train.episodes import evaluate_now
+
         result = {"timesteps": int(steps)}
         result.update(evaluate_now(self.policy(), self._envs, self.config["eval"]["seed"]))
         result["time"] = round(self.clock(), 2)

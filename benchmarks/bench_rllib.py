@@ -32,7 +32,7 @@ def build(runners: int, envs: int, total: int):
     from train.ppo import DEFAULT_HYPERPARAMS
     from train.rllib import RLlibArgs, resolve_config, rllib_config
 
-    config = resolve_config(RLlibArgs(env=ENV_ID, hyperparams=DEFAULT_HYPERPARAMS, num_env_runners=runners, num_envs_per_env_runner=envs, total_timesteps=total))
+    config = resolve_config(RLlibArgs(env_id=ENV_ID, hyperparams=DEFAULT_HYPERPARAMS, num_env_runners=runners, num_envs_per_env_runner=envs, total_timesteps=total))
     return rllib_config(config).build_algo(), config
 
 

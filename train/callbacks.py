@@ -3,12 +3,14 @@ of task settings (a curriculum)."""
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+
+from train.episodes import HOP_EVAL_KEYS, evaluate_now  # evaluate_now: train.episodes', also named here
+from train.run import Every
 
 __all__ = [
     "RewardTermsLogger",
@@ -79,134 +81,30 @@ def leg_adapter(venv):
     return venv
 
 
-class _Drift:
-    """The squared base drift summed over every step of the episodes (a ``train.episodes.Watcher``)."""
+class PeriodicEvaluation(BaseCallback):
+    """The run's periodic evaluation (``train.run.Run.evaluate_if_due``), asked at every step; each result is logged
+    to TensorBoard under ``eval/``.
 
-    def start(self, envs, obs, info) -> None:
-        self.sum_sq = 0.0
-
-    def step(self, envs, obs, actions, info, active) -> None:
-        d = info["base_drift"][active]
-        self.sum_sq += float(np.dot(d, d))
-
-
-def evaluate_now(policy, envs, seed: int) -> dict:
-    """One deterministic episode of ``policy`` (SB3's ``predict`` on raw observations) in each sub-env of the
-    native batch ``envs``, sub-env ``i`` seeded ``seed + i`` (``train.episodes.run_batch``), summarised.
-
-    Returns per-episode ``returns`` and ``lengths``, their means, the survival rate (episodes ended by the time
-    limit, not by a fall) and the RMS base drift over all steps [m]; on the hop task also its measures of Solved
-    (``train.task_metrics.HopTracker``, as ``train.evaluate`` reports them): ``hops_per_episode``,
-    ``mean_abs_apex_error`` and ``mean_apex_error`` [m] (nan without a hop), ``mean_drift_10s`` [m] (nan if no
-    episode ran to its end) and ``apex_error_by_command`` (``HopTracker.by_command``).
+    ``evaluate(steps)`` evaluates the policy when ``steps`` has passed the next multiple of the evaluation frequency
+    (then returns the result; otherwise None): deterministic episodes of the model being trained, its observations
+    normalised by the training ``VecNormalize``'s current statistics, rewards the env's own (unnormalised).
     """
-    from leg_env.tasks.hop import HopConfig
-    from train.episodes import policy_predict, run_batch
-    from train.task_metrics import HopTracker
 
-    drift = _Drift()
-    hop = HopTracker() if isinstance(envs.config, HopConfig) else None
-    batch = run_batch(policy_predict(policy), envs, range(seed, seed + envs.num_envs), [drift] if hop is None else [drift, hop])
-    result = {
-        "mean_return": float(batch.returns.mean()),
-        "std_return": float(batch.returns.std()),
-        "mean_length": float(batch.lengths.mean()),
-        "survival_rate": batch.survival_rate,
-        "rms_base_drift": float(np.sqrt(drift.sum_sq / batch.lengths.sum())),
-        "returns": batch.returns.round(4).tolist(),
-        "lengths": batch.lengths.tolist(),
-    }
-    if hop is not None:
-        hop.end(batch.survived)
-        summary = hop.summary()
-        result.update({key: summary[key] for key in HOP_EVAL_KEYS})
-        result["apex_error_by_command"] = summary["apex_error_by_command"]
-    return result
-
-
-HOP_EVAL_KEYS = ("hops_per_episode", "mean_abs_apex_error", "mean_apex_error", "mean_drift_10s")
-"""The hop task's measures that the in-training evaluation adds (``evaluate_now``), logged under ``eval/``."""
-
-
-class _Periodic(BaseCallback):
-    """Call ``_fire()`` each time the step counter passes a multiple of ``freq`` (never if ``freq <= 0``)."""
-
-    def __init__(self, freq: int):
+    def __init__(self, evaluate: Callable[[int], dict | None]):
         super().__init__()
-        self.freq = freq
-        self._next = None
-
-    def _start_after(self, done: int) -> None:
-        """The first call comes at the first multiple of ``freq`` after ``done`` steps."""
-        self._next = (done // self.freq + 1) * self.freq if self.freq > 0 else None
-
-    def _due(self) -> bool:
-        """Whether the counter has passed the next multiple of ``freq`` (which then moves on)."""
-        steps = self.model.num_timesteps
-        if self._next is None or steps < self._next:
-            return False
-        while self._next <= steps:
-            self._next += self.freq
-        return True
+        self.evaluate = evaluate
 
     def _on_step(self) -> bool:
-        if self._due():
-            self._fire()
+        result = self.evaluate(int(self.num_timesteps))
+        if result is not None:
+            for key in ("mean_return", "std_return", "mean_length", "survival_rate", "rms_base_drift", *HOP_EVAL_KEYS):
+                if key in result:
+                    self.logger.record(f"eval/{key}", result[key])
+            self.logger.dump(self.num_timesteps)
         return True
 
-    def _fire(self) -> None:
-        raise NotImplementedError
 
-
-class PeriodicEvaluation(_Periodic):
-    """Every ``eval_freq`` env steps, run ``envs.num_envs`` deterministic episodes of ``policy`` and log the results.
-
-    ``envs`` is a native batch (``train.episodes.make_batch``); ``policy`` has SB3's ``predict`` on raw observations
-    (``train.policy_loading.TrainedPolicy`` of the model being trained normalises them with the training
-    ``VecNormalize``'s current statistics); rewards are the env's own (unnormalised). Each result (with
-    ``timesteps`` and the wall-clock ``time``) is appended to ``history`` and passed to ``on_result``.
-    """
-
-    def __init__(
-        self,
-        envs,
-        policy,
-        eval_freq: int,
-        seed: int,
-        history: list,
-        on_result: Callable[[dict], None] | None = None,
-        clock: Callable[[], float] = time.perf_counter,
-    ):
-        super().__init__(eval_freq)
-        self.envs = envs
-        self.policy = policy
-        self.seed = seed
-        self.history = history
-        self.on_result = on_result
-        self.clock = clock
-
-    def _init_callback(self) -> None:
-        self._start_after(self.history[-1]["timesteps"] if self.history else 0)  # a resumed run goes on
-
-    def _fire(self) -> None:
-        self.evaluate()
-
-    def evaluate(self) -> dict:
-        """Evaluate now, record and return the result."""
-        result = {"timesteps": int(self.num_timesteps)}
-        result.update(evaluate_now(self.policy, self.envs, self.seed))
-        result["time"] = round(self.clock(), 2)
-        self.history.append(result)
-        for key in ("mean_return", "std_return", "mean_length", "survival_rate", "rms_base_drift", *HOP_EVAL_KEYS):
-            if key in result:
-                self.logger.record(f"eval/{key}", result[key])
-        self.logger.dump(self.num_timesteps)
-        if self.on_result is not None:
-            self.on_result(result)
-        return result
-
-
-class PeriodicCheckpoint(_Periodic):
+class PeriodicCheckpoint(BaseCallback):
     """Call ``save()`` between PPO iterations, once the step counter has passed a multiple of ``checkpoint_freq``.
 
     A checkpoint is taken when a rollout starts: the previous rollout's update is done, and the
@@ -217,18 +115,19 @@ class PeriodicCheckpoint(_Periodic):
     """
 
     def __init__(self, checkpoint_freq: int, save: Callable[[], None]):
-        super().__init__(checkpoint_freq)
+        super().__init__()
+        self.every = Every(checkpoint_freq)
         self.save = save
         self.rollout_start: int | None = None
         self.collecting = False
 
     def _init_callback(self) -> None:
-        self._start_after(self.model.num_timesteps)
+        self.every.start_after(self.model.num_timesteps)
 
     def _on_rollout_start(self) -> None:
         self.rollout_start = self.model.num_timesteps
         self.collecting = True
-        if self._due():
+        if self.every.due(self.model.num_timesteps):
             self.save()
 
     def _on_step(self) -> bool:

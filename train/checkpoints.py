@@ -18,7 +18,8 @@ model whose step counter disagrees with its ``progress.json`` make the checkpoin
 then moved aside to ``<name>.corrupt`` with a ``CheckpointWarning`` naming the file, and the
 previous checkpoint is tried. When none is intact, ``CheckpointError`` lists what is wrong with each.
 
-Both expect to be the only writer of the folder (``train.ppo`` holds the run folder's lock).
+Both expect to be the only writer of the folder (``train.ppo`` holds the run folder's lock). The snapshots of a
+policy (``best/``, ``last/``) are written the same way by either trainer (``save_snapshot``).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import re
 import shutil
 import tempfile
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,6 +44,8 @@ __all__ = [
     "CheckpointError",
     "CheckpointWarning",
     "save_checkpoint",
+    "write_checkpoint",
+    "set_aside",
     "checkpoint_dirs",
     "load_checkpoint",
     "restore_rng",
@@ -49,6 +53,7 @@ __all__ = [
     "write_text_atomic",
     "file_mode",
     "save_snapshot",
+    "copy_policy",
     "read_snapshot_info",
     "recover_snapshot",
 ]
@@ -123,8 +128,9 @@ def _replace_dir(tmp: Path, path: Path) -> None:
         shutil.rmtree(old)
 
 
-def save_snapshot(path: Path, model, vec_normalize, info: dict) -> Path:
-    """Write ``model.zip``, ``vecnormalize.pkl`` (if any) and ``info.json`` as the directory ``path``.
+def save_snapshot(path: Path, write: Callable[[Path], None], info: dict) -> Path:
+    """Write a policy through ``write(folder)`` (the trainer's files: ``model.zip`` and ``vecnormalize.pkl``, or an
+    RLlib ``module/``) and ``info.json`` as the directory ``path``.
 
     The files are written into a temporary directory that then replaces ``path``, so ``path``
     never holds a model from one moment and statistics from another.
@@ -134,9 +140,7 @@ def save_snapshot(path: Path, model, vec_normalize, info: dict) -> Path:
     recover_snapshot(path)
     tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}."))
     try:
-        model.save(tmp / "model.zip", exclude=["tensorboard_log"])  # a machine's path; a policy needs none
-        if vec_normalize is not None:
-            vec_normalize.save(tmp / "vecnormalize.pkl")
+        write(tmp)
         write_json_atomic(tmp / "info.json", info)
         os.chmod(tmp, file_mode(directory=True))
         _replace_dir(tmp, path)
@@ -146,10 +150,41 @@ def save_snapshot(path: Path, model, vec_normalize, info: dict) -> Path:
     return path
 
 
+def copy_policy(source: Path, target: Path, names: tuple[str, ...]) -> None:
+    """Make the files (or folders) ``names`` of ``target`` those of ``source``, each replaced atomically; one that
+    ``source`` lacks is removed from ``target``."""
+    for name in names:
+        src, dst = Path(source) / name, Path(target) / name
+        if src.is_dir():
+            tmp = Path(tempfile.mkdtemp(dir=dst.parent, prefix=f".{dst.name}."))
+            try:
+                shutil.copytree(src, tmp, dirs_exist_ok=True)
+                os.chmod(tmp, file_mode(directory=True))
+                _replace_dir(tmp, dst)
+            finally:
+                if tmp.exists():
+                    shutil.rmtree(tmp, ignore_errors=True)
+        elif src.is_file():
+            fd, tmp = tempfile.mkstemp(dir=dst.parent, prefix=f".{dst.name}.", suffix=dst.suffix)
+            os.close(fd)
+            try:
+                shutil.copyfile(src, tmp)
+                os.chmod(tmp, file_mode())
+                os.replace(tmp, dst)
+            finally:
+                if os.path.exists(tmp):
+                    os.unlink(tmp)
+        elif dst.is_dir():
+            shutil.rmtree(dst)
+        elif dst.exists():
+            dst.unlink()
+
+
 def read_snapshot_info(path: Path) -> dict | None:
-    """The ``info.json`` of a snapshot directory, or None if there is no complete snapshot."""
+    """The ``info.json`` of a snapshot directory, or None if there is no snapshot (a snapshot replaces its directory
+    in one rename, so one with its ``info.json`` is complete)."""
     path = Path(path)
-    if not (path / "model.zip").is_file() or not (path / "info.json").is_file():
+    if not (path / "info.json").is_file():
         return None
     return json.loads((path / "info.json").read_text())
 
@@ -165,25 +200,19 @@ def checkpoint_dirs(folder: Path) -> list[Path]:
     return sorted((p for p in folder.iterdir() if p.is_dir() and _NAME.fullmatch(p.name)), reverse=True)
 
 
-def save_checkpoint(folder: Path, model, vec_normalize, progress: dict, keep: int = 2) -> Path:
-    """Save a checkpoint of ``model`` and ``vec_normalize`` (None: the run does not normalise) under
-    ``folder``; returns its directory. Older checkpoints beyond the ``keep`` newest are deleted,
-    and so are hidden leftovers of writes a killed process did not finish."""
+def write_checkpoint(folder: Path, steps: int, write: Callable[[Path], None], keep: int = 2) -> Path:
+    """Write the checkpoint at ``steps`` env steps through ``write(tmp)`` into a hidden temporary folder under
+    ``folder``, then rename it into place as ``<steps, 12 digits>``; returns its directory. Older checkpoints beyond
+    the ``keep`` newest are deleted, and so are hidden leftovers of writes a killed process did not finish. Either
+    trainer's checkpoints are written so (``train.rllib``'s hold an RLlib algorithm)."""
     if keep < 2:
         raise ValueError(f"keep must be >= 2 so that a corrupt checkpoint has an intact predecessor, got {keep}")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    name = f"{model.num_timesteps:012d}"
+    name = f"{int(steps):012d}"
     tmp = Path(tempfile.mkdtemp(dir=folder, prefix=f".{name}."))
     try:
-        model.save(tmp / "model.zip")
-        if vec_normalize is not None:
-            vec_normalize.save(tmp / "vecnormalize.pkl")
-        with open(tmp / "rng.pkl", "wb") as f:
-            pickle.dump(
-                {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state()}, f
-            )
-        write_json_atomic(tmp / "progress.json", {**progress, "num_timesteps": int(model.num_timesteps)})
+        write(tmp)
         os.chmod(tmp, file_mode(directory=True))
         _replace_dir(tmp, folder / name)  # a second save at the same step count (Ctrl-C, the end) replaces the first
     finally:
@@ -195,6 +224,33 @@ def save_checkpoint(folder: Path, model, vec_normalize, progress: dict, keep: in
         if leftover.is_dir():
             shutil.rmtree(leftover, ignore_errors=True)
     return folder / name
+
+
+def set_aside(path: Path) -> Path:
+    """Move the unusable checkpoint ``path`` to ``<name>.corrupt`` (replacing an older one there), kept for
+    inspection; returns where it went."""
+    target = path.with_name(path.name + CORRUPT_SUFFIX)
+    if target.exists():
+        shutil.rmtree(target)
+    os.replace(path, target)
+    return target
+
+
+def save_checkpoint(folder: Path, model, vec_normalize, progress: dict, keep: int = 2) -> Path:
+    """Save a checkpoint of ``model`` and ``vec_normalize`` (None: the run does not normalise) under
+    ``folder`` (``write_checkpoint``); returns its directory."""
+
+    def write(tmp: Path) -> None:
+        model.save(tmp / "model.zip")
+        if vec_normalize is not None:
+            vec_normalize.save(tmp / "vecnormalize.pkl")
+        with open(tmp / "rng.pkl", "wb") as f:
+            pickle.dump(
+                {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state()}, f
+            )
+        write_json_atomic(tmp / "progress.json", {**progress, "num_timesteps": int(model.num_timesteps)})
+
+    return write_checkpoint(folder, model.num_timesteps, write, keep)
 
 
 @dataclass
@@ -285,10 +341,7 @@ def load_checkpoint(folder: Path, normalize: bool, algo=None, **load_kwargs) -> 
             rejected.append((path, str(e)))
             continue
         for bad, why in rejected:
-            target = bad.with_name(bad.name + CORRUPT_SUFFIX)
-            if target.exists():
-                shutil.rmtree(target)
-            os.replace(bad, target)
+            target = set_aside(bad)
             warnings.warn(
                 f"checkpoint unusable: {why}; moved it to {target} and resumed from the previous checkpoint, {path}",
                 CheckpointWarning,

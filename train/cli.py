@@ -1,7 +1,10 @@
 """Command lines from argument dataclasses: one option per field, its docstring as the help text.
 
 A field's docstring is the string literal written under it (PEP 257's attribute docstring), read
-from the class source once, so the dataclass is the single place that documents an argument.
+from the class source once, so the dataclass is the single place that documents an argument. A
+dataclass that extends another (``train.ppo.TrainArgs`` extends ``train.run.RunArgs``) has the base's
+fields and docstrings, its own where it declares a field again. An option that was renamed is listed in
+the class's ``RENAMED`` (``{old field name: new field name}``): the old option is an error that names the new.
 """
 
 from __future__ import annotations
@@ -19,7 +22,16 @@ __all__ = ["field_docs", "parser_for", "parse_args", "interrupt"]
 
 
 def field_docs(cls: type) -> dict[str, str]:
-    """``{field name: docstring}`` for the attribute docstrings of a dataclass."""
+    """``{field name: docstring}`` for the attribute docstrings of a dataclass and of the dataclasses it extends."""
+    docs = {}
+    for klass in reversed(cls.__mro__):
+        if dataclasses.is_dataclass(klass):
+            docs.update(_own_field_docs(klass))
+    return docs
+
+
+def _own_field_docs(cls: type) -> dict[str, str]:
+    """``{field name: docstring}`` for the attribute docstrings in the body of the class ``cls``."""
     tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
     body = tree.body[0].body
     docs = {}
@@ -78,8 +90,25 @@ def parser_for(cls: type, positional: tuple[str, ...] = (), **parser_kwargs) -> 
                 kwargs["nargs"] = "?"
             parser.add_argument(f.name, **kwargs)
         else:
-            parser.add_argument("--" + f.name.replace("_", "-"), dest=f.name, **kwargs)
+            parser.add_argument(_option(f.name), dest=f.name, **kwargs)
+    for old, new in getattr(cls, "RENAMED", {}).items():
+        parser.add_argument(_option(old), nargs="?", action=_renamed(_option(new)), default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     return parser
+
+
+def _option(name: str) -> str:
+    """The command-line option of the field ``name``: ``--snake-case``."""
+    return "--" + name.replace("_", "-")
+
+
+def _renamed(new: str) -> type[argparse.Action]:
+    """An argparse action that refuses an option, saying it was renamed ``new``."""
+
+    class Renamed(argparse.Action):
+        def __call__(self, parser, namespace, values, option_string=None):
+            parser.error(f"{option_string} was renamed {new}")
+
+    return Renamed
 
 
 def parse_args(cls: type, argv: list[str] | None = None, positional: tuple[str, ...] = (), prog: str | None = None):

@@ -129,7 +129,7 @@ class CurvesArgs:
             raise ValueError(f"shipped_seed must be one of the trained seeds {self.first_seed}..{self.first_seed + self.seeds - 1}, got {self.shipped_seed}")
         if self.jobs < 1:
             raise ValueError(f"jobs must be >= 1, got {self.jobs}")
-        from train.ppo import check_select_after
+        from train.run import check_select_after
 
         check_select_after(self.select_after)  # before any seed trains
         if self.episodes < 1 or self.eval_episodes < 1:

@@ -1,5 +1,6 @@
 """The one batched episode runner: every evaluation of a policy (``train.evaluate``, the push curve, the periodic
-evaluation during training, the learning curves' held-out scores) runs its episodes through ``run_batch``.
+evaluation during training, the learning curves' held-out scores, ``train.falls``' audit of a policy as it is
+trained) runs its episodes through ``run_batch``.
 
 One episode per seed, all in one native batch (``gymnasium.make_vec`` of a leg-env id), sub-env ``i`` seeded
 with ``seeds[i]``: the same episode, step for step, as ``gymnasium.make(env_id)`` reset with that seed (the
@@ -9,6 +10,7 @@ has ended is autoreset by the batch and stepped on with the others, but nothing 
 
 What an evaluation measures beyond returns, lengths and survival is a ``Watcher``: it gets the batch's
 observations and ``info`` after the reset and after every step, with the mask of the episodes still running.
+``evaluate_now`` is the in-training evaluation of either trainer (``train.run``): the summary of one batch.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
-__all__ = ["Batch", "Watcher", "make_batch", "run_batch", "policy_predict"]
+__all__ = ["Batch", "Watcher", "make_batch", "run_batch", "policy_predict", "evaluate_now", "HOP_EVAL_KEYS"]
 
 
 class Watcher(Protocol):
@@ -56,14 +58,15 @@ def make_batch(env_id: str, episodes: int, env_kwargs: dict | None = None, recor
     return gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point", **kwargs)
 
 
-def policy_predict(policy) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """``(obs, episode_start) -> actions`` of anything with SB3's ``predict``, deterministic; a policy with a
-    ``reset()`` (a controller keeping a state per robot) is reset here, before its first call."""
+def policy_predict(policy, deterministic: bool = True) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``(obs, episode_start) -> actions`` of anything with SB3's ``predict``, deterministic unless asked (then the
+    policy draws its actions, as in training); a policy with a ``reset()`` (a controller keeping a state per robot)
+    is reset here, before its first call."""
     if hasattr(policy, "reset"):
         policy.reset()
 
     def predict(obs, episode_start):
-        action, _ = policy.predict(obs, episode_start=episode_start, deterministic=True)
+        action, _ = policy.predict(obs, episode_start=episode_start, deterministic=deterministic)
         return action
 
     return predict
@@ -106,3 +109,51 @@ def run_batch(predict: Callable[[np.ndarray, np.ndarray], np.ndarray], envs, see
         done |= ended
         starts = terminated | truncated
     return Batch(seeds, returns, lengths, survived)
+
+
+class _Drift:
+    """The squared base drift summed over every step of the episodes (a ``Watcher``)."""
+
+    def start(self, envs, obs, info) -> None:
+        self.sum_sq = 0.0
+
+    def step(self, envs, obs, actions, info, active) -> None:
+        d = info["base_drift"][active]
+        self.sum_sq += float(np.dot(d, d))
+
+
+def evaluate_now(policy, envs, seed: int) -> dict:
+    """One deterministic episode of ``policy`` (SB3's ``predict`` on raw observations) in each sub-env of the
+    native batch ``envs``, sub-env ``i`` seeded ``seed + i`` (``run_batch``), summarised.
+
+    Returns per-episode ``returns`` and ``lengths``, their means, the survival rate (episodes ended by the time
+    limit, not by a fall) and the RMS base drift over all steps [m]; on the hop task also its measures of Solved
+    (``train.task_metrics.HopTracker``, as ``train.evaluate`` reports them): ``hops_per_episode``,
+    ``mean_abs_apex_error`` and ``mean_apex_error`` [m] (nan without a hop), ``mean_drift_10s`` [m] (nan if no
+    episode ran to its end) and ``apex_error_by_command`` (``HopTracker.by_command``).
+    """
+    from leg_env.tasks.hop import HopConfig
+    from train.task_metrics import HopTracker
+
+    drift = _Drift()
+    hop = HopTracker() if isinstance(envs.config, HopConfig) else None
+    batch = run_batch(policy_predict(policy), envs, range(seed, seed + envs.num_envs), [drift] if hop is None else [drift, hop])
+    result = {
+        "mean_return": float(batch.returns.mean()),
+        "std_return": float(batch.returns.std()),
+        "mean_length": float(batch.lengths.mean()),
+        "survival_rate": batch.survival_rate,
+        "rms_base_drift": float(np.sqrt(drift.sum_sq / batch.lengths.sum())),
+        "returns": batch.returns.round(4).tolist(),
+        "lengths": batch.lengths.tolist(),
+    }
+    if hop is not None:
+        hop.end(batch.survived)
+        summary = hop.summary()
+        result.update({key: summary[key] for key in HOP_EVAL_KEYS})
+        result["apex_error_by_command"] = summary["apex_error_by_command"]
+    return result
+
+
+HOP_EVAL_KEYS = ("hops_per_episode", "mean_abs_apex_error", "mean_apex_error", "mean_drift_10s")
+"""The hop task's measures that the in-training evaluation adds (``evaluate_now``)."""

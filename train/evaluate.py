@@ -164,22 +164,30 @@ def run_episodes(
         envs.close()
     if hop is not None:
         hop.end(batch.survived)
-    series = None
-    if record is not None:
-        rec = metrics.series
-        series = {
-            "base_drift": np.asarray(rec["base_drift"]),
-            "torso_angle": np.asarray(rec["torso_angle"]),
-            "torque": np.asarray(rec["torque"]),
-            "contact_force": np.asarray(rec["contact_force"]),
-            "weight": weight,
-            "dt": dt,
-            "torque_limit": tuple(metrics.limit),
-            "frames": rec["frames"] if frames else None,
-            "mode": rec["mode"],
-            "impulse": np.asarray(rec["impulse"]),
-            "hop": dict(hop.series) if hop is not None else None,
-        }
+    series = None if record is None else _series(metrics, hop, weight, dt, frames)
+    return _summary(batch, metrics, hop), series
+
+
+def _series(metrics: EpisodeMetrics, hop, weight: float, dt: float, frames: bool) -> dict:
+    """The recorded episode's time series (``run_episodes``), as arrays."""
+    rec = metrics.series
+    return {
+        "base_drift": np.asarray(rec["base_drift"]),
+        "torso_angle": np.asarray(rec["torso_angle"]),
+        "torque": np.asarray(rec["torque"]),
+        "contact_force": np.asarray(rec["contact_force"]),
+        "weight": weight,
+        "dt": dt,
+        "torque_limit": tuple(metrics.limit),
+        "frames": rec["frames"] if frames else None,
+        "mode": rec["mode"],
+        "impulse": np.asarray(rec["impulse"]),
+        "hop": dict(hop.series) if hop is not None else None,
+    }
+
+
+def _per_episode(batch, metrics: EpisodeMetrics) -> list[dict]:
+    """Each episode's seed, return, length, survival, ending, RMS drift, reward terms (and drawn robot)."""
     per_episode = []
     for i, seed in enumerate(batch.seeds):
         length = int(batch.lengths[i])
@@ -195,9 +203,15 @@ def run_episodes(
                 **({"robot": metrics.robots[i]} if metrics.robots is not None and metrics.robots[i] is not None else {}),
             }
         )
+    return per_episode
+
+
+def _summary(batch, metrics: EpisodeMetrics, hop) -> dict:
+    """The metrics of ``run_episodes`` (module docstring) over the episodes of ``batch``, with the per-episode list."""
+    per_episode = _per_episode(batch, metrics)
     steps = int(batch.lengths.sum())
     returns = np.array([e["return"] for e in per_episode])
-    summary = {
+    return {
         "episodes": len(per_episode),
         "survival_rate": float(np.mean([e["survived"] for e in per_episode])),
         "mean_return": float(returns.mean()),
@@ -215,7 +229,6 @@ def run_episodes(
         **(hop.summary() if hop is not None else {}),
         "per_episode": per_episode,
     }
-    return summary, series
 
 
 _ROWS = (

@@ -50,90 +50,51 @@ class ExportError(ValueError):
     """The policy cannot be written as the ONNX graph described in ``train.export``."""
 
 
+class _Graph:
+    """The nodes and initializers of an ONNX graph being written, each node named by its output."""
+
+    def __init__(self):
+        self.nodes, self.initializers = [], []
+
+    def constant(self, name: str, value: np.ndarray) -> str:
+        from onnx import numpy_helper
+
+        self.initializers.append(numpy_helper.from_array(np.asarray(value), name))
+        return name
+
+    def node(self, op: str, inputs: list[str], output: str, **attributes) -> str:
+        from onnx import helper
+
+        self.nodes.append(helper.make_node(op, inputs, [output], name=output, **attributes))
+        return output
+
+
 def policy_to_onnx(policy: TrainedPolicy, source: str = ""):
     """The ONNX model (``onnx.ModelProto``) of ``policy``: raw observations in, clipped actions out."""
     import onnx
-    import torch
-    from gymnasium import spaces
-    from onnx import TensorProto, helper, numpy_helper
-    from stable_baselines3.common.torch_layers import FlattenExtractor
-
-    from train.features import CommandGains
+    from onnx import TensorProto, helper
 
     sb3_policy = policy.model.policy
+    _check_exportable(sb3_policy)
     env_id = policy.env_id or ENV_ID
     obs_space, action_space = sb3_policy.observation_space, sb3_policy.action_space
-    if not (isinstance(obs_space, spaces.Box) and len(obs_space.shape) == 1):
-        raise ExportError(f"only flat Box observations can be exported, the model has {obs_space}")
-    if not isinstance(action_space, spaces.Box) or len(action_space.shape) != 1:
-        raise ExportError(f"only flat Box actions can be exported, the model has {action_space}")
-    if sb3_policy.squash_output:
-        raise ExportError("policies with squash_output=True are not supported (their actions are tanh-squashed, then unscaled)")
-    extractor = sb3_policy.pi_features_extractor
-    if not isinstance(extractor, (FlattenExtractor, CommandGains)):
-        raise ExportError(f"only MlpPolicy's FlattenExtractor and train.features.CommandGains are supported, the model has {type(extractor).__name__}")
-
-    nodes, initializers = [], []
-
-    def constant(name: str, value: np.ndarray) -> str:
-        initializers.append(numpy_helper.from_array(np.asarray(value), name))
-        return name
-
-    def node(op: str, inputs: list[str], output: str, **attributes) -> str:
-        nodes.append(helper.make_node(op, inputs, [output], name=output, **attributes))
-        return output
-
-    x = INPUT
-    vec_normalize = policy.vec_normalize  # None unless the run normalised observations
-    normalised = vec_normalize is not None
-    if normalised:
-        rms = vec_normalize.obs_rms
-        mean, std = np.asarray(rms.mean, dtype=np.float64), np.sqrt(np.asarray(rms.var, dtype=np.float64) + vec_normalize.epsilon)
-        clip = float(vec_normalize.clip_obs)
-        x = node("Cast", [x], "obs_f64", to=TensorProto.DOUBLE)
-        x = node("Sub", [x, constant("obs_mean", mean)], "obs_centred")
-        x = node("Div", [x, constant("obs_std", std)], "obs_scaled")
-        x = node("Clip", [x, constant("obs_clip_low", np.array(-clip)), constant("obs_clip_high", np.array(clip))], "obs_clipped")
-        x = node("Cast", [x], "obs_normalised", to=TensorProto.FLOAT)
-
-    if isinstance(extractor, CommandGains):  # the observation, then its products with the command entry
-        k = extractor.command
-        command = node("Slice", [x, constant("command_start", np.array([k])), constant("command_end", np.array([k + 1])),
-                                 constant("command_axis", np.array([1]))], "command")  # fmt: skip
-        x = node("Concat", [x, node("Mul", [x, command], "command_products")], "features", axis=1)
-    layers = [*sb3_policy.mlp_extractor.policy_net, sb3_policy.action_net]
-    for k, layer in enumerate(layers):
-        if isinstance(layer, torch.nn.Linear):
-            weight = layer.weight.detach().cpu().numpy().astype(np.float32)
-            bias = layer.bias.detach().cpu().numpy().astype(np.float32)
-            x = node("Gemm", [x, constant(f"W{k}", weight), constant(f"b{k}", bias)], f"linear{k}", transB=1)
-        elif isinstance(layer, torch.nn.Tanh):
-            x = node("Tanh", [x], f"tanh{k}")
-        elif isinstance(layer, torch.nn.ReLU):
-            x = node("Relu", [x], f"relu{k}")
-        elif isinstance(layer, torch.nn.Sigmoid):
-            x = node("Sigmoid", [x], f"sigmoid{k}")
-        elif isinstance(layer, torch.nn.ELU):
-            x = node("Elu", [x], f"elu{k}", alpha=float(layer.alpha))
-        elif isinstance(layer, torch.nn.LeakyReLU):
-            x = node("LeakyRelu", [x], f"leaky_relu{k}", alpha=float(layer.negative_slope))
-        elif not isinstance(layer, torch.nn.Identity):
-            raise ExportError(f"layer {k} of the actor, {layer}, has no ONNX translation here")
-    low = constant("action_low", action_space.low.astype(np.float32))
-    high = constant("action_high", action_space.high.astype(np.float32))
-    x = node("Min", [x, high], "action_below_high")
-    node("Max", [x, low], OUTPUT)
+    graph = _Graph()
+    x = _normalisation(graph, INPUT, policy.vec_normalize)  # policy.vec_normalize: None unless the run normalised observations
+    x = _actor(graph, x, sb3_policy)
+    low = graph.constant("action_low", action_space.low.astype(np.float32))
+    high = graph.constant("action_high", action_space.high.astype(np.float32))
+    graph.node("Max", [graph.node("Min", [x, high], "action_below_high"), low], OUTPUT)  # step 3: clipped to the box
 
     n_obs, n_act = obs_space.shape[0], action_space.shape[0]
-    graph = helper.make_graph(
-        nodes,
-        "policy",
-        [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["batch", n_obs])],
-        [helper.make_tensor_value_info(OUTPUT, TensorProto.FLOAT, ["batch", n_act])],
-        initializers,
-    )
+    normalised = policy.vec_normalize is not None
     model = helper.make_model(
-        graph,
+        helper.make_graph(
+            graph.nodes,
+            "policy",
+            [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["batch", n_obs])],
+            [helper.make_tensor_value_info(OUTPUT, TensorProto.FLOAT, ["batch", n_act])],
+            graph.initializers,
+        ),
         opset_imports=[helper.make_opsetid("", OPSET)],
         producer_name="leg-env train.export",
         producer_version=__version__,
@@ -150,6 +111,75 @@ def policy_to_onnx(policy: TrainedPolicy, source: str = ""):
         entry.key, entry.value = key, value
     onnx.checker.check_model(model, full_check=True)
     return model
+
+
+def _check_exportable(sb3_policy) -> None:
+    """``ExportError`` unless the policy is one the module docstring lists as supported."""
+    from gymnasium import spaces
+    from stable_baselines3.common.torch_layers import FlattenExtractor
+
+    from train.features import CommandGains
+
+    obs_space, action_space = sb3_policy.observation_space, sb3_policy.action_space
+    if not (isinstance(obs_space, spaces.Box) and len(obs_space.shape) == 1):
+        raise ExportError(f"only flat Box observations can be exported, the model has {obs_space}")
+    if not isinstance(action_space, spaces.Box) or len(action_space.shape) != 1:
+        raise ExportError(f"only flat Box actions can be exported, the model has {action_space}")
+    if sb3_policy.squash_output:
+        raise ExportError("policies with squash_output=True are not supported (their actions are tanh-squashed, then unscaled)")
+    extractor = sb3_policy.pi_features_extractor
+    if not isinstance(extractor, (FlattenExtractor, CommandGains)):
+        raise ExportError(f"only MlpPolicy's FlattenExtractor and train.features.CommandGains are supported, the model has {type(extractor).__name__}")
+
+
+def _normalisation(graph: _Graph, x: str, vec_normalize) -> str:
+    """Step 1 of the module docstring: the observation normalised as ``vec_normalize`` does it (None: as it is)."""
+    from onnx import TensorProto
+
+    if vec_normalize is None:
+        return x
+    rms = vec_normalize.obs_rms
+    mean, std = np.asarray(rms.mean, dtype=np.float64), np.sqrt(np.asarray(rms.var, dtype=np.float64) + vec_normalize.epsilon)
+    clip = float(vec_normalize.clip_obs)
+    x = graph.node("Cast", [x], "obs_f64", to=TensorProto.DOUBLE)
+    x = graph.node("Sub", [x, graph.constant("obs_mean", mean)], "obs_centred")
+    x = graph.node("Div", [x, graph.constant("obs_std", std)], "obs_scaled")
+    x = graph.node("Clip", [x, graph.constant("obs_clip_low", np.array(-clip)), graph.constant("obs_clip_high", np.array(clip))],
+                   "obs_clipped")  # fmt: skip
+    return graph.node("Cast", [x], "obs_normalised", to=TensorProto.FLOAT)
+
+
+_ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu", "Sigmoid": "sigmoid"}
+"""torch activations without arguments, by class name: their ONNX op (the same name but ReLU's) and node name."""
+
+
+def _actor(graph: _Graph, x: str, sb3_policy) -> str:
+    """Step 2 of the module docstring: the features (``CommandGains``' products), then the actor's layers."""
+    import torch
+
+    from train.features import CommandGains
+
+    extractor = sb3_policy.pi_features_extractor
+    if isinstance(extractor, CommandGains):  # the observation, then its products with the command entry
+        k = extractor.command
+        command = graph.node("Slice", [x, graph.constant("command_start", np.array([k])), graph.constant("command_end", np.array([k + 1])),
+                                       graph.constant("command_axis", np.array([1]))], "command")  # fmt: skip
+        x = graph.node("Concat", [x, graph.node("Mul", [x, command], "command_products")], "features", axis=1)
+    for k, layer in enumerate([*sb3_policy.mlp_extractor.policy_net, sb3_policy.action_net]):
+        name = type(layer).__name__
+        if isinstance(layer, torch.nn.Linear):
+            weight = layer.weight.detach().cpu().numpy().astype(np.float32)
+            bias = layer.bias.detach().cpu().numpy().astype(np.float32)
+            x = graph.node("Gemm", [x, graph.constant(f"W{k}", weight), graph.constant(f"b{k}", bias)], f"linear{k}", transB=1)
+        elif isinstance(layer, (torch.nn.Tanh, torch.nn.ReLU, torch.nn.Sigmoid)):
+            x = graph.node("Relu" if name == "ReLU" else name, [x], f"{_ACTIVATIONS[name]}{k}")
+        elif isinstance(layer, torch.nn.ELU):
+            x = graph.node("Elu", [x], f"elu{k}", alpha=float(layer.alpha))
+        elif isinstance(layer, torch.nn.LeakyReLU):
+            x = graph.node("LeakyRelu", [x], f"leaky_relu{k}", alpha=float(layer.negative_slope))
+        elif not isinstance(layer, torch.nn.Identity):
+            raise ExportError(f"layer {k} of the actor, {layer}, has no ONNX translation here")
+    return x
 
 
 def export_onnx(policy_dir, out) -> Path:

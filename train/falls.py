@@ -20,7 +20,6 @@ with ``seed``, so that a run prints the same figures again.
 from __future__ import annotations
 
 import json
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,7 +28,7 @@ import numpy as np
 from leg_env import ENDINGS
 from train.cli import parse_args
 
-__all__ = ["FallsArgs", "FallsReport", "training_env_kwargs", "audit", "format_report", "main"]
+__all__ = ["FallsArgs", "FallsReport", "FallWatcher", "training_env_kwargs", "audit", "format_report", "main"]
 
 FRESH_SEED = 30_000
 
@@ -153,12 +152,72 @@ class FallsReport:
         }
 
 
+class FallWatcher:
+    """What ``audit`` measures of each episode, a ``train.episodes.Watcher`` of the one episode runner: each reward
+    term's sum, its mean per step over the episode's last ``window`` steps, and how the episode ended.
+
+    Every episode of a batch starts at its reset, so an episode's step ``t`` is the batch's step ``t``: the last
+    ``window`` steps are kept in a ring of ``window`` rows, row ``(t - 1) % window`` for step ``t``, written for the
+    episodes still running; an episode that has ended keeps its own last steps there.
+    """
+
+    def __init__(self, window: int):
+        self.window = window
+
+    def start(self, envs, obs, info: dict) -> None:
+        n = obs.shape[0]
+        self.keys = list(envs.unwrapped.reward_keys)
+        self.terms = {key: np.zeros(n) for key in self.keys}
+        self.ring = {key: np.zeros((self.window, n)) for key in self.keys}
+        self.steps = 0
+        self.ends: list[str | None] = [None] * n
+        self.in_flight = np.zeros(n, bool)
+
+    def step(self, envs, obs, actions, info: dict, active: np.ndarray) -> None:
+        row = self.steps % self.window
+        self.steps += 1
+        for key in self.keys:
+            value = np.where(active, np.asarray(info[key], dtype=np.float64), 0.0)
+            self.terms[key] += value
+            self.ring[key][row, active] = value[active]
+        fell = active & (info["ending"] != 0)  # terminated at this step (truncation is ending 0)
+        for i in np.flatnonzero(fell):
+            self.ends[i] = ENDINGS[info["ending"][i]]  # the first limit the step passed, as the task's kernel names it
+            self.in_flight[i] = "contact_mode" in info and info["contact_mode"][i] == "flight"  # a pinned foot never flies
+
+    def last(self, lengths: np.ndarray) -> dict[str, np.ndarray]:
+        """Each term's mean per step over the last ``window`` steps of each episode (of ``lengths`` steps), summed
+        from the oldest of those steps on."""
+        n = len(lengths)
+        oldest_first = (lengths[None, :] - self.window + np.arange(self.window)[:, None]) % self.window
+        return {key: ring[oldest_first, np.arange(n)].sum(axis=0) / np.minimum(lengths, self.window)
+                for key, ring in self.ring.items()}  # fmt: skip
+
+
 def audit(args: FallsArgs) -> FallsReport:
-    """Run ``args.episodes`` episodes of the policy as ``FallsArgs`` says; returns their figures."""
+    """Run ``args.episodes`` episodes of the policy as ``FallsArgs`` says, in one batch through
+    ``train.episodes.run_batch``; returns their figures."""
     import torch
 
-    from train.episodes import make_batch
-    from train.policy_loading import TrainedPolicy, read_run_config, load_policy
+    from train.episodes import make_batch, policy_predict, run_batch
+
+    policy, env_id, kwargs = _audited(args)
+    torch.manual_seed(args.seed)
+    envs = make_batch(env_id, args.episodes, kwargs)
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    watcher = FallWatcher(args.window)
+    try:
+        batch = run_batch(policy_predict(policy, deterministic=not args.sample), envs, seeds, [watcher])
+    finally:
+        envs.close()
+    return FallsReport(env_id, kwargs, args.sample, args.window, seeds, batch.survived, batch.lengths, watcher.terms,
+                       watcher.last(batch.lengths), watcher.ends, watcher.in_flight)  # fmt: skip
+
+
+def _audited(args: FallsArgs):
+    """``(policy, env_id, env_kwargs)`` of the audit: the SB3 policy of ``args.policy``, its task and the env's
+    arguments (``--training-env``'s, then ``--env-kwargs``)."""
+    from train.policy_loading import TrainedPolicy, load_policy, read_run_config
 
     policy = load_policy(args.policy)
     if not isinstance(policy, TrainedPolicy):
@@ -171,40 +230,7 @@ def audit(args: FallsArgs) -> FallsReport:
         raise ValueError(f"{args.policy} has no config.yaml naming its task: pass --env-id")
     kwargs = training_env_kwargs(config, args.at_steps) if args.training_env else {}
     kwargs.update(args.extra_env_kwargs())
-    torch.manual_seed(args.seed)
-    n = args.episodes
-    envs = make_batch(env_id, n, kwargs)
-    seeds = list(range(args.seed, args.seed + n))
-    obs, _ = envs.reset(seed=seeds)
-    keys = list(envs.unwrapped.reward_keys)
-    done, starts = np.zeros(n, bool), np.ones(n, bool)
-    lengths, survived = np.zeros(n, np.int64), np.zeros(n, bool)
-    terms = {key: np.zeros(n) for key in keys}
-    last = {key: np.zeros(n) for key in keys}
-    recent = {key: deque(maxlen=args.window) for key in keys}  # each term's last `window` steps, oldest first
-    ends: list[str | None] = [None] * n
-    in_flight = np.zeros(n, bool)
-    while not done.all():
-        actions, _ = policy.predict(obs, episode_start=starts, deterministic=not args.sample)
-        obs, _, terminated, truncated, info = envs.step(np.asarray(actions, dtype=np.float64).reshape(n, -1))
-        active = ~done
-        for key in keys:
-            value = np.where(active, np.asarray(info[key], dtype=np.float64), 0.0)
-            terms[key] += value
-            recent[key].append(value)
-        lengths[active] += 1
-        ended = (terminated | truncated) & active
-        survived[ended] = truncated[ended] & ~terminated[ended]
-        if ended.any():
-            for key in keys:
-                last[key][ended] = np.sum(recent[key], axis=0)[ended] / np.minimum(lengths[ended], args.window)
-        for i in np.flatnonzero(ended & terminated):
-            ends[i] = ENDINGS[info["ending"][i]]  # the first limit the step passed, as the task's kernel names it
-            in_flight[i] = info["contact_mode"][i] == "flight"
-        done |= ended
-        starts = terminated | truncated
-    envs.close()
-    return FallsReport(env_id, kwargs, args.sample, args.window, seeds, survived, lengths, terms, last, ends, in_flight)
+    return policy, env_id, kwargs
 
 
 def format_report(report: FallsReport) -> str:

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import yaml
 
-__all__ = ["DEFAULT_HYPERPARAMS", "ZOO_KEYS", "PPO_KEYS", "parse_override", "load_hyperparams", "class_at", "display_path"]
+__all__ = ["DEFAULT_HYPERPARAMS", "ZOO_KEYS", "PPO_KEYS", "parse_override", "load_hyperparams", "linear_schedule_start",
+           "class_at", "display_path"]
 
 DEFAULT_HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
 
@@ -42,6 +43,17 @@ def parse_override(item: str) -> tuple[str, object]:
     if not sep or not key:
         raise ValueError(f"hyperparameter override must be key:value, got {item!r}")
     return key.strip(), yaml.safe_load(value)
+
+
+def linear_schedule_start(value) -> float | None:
+    """The initial value of a Zoo schedule literal ``"lin_<initial>"`` (a linear decay to 0 over the run), None for a
+    number; ``ValueError`` for any other string."""
+    if not isinstance(value, str):
+        return None
+    kind, _, initial = value.partition("_")
+    if kind != "lin":
+        raise ValueError(f"unknown schedule {value!r}; use a number or 'lin_<initial value>'")
+    return float(initial)
 
 
 def load_hyperparams(path: Path, env_id: str, overrides: list[str] = ()) -> dict:

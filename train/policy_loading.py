@@ -92,7 +92,7 @@ BASELINES = {"lqr": _lqr, "hopper": _hopper, "gated": _gated, "stepping": _stepp
 def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None):
     """A policy with ``predict(obs)`` from a run/policy folder (or its ``model.zip``), or a baseline's name.
 
-    A folder written by ``python -m train.rllib``, or one of its checkpoints, loads as a
+    A folder written by ``python -m train.rllib``, its ``best/`` or ``last/``, or one of its checkpoints, loads as a
     ``train.rllib.RLlibPolicy`` (needs the ``rllib`` extra).
 
     A baseline (``BASELINES``: ``"lqr"``, ``"hopper"``, ``"gated"``, ``"stepping"``) is built for the env ``env_id`` made with ``env_kwargs``. For a folder,
@@ -111,23 +111,33 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
         env = gym.make(env_id or ENV_ID, **kwargs).unwrapped  # the task's params and config, checked
         return BASELINES[path.lower()](env.params, env.config)
 
-    from train.rllib import RLlibPolicy, is_rllib_checkpoint, is_rllib_run
+    from train.rllib import is_rllib_checkpoint, is_rllib_policy, is_rllib_run
 
     path = Path(path)
-    if is_rllib_run(path) or is_rllib_checkpoint(path):  # python -m train.rllib's run folder or checkpoint
-        try:
-            policy = RLlibPolicy.load(path)
-        except FileNotFoundError as e:
-            raise PolicyNotFoundError(str(e)) from e
-        except ValueError as e:
-            raise PolicyLoadError(str(e)) from e
-        if env_kwargs is not None:
-            policy.env_kwargs = dict(env_kwargs)
-        return policy
+    if is_rllib_run(path) or is_rllib_checkpoint(path) or is_rllib_policy(path):  # python -m train.rllib's
+        return _rllib_policy(path, env_kwargs)
+    return _sb3_policy(path, env_kwargs)
 
+
+def _rllib_policy(path: Path, env_kwargs: dict | None):
+    """``load_policy`` of a ``train.rllib`` run folder, policy folder or checkpoint."""
+    from train.rllib import RLlibPolicy
+
+    try:
+        policy = RLlibPolicy.load(path)
+    except FileNotFoundError as e:
+        raise PolicyNotFoundError(str(e)) from e
+    except ValueError as e:
+        raise PolicyLoadError(str(e)) from e
+    if env_kwargs is not None:
+        policy.env_kwargs = dict(env_kwargs)
+    return policy
+
+
+def _sb3_policy(path: Path, env_kwargs: dict | None):
+    """``load_policy`` of an SB3 run or policy folder, or its ``model.zip``."""
     import torch
     from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import VecNormalize
 
     torch.set_num_threads(1)
     folder = path.parent if path.suffix == ".zip" else path
@@ -141,28 +151,7 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
         model = PPO.load(model_file, device="cpu")
     except Exception as e:  # SB3 raises zipfile, pickle, torch or key errors on a bad archive
         raise PolicyLoadError(f"cannot load the model file {model_file}: {type(e).__name__}: {e}") from e
-
-    vec_normalize = None
-    stats_file = folder / "vecnormalize.pkl"
-    if config.get("normalize", True) is not False or stats_file.exists():
-        if not stats_file.is_file():
-            raise PolicyNotFoundError(f"normalisation statistics not found: {stats_file}")
-        try:
-            with open(stats_file, "rb") as f:
-                vec_normalize = pickle.load(f)
-        except Exception as e:
-            raise PolicyLoadError(f"cannot load the normalisation statistics {stats_file}: {type(e).__name__}: {e}") from e
-        if not isinstance(vec_normalize, VecNormalize):
-            raise PolicyLoadError(f"{stats_file} does not hold VecNormalize statistics (got {type(vec_normalize).__name__})")
-        vec_normalize.training = False
-        vec_normalize.norm_reward = False
-        if not vec_normalize.norm_obs:
-            vec_normalize = None  # only returns were normalised: the policy reads raw observations
-        elif vec_normalize.obs_rms.mean.shape != model.observation_space.shape:
-            raise PolicyLoadError(
-                f"{stats_file} has statistics for observations of shape {vec_normalize.obs_rms.mean.shape}, "
-                f"the model in {model_file} expects {model.observation_space.shape}"
-            )
+    vec_normalize = _observation_statistics(folder, config, model, model_file)
     if env_kwargs is None:
         env_kwargs = config.get("eval_env_kwargs", config.get("env_kwargs")) or {}
     policy = TrainedPolicy(model, vec_normalize, env_kwargs, folder, env_id=config.get("env_id"))
@@ -172,6 +161,35 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
             raise PolicyLoadError(f"the run configuration {folder / 'config.yaml'} has an unknown residual {residual!r}")
         return with_controller(policy, residual, config.get("env_kwargs") or {}, policy.env_id)
     return policy
+
+
+def _observation_statistics(folder: Path, config: dict, model, model_file: Path):
+    """The ``VecNormalize`` of ``folder`` that normalises the policy's observations, or None (the run did not
+    normalise them)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    stats_file = folder / "vecnormalize.pkl"
+    if config.get("normalize", True) is False and not stats_file.exists():
+        return None
+    if not stats_file.is_file():
+        raise PolicyNotFoundError(f"normalisation statistics not found: {stats_file}")
+    try:
+        with open(stats_file, "rb") as f:
+            vec_normalize = pickle.load(f)
+    except Exception as e:
+        raise PolicyLoadError(f"cannot load the normalisation statistics {stats_file}: {type(e).__name__}: {e}") from e
+    if not isinstance(vec_normalize, VecNormalize):
+        raise PolicyLoadError(f"{stats_file} does not hold VecNormalize statistics (got {type(vec_normalize).__name__})")
+    vec_normalize.training = False
+    vec_normalize.norm_reward = False
+    if not vec_normalize.norm_obs:
+        return None  # only returns were normalised: the policy reads raw observations
+    if vec_normalize.obs_rms.mean.shape != model.observation_space.shape:
+        raise PolicyLoadError(
+            f"{stats_file} has statistics for observations of shape {vec_normalize.obs_rms.mean.shape}, "
+            f"the model in {model_file} expects {model.observation_space.shape}"
+        )
+    return vec_normalize
 
 
 def with_controller(network, residual: dict, env_kwargs: dict, env_id: str | None):

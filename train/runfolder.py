@@ -1,4 +1,8 @@
-"""The run folder of ``train.ppo``: one training process at a time, and what a rerun does with it.
+"""The run folder of ``train.ppo`` and ``train.rllib``: one training process at a time, and what a rerun does with it.
+
+The steps of a run in its folder are ``train.run``'s; this module holds the two that guard the folder. What
+differs between the trainers (the ``trainer`` entry of ``config.yaml``, the configuration entries a resume must
+match, the files of a policy) is a ``RunKind``.
 
 ``RunLock`` makes a training process the folder's only writer. It holds an exclusive
 ``fcntl.flock`` on ``<run>/train.lock``, a file holding the process id, from before the folder
@@ -9,14 +13,16 @@ process leaves behind is stale: the next run takes it over. This needs a POSIX s
 ``prepare_run_folder`` decides, under the lock, whether a run starts afresh or resumes:
 
 * ``--overwrite``: the run's files are deleted and training starts afresh;
-* a folder with checkpoints resumes from the newest intact one, if its ``config.yaml`` matches
-  (``train.checkpoints`` picks the checkpoint); with ``--no-resume`` it is refused;
+* a folder with checkpoints resumes from the newest intact one, if its ``config.yaml`` matches (the
+  same trainer and the same ``RunKind.resume_keys``; the trainer picks the checkpoint); with
+  ``--no-resume`` it is refused;
 * a started run that never reached a checkpoint (it failed, or was killed, before the first one)
   and has the same configuration is restarted: its partial files go, its ``command.txt`` stays;
 * any other existing run is refused (a different configuration, or no record of one).
 
-It also tidies what a killed process leaves: the temporary files of atomic writes, and a
-``best/`` or ``last/`` directory caught in the middle of being replaced.
+It also tidies what a killed process leaves: the temporary files of atomic writes, the temporary
+folders of checkpoints being written, and a ``best/`` or ``last/`` directory caught in the middle of
+being replaced.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ import shlex
 import shutil
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
 
@@ -33,25 +40,43 @@ import yaml
 
 from train.checkpoints import checkpoint_dirs, file_mode, recover_snapshot
 
-__all__ = ["RunFolderError", "RunLockedError", "RunLock", "prepare_run_folder", "LOCK_NAME", "RESUME_KEYS", "runnable_command"]
+__all__ = ["RunFolderError", "RunLockedError", "RunLock", "RunKind", "prepare_run_folder", "run_locked", "LOCK_NAME",
+           "runnable_command"]
 
 LOCK_NAME = "train.lock"
-# configuration entries that define the training; a resume must match them
-RESUME_KEYS = ("env_id", "env_kwargs", "eval_env_kwargs", "seed", "n_envs", "policy", "normalize", "ppo", "residual", "init_from")
-# what a run writes into its folder (the lock aside)
 RUN_FILES = (
-    "model.zip",
-    "vecnormalize.pkl",
     "config.yaml",
     "command.txt",
     "evaluations.json",
     "learning_curve.png",
-    "tb",
     "checkpoints",
-    "eval",
     "best",
     "last",
+    "eval",  # train.evaluate's
+    "model.zip",  # train.ppo's policy
+    "vecnormalize.pkl",
+    "tb",
+    "module",  # train.rllib's policy
+    "progress.json",
+    "runners.json",
 )
+"""What a run of either trainer writes into its folder (the lock aside): what ``--overwrite`` deletes."""
+
+
+@dataclass(frozen=True)
+class RunKind:
+    """What tells one trainer's run folders from the other's, and what a resume of them must match."""
+
+    command: str
+    """The trainer's command (``train.ppo``), for messages."""
+    trainer: str | None
+    """``config.yaml``'s ``trainer`` entry (None: a run without one, ``train.ppo``'s): a folder of another
+    trainer is never resumed."""
+    resume_keys: tuple[str, ...]
+    """The configuration entries that define the training; a resume must match them."""
+    policy_files: tuple[str, ...]
+    """The files (or folders) of a policy: the selected one at the top of the run folder, and in ``best/``, ``last/``;
+    a run that has them finished."""
 
 
 class RunFolderError(Exception):
@@ -158,16 +183,28 @@ def _remove(paths) -> None:
         shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
 
 
-def _tidy(out: Path) -> None:
+def _tidy(out: Path, kind: RunKind) -> None:
     """Remove what an interrupted atomic write left in ``out`` and finish an interrupted snapshot swap."""
-    for name in ("best", "last"):
+    for name in ("best", "last", *kind.policy_files):
         recover_snapshot(out / name)
     prefixes = tuple(f".{name}." for name in RUN_FILES)
     _remove(p for p in out.iterdir() if p.name.startswith(prefixes))
+    checkpoints = out / "checkpoints"
+    if checkpoints.is_dir():  # a checkpoint being written when its process was killed
+        _remove(p for p in checkpoints.iterdir() if p.name.startswith(".") and p.is_dir())
 
 
-def prepare_run_folder(out: Path, config: dict, resume: bool = True, overwrite: bool = False, log=None) -> bool:
-    """Make ``out`` ready for the run ``config`` (see the module docstring); True to resume from its checkpoints.
+def _differences(saved: dict | None, config: dict, kind: RunKind) -> list[str]:
+    """The entries in which the saved configuration differs from ``config``, ``trainer`` first."""
+    saved = saved or {}
+    if saved.get("trainer") != kind.trainer:
+        return ["trainer"]
+    return [key for key in kind.resume_keys if saved.get(key) != config.get(key)]
+
+
+def prepare_run_folder(out: Path, config: dict, kind: RunKind, resume: bool = True, overwrite: bool = False, log=None) -> bool:
+    """Make ``out`` ready for the run ``config`` of a ``kind`` of trainer (see the module docstring); True to resume
+    from its checkpoints.
 
     The caller holds the folder's ``RunLock``. ``log`` receives a line when a failed start is restarted.
 
@@ -177,7 +214,7 @@ def prepare_run_folder(out: Path, config: dict, resume: bool = True, overwrite: 
         RunFolderError: its ``config.yaml`` cannot be read.
     """
     out = Path(out)
-    _tidy(out)
+    _tidy(out, kind)
     existing = [out / name for name in RUN_FILES if (out / name).exists()]
     if overwrite:
         _remove(existing)
@@ -186,9 +223,10 @@ def prepare_run_folder(out: Path, config: dict, resume: bool = True, overwrite: 
         return False
     has_checkpoint = bool(checkpoint_dirs(out / "checkpoints"))
     saved = _saved_config(out)
-    restartable = not has_checkpoint and saved is not None and not (out / "model.zip").exists()
+    finished = any((out / name).exists() for name in kind.policy_files)
+    restartable = not has_checkpoint and saved is not None and not finished
     if (has_checkpoint and resume) or restartable:
-        different = [key for key in RESUME_KEYS if (saved or {}).get(key) != config[key]]
+        different = _differences(saved, config, kind)
         if different:
             raise ConfigMismatchError(
                 f"{out} holds a run with a different configuration ({', '.join(different)} differ); "

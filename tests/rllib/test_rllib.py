@@ -1,4 +1,5 @@
-"""RLlib smoke test: ``python -m train.rllib``'s training, checkpoints, resume and evaluation.
+"""RLlib smoke test: ``python -m train.rllib``'s training, checkpoints, resume, in-training evaluation, the policy it
+keeps, and evaluation by ``train.evaluate``.
 
 Needs the ``rllib`` extra, so plain ``pytest`` does not collect this folder (pyproject's
 ``norecursedirs``); ``make test`` runs it in its second venv, ``.venv-rllib``. A tiny network and a
@@ -30,7 +31,8 @@ def local_ray():
 
 
 def args(out, **kwargs) -> RLlibArgs:
-    return RLlibArgs(out=out, params=PARAMS, num_env_runners=1, checkpoint_freq=BATCH, verbose=0, **kwargs)
+    return RLlibArgs(out=out, params=PARAMS, num_env_runners=1, checkpoint_freq=BATCH, eval_freq=2 * BATCH, eval_episodes=2,
+                     verbose=0, **kwargs)  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -64,9 +66,36 @@ def test_rerun_resumes_from_the_newest_checkpoint(run):
     newest = latest_checkpoint(out)
     assert newest.name == f"{progress[2]['timesteps']:012d}"
     state = json.loads((newest / "progress.json").read_text())
-    assert state["restarts"] == 1 and state["iterations"] == 3
+    assert state["resumes"] == 1 and state["iterations"] == 3
     assert len(list((out / "checkpoints").iterdir())) == 2
     assert len((out / "command.txt").read_text().splitlines()) == 2
+
+
+def test_the_run_evaluates_keeps_the_best_and_the_last_policy_and_selects_one(run):
+    """As train.ppo's runs: an evaluation at the first multiple of eval_freq and at the end of each invocation (the
+    resume's history kept), best/ and last/ with their records, and the selected one's module at the top."""
+    out, first, _ = run
+    record = json.loads((out / "evaluations.json").read_text())
+    steps = [e["timesteps"] for e in record["evaluations"]]
+    assert steps == [first[1]["timesteps"], json.loads((out / "progress.json").read_text())["iterations"][-1]["timesteps"]]
+    assert all(len(e["returns"]) == 2 for e in record["evaluations"]) and record["resumes"] == 1
+    assert record["total_timesteps"] == steps[-1] and "ray" in record["machine"]
+    best = max(record["evaluations"], key=lambda e: (e["survival_rate"], e["mean_return"]))
+    assert record["selected"]["from"] == "best" and record["selected"]["mean_return"] == best["mean_return"]
+    assert json.loads((out / "last" / "info.json").read_text())["timesteps"] == steps[-1]
+    assert (out / "learning_curve.png").is_file()
+    top, chosen = RLlibPolicy.load(out).module.state_dict(), RLlibPolicy.load(out / "best").module.state_dict()
+    for name, value in top.items():
+        np.testing.assert_array_equal(value.numpy(), chosen[name].numpy(), err_msg=name)
+    assert isinstance(load_policy(str(out / "last")), RLlibPolicy)
+
+
+def test_the_environment_flag_is_env_id_as_in_train_ppo(capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["--env", leg_env.ENV_ID, "--total-timesteps", str(BATCH)])
+    assert stop.value.code == 2 and "--env was renamed --env-id" in capsys.readouterr().err
+    with pytest.raises(TypeError, match="env"):
+        RLlibArgs(env=leg_env.ENV_ID)
 
 
 def test_checkpoint_restores_into_a_new_algorithm(run, local_ray):
@@ -130,6 +159,8 @@ def test_unmapped_keys_are_errors_or_recorded(tmp_path):
     resolve_config(RLlibArgs(out=tmp_path, params=["bounds_loss_coef:0.0", "target_kl:null", "use_sde:false"]))  # off: nothing to refuse
     with pytest.raises(ValueError, match="norm_obs"):
         resolve_config(RLlibArgs(out=tmp_path, params=["normalize:{norm_obs: true}"]))
+    with pytest.raises(ValueError, match="clip_range must be a number"):  # a Zoo schedule of it has no counterpart
+        resolve_config(RLlibArgs(out=tmp_path, params=["clip_range:lin_0.2"]))
     config = resolve_config(RLlibArgs(out=tmp_path, num_env_runners=3))
     assert config["scaling"]["num_envs_per_env_runner"] == 11  # ceil(32 / 3)
     assert config["learning_rate"] == "lin_3.0e-4" and config["total_timesteps"] == 4_000_000

@@ -1,9 +1,13 @@
 """``train.falls``: a policy run as it is trained, and what its episodes are paid before they end."""
 
 import json
+from collections import deque
 
 import numpy as np
 import pytest
+import torch
+
+from leg_env import ENDINGS
 
 from train.episodes import make_batch, policy_predict, run_batch
 from train.falls import FallsArgs, audit, format_report, main, training_env_kwargs
@@ -51,6 +55,67 @@ def test_the_terms_sum_to_the_returns_of_the_evaluation_runner_and_the_window_av
     assert report.last["reward_alive"][~report.survived].max() <= 3.0  # the scheduled bonus, 0 on the falling step
     groups = report.groups()
     assert sum(g["episodes"] for g in groups.values()) == 6 and "fell" in groups  # an untrained policy falls
+
+
+def reference_audit(policy, env_id: str, env_kwargs: dict, seeds: list[int], window: int, sample: bool) -> dict:
+    """The audit's figures from a loop of its own, stepping the batch and keeping each term's last ``window`` steps
+    in a queue (the way ``train.falls`` computed them before it became a watcher of the episode runner)."""
+    torch.manual_seed(seeds[0])
+    n = len(seeds)
+    envs = make_batch(env_id, n, env_kwargs)
+    obs, _ = envs.reset(seed=seeds)
+    keys = list(envs.unwrapped.reward_keys)
+    done, starts = np.zeros(n, bool), np.ones(n, bool)
+    lengths, survived, ends, in_flight = np.zeros(n, np.int64), np.zeros(n, bool), [None] * n, np.zeros(n, bool)
+    terms, last = {key: np.zeros(n) for key in keys}, {key: np.zeros(n) for key in keys}
+    recent = {key: deque(maxlen=window) for key in keys}
+    while not done.all():
+        actions, _ = policy.predict(obs, episode_start=starts, deterministic=not sample)
+        obs, _, terminated, truncated, info = envs.step(np.asarray(actions, dtype=np.float64).reshape(n, -1))
+        active = ~done
+        for key in keys:
+            value = np.where(active, np.asarray(info[key], dtype=np.float64), 0.0)
+            terms[key] += value
+            recent[key].append(value)
+        lengths[active] += 1
+        ended = (terminated | truncated) & active
+        survived[ended] = truncated[ended] & ~terminated[ended]
+        for key in keys:
+            last[key][ended] = np.sum(recent[key], axis=0)[ended] / np.minimum(lengths[ended], window)
+        for i in np.flatnonzero(ended & terminated):
+            ends[i] = ENDINGS[info["ending"][i]]
+            in_flight[i] = "contact_mode" in info and info["contact_mode"][i] == "flight"
+        done |= ended
+        starts = terminated | truncated
+    envs.close()
+    return {"survived": survived, "lengths": lengths, "terms": terms, "last": last, "ends": ends, "in_flight": in_flight}
+
+
+@pytest.mark.parametrize("window, sample", [(5, True), (50, True), (20, False), (1000, True)])
+def test_the_audit_gives_the_figures_of_a_loop_of_its_own_bit_for_bit(hop_run, window, sample):
+    """``FallWatcher`` on the one episode runner gives, to the bit, each term's sum and last-window mean, survival,
+    lengths and endings of a reference loop over the same episodes and drawn actions; windows shorter and longer
+    than the episodes, which end at different steps when the actions are drawn (the untrained policy falls)."""
+    args = FallsArgs(policy=hop_run, training_env=True, episodes=12, window=window, sample=sample)
+    report = audit(args)
+    ref = reference_audit(load_policy(hop_run), "leg_env/PlanarLegHop-v3", report.env_kwargs, report.seeds, window, sample)
+    assert len(set(report.lengths.tolist())) > 3 or not sample, "the case needs episodes of different lengths"
+    np.testing.assert_array_equal(report.survived, ref["survived"])
+    np.testing.assert_array_equal(report.lengths, ref["lengths"])
+    assert report.ends == ref["ends"]
+    np.testing.assert_array_equal(report.in_flight, ref["in_flight"])
+    for key in ref["terms"]:
+        np.testing.assert_array_equal(report.terms[key], ref["terms"][key], err_msg=key)
+        np.testing.assert_array_equal(report.last[key], ref["last"][key], err_msg=key)
+
+
+def test_the_audit_runs_on_the_pinned_foot_where_nothing_flies(tmp_path):
+    """A task without ``contact_mode`` in its info (the pinned foot): every fall is in contact."""
+    out = train(TrainArgs(out=tmp_path / "run", total_timesteps=128, eval_freq=0, checkpoint_freq=0, progress_bar=False,
+                          verbose=0, params=["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]))  # fmt: skip
+    report = audit(FallsArgs(policy=out, episodes=6, window=10))
+    assert report.env_id == "leg_env/PlanarLegStance-v0" and not report.in_flight.any()
+    assert all(row["in flight"] == 0 for row in report.ends_table().values())
 
 
 def test_sampled_actions_repeat_with_the_seed_and_differ_from_the_mean(hop_run):

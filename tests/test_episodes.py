@@ -14,7 +14,7 @@ from policies.lqr import LQRController
 from policies.stepping import SteppingController
 from train.episodes import make_batch, policy_predict, run_batch
 from train.evaluate import load_policy, run_episodes
-from train.task_metrics import push_survival
+from train.episodes import push_survival
 
 
 def single_env_episodes(make_policy, env_id: str, seeds, env_kwargs=None):

@@ -72,6 +72,7 @@ def test_an_unknown_keyword_is_a_type_error(cls):
         cls(no_such_argument=1)
 
 
+@pytest.mark.sb3
 @pytest.mark.parametrize("kind, other", [(SB3_RUN, RLLIB_RUN), (RLLIB_RUN, SB3_RUN)], ids=["ppo-on-rllib", "rllib-on-ppo"])
 def test_a_folder_of_the_other_trainer_is_never_resumed_or_replaced_silently(tmp_path, kind, other):
     """A run folder with a checkpoint and the configuration of one trainer is refused by the other, naming the

@@ -15,7 +15,7 @@ from policies.lqr import LQRController
 from policies.recovery import com_from_observation
 from policies.stepping import SteppingController
 from train.evaluate import BASELINES, load_policy
-from train.task_metrics import push_survival
+from train.episodes import push_survival
 
 ENV_ID = "leg_env/PlanarLegPush-v0"
 

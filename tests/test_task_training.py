@@ -16,7 +16,8 @@ from policies.hopper import HopperController
 from policies.lqr import LQRController
 from train.evaluate import EvalArgs, evaluate, load_policy, run_episodes
 from train.ppo import TrainArgs, train
-from train.task_metrics import HopTracker, largest_survived_impulse, push_survival
+from train.episodes import push_survival
+from train.task_metrics import HopTracker, largest_survived_impulse
 
 ROOT = Path(__file__).resolve().parents[1]
 TASK_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0")

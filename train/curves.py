@@ -282,9 +282,10 @@ def eval_env_kwargs(args: CurvesArgs) -> dict:
 
 def _held_out(policy, args: CurvesArgs, env_kwargs: dict) -> dict:
     """A policy's scores on the held-out episodes (``train.evaluate.run_episodes``); on the push task also the
-    push curve's 90% impulse (``train.task_metrics.push_survival``, every push of an episode at one magnitude)."""
+    push curve's 90% impulse (``train.episodes.push_survival``, every push of an episode at one magnitude)."""
     from train.evaluate import PUSH_FORCES, run_episodes
-    from train.task_metrics import is_push_task, largest_survived_impulse, push_survival
+    from train.episodes import push_survival
+    from train.task_metrics import is_push_task, largest_survived_impulse
 
     seeds = [TEST_SEED + i for i in range(args.episodes)]
     summary, _ = run_episodes(policy, seeds, env_kwargs, env_id=args.env_id)

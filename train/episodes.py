@@ -19,7 +19,7 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
-__all__ = ["Batch", "Watcher", "make_batch", "run_batch", "policy_predict", "evaluate_now", "HOP_EVAL_KEYS"]
+__all__ = ["Batch", "Watcher", "make_batch", "run_batch", "policy_predict", "evaluate_now", "HOP_EVAL_KEYS", "push_survival"]
 
 
 class Watcher(Protocol):
@@ -157,3 +157,24 @@ def evaluate_now(policy, envs, seed: int) -> dict:
 
 HOP_EVAL_KEYS = ("hops_per_episode", "mean_abs_apex_error", "mean_apex_error", "mean_drift_10s")
 """The hop task's measures that the in-training evaluation adds (``evaluate_now``)."""
+
+
+def push_survival(controller, forces, episodes: int, seed: int, env_kwargs: dict | None = None,
+                  env_id: str = "leg_env/PlanarLegPush-v0") -> list[dict]:
+    """Survival rate of ``controller`` on the push task ``env_id`` with every push of magnitude ``F``, for each ``F``.
+
+    ``episodes`` episodes per magnitude, episode ``i`` seeded ``seed + i`` (the same seeds, so the same
+    push times and signs, at every magnitude and for every controller). Returns one dict per force:
+    ``force`` [N], ``impulse`` [N s] (``F`` times the push's duration), ``survival_rate``, ``episodes``.
+    """
+    rows = []
+    for force in forces:
+        kwargs = {**(env_kwargs or {}), "push_force": (float(force), float(force))}
+        envs = make_batch(env_id, episodes, kwargs)
+        duration = envs.config.push_steps * envs.config.dt
+        try:
+            batch = run_batch(policy_predict(controller), envs, range(seed, seed + episodes))
+        finally:
+            envs.close()
+        rows.append({"force": float(force), "impulse": float(force) * duration, "survival_rate": batch.survival_rate, "episodes": episodes})
+    return rows

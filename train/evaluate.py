@@ -37,7 +37,7 @@ Metrics (over all episodes; "steps" are all control steps of all episodes):
 The hop task adds the metrics of ``train.task_metrics.HopTracker`` (apex error, hop period, drift after
 10 s, landing impulses) and ``hops.png``, a few hops of the first episode (COM height against its target,
 contact mode, contact force, impulses). ``--push-curve`` (push task) adds survival against the push
-impulse for every controller on the same seeds (``train.task_metrics.push_survival``): ``push_curve.json``,
+impulse for every controller on the same seeds (``train.episodes.push_survival``): ``push_curve.json``,
 ``push_curve.md`` and ``push_curve.png``, with the largest impulse each survives 90% of the time.
 """
 
@@ -457,8 +457,9 @@ where the controllers' limits lie), then to 200 N (20 N s) in steps of 10 N."""
 
 
 def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs, out: Path) -> dict:
-    """Survival against the push impulse for every controller (``train.task_metrics.push_survival``)."""
-    from train.task_metrics import is_push_task, largest_survived_impulse, push_survival
+    """Survival against the push impulse for every controller (``train.episodes.push_survival``)."""
+    from train.episodes import push_survival
+    from train.task_metrics import is_push_task, largest_survived_impulse
 
     if not is_push_task(env_id):
         raise ValueError(f"--push-curve needs a push task (leg_env/PlanarLegPush-v0 or -v1), not {env_id}")

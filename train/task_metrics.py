@@ -11,7 +11,7 @@ metrics; these add what a task's own question needs:
   flights of at least ``LONG_FLIGHT`` (50 ms) per episode. ``apex_error_by_command`` splits the signed apex
   errors by the command of the hop into ``COMMAND_BANDS`` bands of equal width over the task's
   ``command_range``: where in the range a policy hops short or high.
-* **Push** (``push_survival``): episodes of ``PlanarLegPush-v0`` with every push of one magnitude (the
+* **Push** (``train.episodes.push_survival``): episodes of ``PlanarLegPush-v0`` with every push of one magnitude (the
   range ``push_force`` set to ``(F, F)``; signs and times as the task draws them), run as one batch per
   magnitude (``train.episodes.run_batch``); survival is reaching the time limit.
 """
@@ -22,7 +22,7 @@ import numpy as np
 
 from leg_env.tasks.base import Obs
 
-__all__ = ["HopTracker", "is_push_task", "push_survival", "largest_survived_impulse", "LONG_FLIGHT", "COMMAND_BANDS"]
+__all__ = ["HopTracker", "is_push_task", "largest_survived_impulse", "LONG_FLIGHT", "COMMAND_BANDS"]
 
 LONG_FLIGHT = 0.05
 """A flight of at least this long [s] is a hop in ``hops_per_episode`` (shorter ones are stumbles)."""
@@ -143,29 +143,6 @@ def is_push_task(env_id: str) -> bool:
     from leg_env.tasks import REGISTRY
 
     return REGISTRY.get(env_id, (None, {}))[0] == "push"
-
-
-def push_survival(controller, forces, episodes: int, seed: int, env_kwargs: dict | None = None,
-                  env_id: str = "leg_env/PlanarLegPush-v0") -> list[dict]:
-    """Survival rate of ``controller`` on the push task ``env_id`` with every push of magnitude ``F``, for each ``F``.
-
-    ``episodes`` episodes per magnitude, episode ``i`` seeded ``seed + i`` (the same seeds, so the same
-    push times and signs, at every magnitude and for every controller). Returns one dict per force:
-    ``force`` [N], ``impulse`` [N s] (``F`` times the push's duration), ``survival_rate``, ``episodes``.
-    """
-    from train.episodes import make_batch, policy_predict, run_batch
-
-    rows = []
-    for force in forces:
-        kwargs = {**(env_kwargs or {}), "push_force": (float(force), float(force))}
-        envs = make_batch(env_id, episodes, kwargs)
-        duration = envs.config.push_steps * envs.config.dt
-        try:
-            batch = run_batch(policy_predict(controller), envs, range(seed, seed + episodes))
-        finally:
-            envs.close()
-        rows.append({"force": float(force), "impulse": float(force) * duration, "survival_rate": batch.survival_rate, "episodes": episodes})
-    return rows
 
 
 def largest_survived_impulse(rows: list[dict], level: float = 0.9) -> float:

@@ -93,7 +93,8 @@ def test_a_push_sweep_scores_the_push_curve_on_its_evaluation_env(tmp_path, env_
     ``train.evaluate --push-curve`` computes it, and the in-training, held-out and baseline episodes all run
     the evaluation env of ``--eval-env-kwargs``."""
     from train.evaluate import PUSH_FORCES, load_policy
-    from train.task_metrics import largest_survived_impulse, push_survival
+    from train.episodes import push_survival
+    from train.task_metrics import largest_survived_impulse
 
     runs, out = tmp_path / "runs", tmp_path / "page"
     argv = ["--env-id", env_id, "--seeds", "2", "--shipped-seed", "1", "--total-timesteps", "256",

@@ -12,7 +12,7 @@ from policies.lqr import LQRController
 from policies.stepping import SteppingController
 from train.evaluate import load_policy
 from train.residual import ResidualPolicy
-from train.task_metrics import push_survival
+from train.episodes import push_survival
 
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "policies" / "ppo_push"

@@ -67,7 +67,7 @@ def test_shipped_push_policy_reproduces_its_push_curve_at_its_90_percent_impulse
     ``CPU_EPISODES`` episodes of the card's. On the CPU that wrote the cards (an AMD EPYC) the rates are the card's
     exactly; on an Intel Xeon (Sapphire Rapids) torch's kernels round the network's float32 differently and a push
     near the limit of recovery can go the other way: there both rates came out 3 episodes off the card's."""
-    from train.task_metrics import push_survival
+    from train.episodes import push_survival
 
     folder = ROOT / "policies" / name
     card = json.loads((folder / CARD.get(name, "eval") / "push_curve.json").read_text())

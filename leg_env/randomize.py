@@ -49,7 +49,7 @@ import numpy as np
 from . import checks
 from ._core import kernels
 from .physics import layout
-from .physics.params import PARAM_NAMES, PARAM_RANGE
+from .physics.params import G_MIN, PARAM_NAMES, PARAM_RANGE
 
 __all__ = [
     "FIELDS",
@@ -142,9 +142,10 @@ class Randomization:
         """``(k, 4)`` float64 rows ``(the field's index among a robot's doubles, kind index, low, high)`` for the compiled draw."""
         return np.array([[_COLUMN[n], KINDS.index(k), lo, hi] for n, k, lo, hi in self.ranges], dtype=np.float64).reshape(-1, 4)
 
-    def check_against(self, base: np.ndarray) -> None:
+    def check_against(self, base: np.ndarray, gravity: bool = False) -> None:
         """``ValueError`` naming the field if a value the ranges can draw around the nominal robot ``base`` (a
-        1-row ``ROBOT`` array) is not a valid value of the field (a mass at or below 0, a negative ``mu``)."""
+        1-row ``ROBOT`` array) is not a valid value of the field (a mass at or below 0, a negative ``mu``, a ``g``
+        between 0 and ``G_MIN`` that ``LegParams`` refuses, or with ``gravity`` (a task that needs it) a ``g`` of 0)."""
         doubles = base.view(np.float64)
         for name, kind, lo, hi in self.ranges:
             nominal = float(doubles[_COLUMN[name]])
@@ -156,6 +157,11 @@ class Randomization:
                         f"randomize[{name!r}] = {(kind, lo, hi)} draws {name} = {v:g} around the nominal {nominal:g}; "
                         f"{name} must be in {'(' if lo_open else '['}{v_lo:g}, {v_hi:g}]"
                     )
+            if name == "g" and (min(ends) < G_MIN and (max(ends) > 0.0 or gravity)):
+                raise ValueError(
+                    f"randomize['g'] = {(kind, lo, hi)} draws g in [{min(ends):g}, {max(ends):g}] around the nominal {nominal:g}; "
+                    f"g must be {'' if gravity else '0 or '}at least {G_MIN:g} m/s^2{' (this task needs gravity)' if gravity else ''}"
+                )
 
 
 def _drawn(kind: str, nominal: float, x: float) -> float:
@@ -226,14 +232,15 @@ class Robots:
     the same generator. ``base`` is the nominal robot, a 1-row array of ``leg_env.physics.layout.ROBOT``.
     """
 
-    def __init__(self, randomize, base: np.ndarray, config):
+    def __init__(self, randomize, base: np.ndarray, config, gravity: bool = False):
         self.randomization = Randomization.from_any(randomize)
+        self.gravity = gravity  # the task refuses g = 0
         self.base = np.array(base, dtype=layout.ROBOT).reshape(1)
         self.base.setflags(write=False)
         self.limits = posture_limits(config)
         self.spec = np.zeros((0, 4)) if self.randomization is None else self.randomization.spec()
         if self.randomization is not None:
-            self.randomization.check_against(self.base)
+            self.randomization.check_against(self.base, gravity)
             rate = acceptance(self.randomization, self.base, self.limits)
             if rate < MIN_ACCEPTANCE:
                 raise ValueError(
@@ -292,11 +299,11 @@ class Robots:
             v = np.broadcast_to(v, (n,))
             bad = ~((v > lo) if lo_open else (v >= lo)) | (v > hi)
             if name == "g":
-                bad |= (v > 0.0) & (v < PARAM_RANGE[0])
+                bad |= ((v > 0.0) | self.gravity) & (v < PARAM_RANGE[0])
             if bad.any():
-                raise ValueError(
-                    f"reset option 'params'[{name!r}] must be in {'(' if lo_open else '['}{lo:g}, {hi:g}], got {float(v[bad][0])!r}"
-                )
+                where = f"[{PARAM_RANGE[0]:g}, {hi:g}]" if name == "g" and self.gravity else (
+                    f"0 or [{PARAM_RANGE[0]:g}, {hi:g}]" if name == "g" else f"{'(' if lo_open else '['}{lo:g}, {hi:g}]")
+                raise ValueError(f"reset option 'params'[{name!r}] must be in {where}, got {float(v[bad][0])!r}")
             values[:, j] = v
         spec = np.array([[_COLUMN[name], KINDS.index("range"), 0.0, 0.0] for name in names], dtype=np.float64).reshape(-1, 4)
         out = np.empty(n, dtype=layout.ROBOT)

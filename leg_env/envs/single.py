@@ -59,6 +59,8 @@ class LegEnv(gym.Env):
         self.render_mode = render_mode
         self.width, self.height = checks.integer("width", width, 1, MAX_PIXELS), checks.integer("height", height, 1, MAX_PIXELS)
         self.params = LegParams.from_any(params)
+        if self.task.needs_gravity and self.params.g == 0.0:
+            raise ValueError(f"params.g must be positive for the {task} task (its apex is where gravity stops the rise), got 0.0")
         self.config = self.task.config_cls.from_kwargs(config, **config_overrides)
         self.nominal = nominal_state(self.params, self.config)
 
@@ -71,7 +73,7 @@ class LegEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         # the compiled core's arrays (leg_env.physics.layout), one row, shared with nothing; _bind() hands them to C
         self._robots = robot_row(self.params, self.config, self.nominal)
-        self.robots = Robots(randomize, self._robots, self.config)  # leg_env.randomize
+        self.robots = Robots(randomize, self._robots, self.config, gravity=self.task.needs_gravity)  # leg_env.randomize
         self.observation_space = self.task.observation_space(self.robots.longest(self.params), self.config)
         self._custom_robot = False  # whether the robot is not the nominal one
         self._settings = self.config.settings(self.task.name)

@@ -17,7 +17,9 @@ drops them, so ``info["reward_alive"]`` never raises ``KeyError``.
 
 from __future__ import annotations
 
+import numbers
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
@@ -44,7 +46,7 @@ _RESET_OPTIONS = ("qpos", "qvel", "reset_mask", "params")
 MAX_ENVS = kernels.MAX_ROWS  # bound of num_envs and render_envs: the most rows of the compiled core's tables, 2^26
 MAX_THREADS = 256  # bound of num_threads
 _VIEWS = ("_q", "_qd", "_anchor", "_action", "task", "_info_builder")  # rebuilt by _bind, never pickled
-_UNPICKLED = _VIEWS + ("_pool",)  # the thread pool is made anew where it is used
+_UNPICKLED = _VIEWS + ("_pool", "_busy")  # the thread pool is made anew where it is used, the lock at unpickling
 
 
 class LegVectorEnv(VectorEnv):
@@ -197,12 +199,26 @@ class LegVectorEnv(VectorEnv):
         self._ended = np.zeros(n, dtype=np.bool_)  # ended on the last step and not reset since
         self._rngs = BitGeneratorRows(n)  # sub-env i's generator, drawn from in compiled code
         self._rng_seeds: list[int | None] = [None] * n  # the seed each generator was made from
-        self._needs_reset = True  # step() refuses to run before the first reset()
+        self._never_reset = np.ones(n, dtype=np.bool_)  # step() refuses to run while a sub-env was never reset
+        self._busy = threading.Lock()  # held by the step or reset under way: one caller at a time
 
     # ---------------------------------------------------------------- API
 
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
         """Reset all sub-envs (or those in ``options["reset_mask"]``); see the class docstring."""
+        if not self._busy.acquire(blocking=False):
+            raise self._concurrent("reset")
+        try:
+            return self._reset(seed, options)
+        finally:
+            self._busy.release()
+
+    def _concurrent(self, what: str) -> RuntimeError:
+        """A second thread's step or reset while one is under way (they would interleave their rows)."""
+        return RuntimeError(f"{type(self).__name__}.{what}: another thread is stepping or resetting this env; step a vector env from "
+                            "one thread at a time (num_threads splits each step over threads)")
+
+    def _reset(self, seed, options):
         n = self.num_envs
         if options is not None and not isinstance(options, dict):
             raise checks.ArgumentTypeError(f"reset options must be a dict or None, got {checks.shown(options)}")
@@ -225,7 +241,7 @@ class LegVectorEnv(VectorEnv):
         self._start(None if rows.size == n else rows, *starts)
         self._elapsed[rows] = 0
         self._ended[rows] = False
-        self._needs_reset = any(rng is None for rng in self._rngs.generators)  # a reset_mask may leave some never reset
+        self._never_reset[rows] = False  # a reset_mask may leave some never reset
         info = {}
         if rows.size == n:
             self._add_state_info(info, self._out, self._state)
@@ -236,7 +252,12 @@ class LegVectorEnv(VectorEnv):
 
     def step(self, actions):
         """Step every sub-env (autoresetting those that ended); see the class docstring."""
-        t = self._step(actions)
+        if not self._busy.acquire(blocking=False):
+            raise self._concurrent("step")
+        try:
+            t = self._step(actions)
+        finally:
+            self._busy.release()
         stepped = None
         if t.restarted is not None:
             stepped = np.ones(self.num_envs, dtype=np.bool_)
@@ -307,7 +328,10 @@ class LegVectorEnv(VectorEnv):
     @property
     def np_random_seed(self) -> tuple[int | None, ...]:
         """Each sub-env's seed, as ``SyncVectorEnv`` gives them: the seed its generator was made from at its last
-        seeded reset (an entropy-drawn one after ``reset(seed=None)``), None before its first reset."""
+        seeded reset (an entropy-drawn one after ``reset(seed=None)``). Before a sub-env's first reset, as a single
+        env does, asking draws its generator from fresh entropy, and a later ``reset(seed=None)`` goes on from it."""
+        for i in np.flatnonzero(np.array([rng is None for rng in self._rngs.generators], dtype=np.bool_)).tolist():
+            self._rngs[i], self._rng_seeds[i] = seeding.np_random(None)
         return tuple(self._rng_seeds)
 
     @property
@@ -325,10 +349,9 @@ class LegVectorEnv(VectorEnv):
         the rows that end in this step, after keeping their last observation, flags, extras and
         force in ``final``. The returned ``terms`` are the step's; the buffers hold the reset rows' start.
         """
-        if getattr(self, "_needs_reset", False):
-            never = [i for i, rng in enumerate(self._rngs.generators) if rng is None]
+        if self._never_reset.any():
             raise ResetNeeded(
-                f"call reset() before step(): sub-env(s) {_some(np.array(never))} were never reset (no episode, no random generator)"
+                f"call reset() before step(): sub-env(s) {_some(np.flatnonzero(self._never_reset))} were never reset (no episode)"
             )
         self._action[:] = self._checked_actions(actions)
         mode = self.autoreset_mode
@@ -395,8 +418,10 @@ class LegVectorEnv(VectorEnv):
 
         Strings, complex numbers and bools are refused (``leg_env.checks.real_array``), not converted.
         """
-        if type(actions) is np.ndarray and actions.dtype.kind == "f":
+        if type(actions) is np.ndarray and actions.dtype.kind == "f" and actions.ndim:
             a = np.ascontiguousarray(actions, dtype=np.float64)  # the common case
+        elif isinstance(actions, (numbers.Number, np.generic)) or (type(actions) is np.ndarray and actions.ndim == 0):  # one number (Sync: a TypeError)
+            raise checks.ArgumentTypeError(f"actions must be a ({self.num_envs}, 2) array [hip, knee], not one number: {checks.shown(actions)}")
         else:
             a = checks.real_array("actions", actions, f"a ({self.num_envs}, 2) array of numbers [hip, knee]")
         if a.shape != (self.num_envs, 2):
@@ -511,6 +536,7 @@ class LegVectorEnv(VectorEnv):
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._pool = None
+        self._busy = threading.Lock()
         self._bind()
 
     def _reset_rows(self, reset_mask) -> np.ndarray:

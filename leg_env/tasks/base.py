@@ -64,6 +64,8 @@ class Task:
         info_names: the task's own ``out`` fields that ``info`` carries (push: ``push_force``, ``work_push``).
         state_info: the task's own ``state`` fields that ``info`` carries (hop: ``command``).
         draws: ``config -> int``: uniforms the task draws at every reset, after the posture noise.
+        needs_gravity: the task has no meaning without gravity (the hop's apex is where gravity stops the rise): a
+            robot with ``g = 0``, nominal, drawn or given at a reset, is refused.
         columns: ``(draws (k, n), config) -> {field: (k, ...) values}``: the task's own state fields of ``k``
             fresh robots from their draws (None when the task has none).
     """
@@ -77,6 +79,7 @@ class Task:
     state_info: tuple = ()
     draws: Callable = _no_draws
     columns: Callable | None = None
+    needs_gravity: bool = False
 
     def assess(self, state, robots, settings, out, obs) -> None:
         """The task after a control step of every robot (the compiled core's control step, ``env.c``), in place: the

@@ -180,6 +180,8 @@ from .base import OBS_DIM_UNILATERAL, StanceConfig, Task, observation_space as _
 
 __all__ = ["HopConfig", "TASK", "REWARD_TERMS", "OBS_DIM"]
 
+MAX_STEPS = 2**31 - 1  # control steps a setting can count (an int32 of the compiled core)
+
 REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl", "limit")
 N_TERMS = len(REWARD_TERMS)
 OBS_DIM = OBS_DIM_UNILATERAL + 1  # 19 (v0); 21 with observe_progress (v1)
@@ -244,6 +246,9 @@ class HopConfig(StanceConfig):
         object.__setattr__(self, "command_period", checks.real("HopConfig.command_period", self.command_period, 0.0, float("inf"), lo_open=True, unit="s"))
         if self.command_period < self.dt:
             raise ValueError(f"HopConfig.command_period must be at least dt ({self.dt} s), got {self.command_period!r}")
+        if self.command_period != float("inf") and round(self.command_period / self.dt) > MAX_STEPS:
+            raise ValueError(f"HopConfig.command_period must be at most {MAX_STEPS} control steps of dt = {self.dt} s (or inf), got "
+                             f"{self.command_period!r} s")
         if self.observe_apex and not self.observe_progress:
             raise ValueError("HopConfig.observe_apex needs observe_progress=True (the apex is the entry after the ground time)")
         if self.hold_height:
@@ -317,5 +322,6 @@ TASK = Task(
     state_info=("command", "ground_time"),
     draws=_draws,
     columns=_columns,
+    needs_gravity=True,
 )
 """The hopping task as the shared environments see it (``leg_env.tasks.base.Task``)."""

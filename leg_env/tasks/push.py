@@ -128,6 +128,7 @@ from .stance import REWARD_TERMS as _STANCE_TERMS
 
 __all__ = ["PushConfig", "TASK", "MAX_PUSHES", "REWARD_TERMS", "INFO_NAMES", "OBS_COM_DRIFT"]
 
+MAX_STEPS = 2**31 - 1  # control steps a setting can count (an int32 of the compiled core)
 OBS_COM_DRIFT = layout.OBS["push_com_drift"]  # 18: the COM's x from its start, with observe_com (v1)
 MAX_PUSHES = kernels.PUSH_MAX  # pushes scheduled per episode (8): at least 0.8 + 7 x 2 s = 14.8 s of them
 REWARD_TERMS = _STANCE_TERMS + ("com",)
@@ -176,6 +177,8 @@ class PushConfig(StanceConfig):
             lo, hi, unit = PUSH_RANGES[name]
             value = checks.real(f"PushConfig.{name}", getattr(self, name), lo, hi, lo_open=name == "push_duration", unit=unit)
             object.__setattr__(self, name, value)
+        if round(self.push_duration / self.dt) > MAX_STEPS:
+            raise ValueError(f"PushConfig.push_duration must be at most {MAX_STEPS} control steps of dt = {self.dt} s, got {self.push_duration!r} s")
         object.__setattr__(self, "observe_com", checks.boolean("PushConfig.observe_com", self.observe_com))
         if self.observe_com and self.contact != "unilateral":
             raise ValueError(f"PushConfig.observe_com needs contact='unilateral' (its entry follows the unilateral ground's 18), got {self.contact!r}")

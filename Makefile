@@ -48,7 +48,7 @@ RLLIB_TESTS := $(wildcard tests/rllib/test_*.py)
 
 # the compiled core (leg_env/_core, C) is built in place by the editable install; after an edit of its
 # sources it is built again (both venvs run the same Python, so they share the one built in place)
-CORE_SOURCES := setup.py $(wildcard leg_env/_core/*.c leg_env/_core/*.h)
+CORE_SOURCES := setup.py $(wildcard leg_env/_core/*.c leg_env/_core/*.h leg_env/_core/*.def)
 $(VENV)/.core: $(CORE_SOURCES) | $(BIN)/python
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 	touch $@

@@ -1,5 +1,5 @@
 /* The machinery of the structs' field lists: every struct the compiled core shares with Python is one list of
- * fields, written once (robot.h, env.h), from which come its C declaration, its layout report (the field's name,
+ * fields, written once (structs.def), from which come its C declaration, its layout report (the field's name,
  * byte offset, numpy type and count, from which leg_env.physics.layout builds the numpy dtype) and the field's
  * documentation (the report's last entry; leg_env.physics.layout.FIELD_DOCS).
  *
@@ -15,6 +15,8 @@
 
 #include <stddef.h>
 #include <stdint.h>
+
+#include "structs.def" /* the lists: macros, expanded where robot.h and env.h declare the structs */
 
 #define T_F64 double
 #define T_I32 int32_t

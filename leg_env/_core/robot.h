@@ -48,18 +48,6 @@ static inline double leg_fmin(double a, double b)
 #define LEG_NU 2 /* actuated joints */
 
 /* Masses [kg], inertias [kg m^2], lengths [m] and gravity [m/s^2]: LegParams, field for field. */
-#define LEG_PARAMS_FIELDS(X, S, P)                                                                                     \
-    X(S, P, F64, m_b, , "torso mass [kg]")                                                                             \
-    X(S, P, F64, m1, , "thigh mass [kg]")                                                                              \
-    X(S, P, F64, m2, , "shank mass [kg]")                                                                              \
-    X(S, P, F64, I_b, , "torso rotational inertia about its COM [kg m^2]")                                            \
-    X(S, P, F64, I1, , "thigh rotational inertia about its COM [kg m^2]")                                             \
-    X(S, P, F64, I2, , "shank rotational inertia about its COM [kg m^2]")                                             \
-    X(S, P, F64, l1, , "thigh length, hip to knee [m]")                                                                \
-    X(S, P, F64, l2, , "shank length, knee to foot [m]")                                                               \
-    X(S, P, F64, c1, , "hip to thigh COM [m]")                                                                         \
-    X(S, P, F64, c2, , "knee to shank COM [m]")                                                                        \
-    X(S, P, F64, g, , "gravity along -y [m/s^2]; 0: none")
 typedef struct {
     LEG_PARAMS_FIELDS(FIELD_DECLARE, , )
 } leg_params;
@@ -108,37 +96,16 @@ typedef struct {
 
 /* What one hybrid control step adds up (leg_env.physics.hybrid.HybridStep's sums and counts); an environment's
  * env_out holds one, which the step writes in place. */
-#define LEG_TALLY_FIELDS(X, S, P)                                                                                      \
-    X(S, P, F64, impulse, [2], "integral of the contact force over the continuous modes [N s]")                       \
-    X(S, P, F64, kick, [2], "sum of impact (and tangential) impulses on the foot [N s]")                              \
-    X(S, P, F64, stick_time, , "time in stick [s]")                                                                    \
-    X(S, P, F64, slip_time, , "time sliding [s]")                                                                      \
-    X(S, P, F64, flight_time, , "time in flight [s]")                                                                  \
-    X(S, P, F64, slip_distance, , "distance slid [m]")                                                                 \
-    X(S, P, F64, work, , "actuator work [J]")                                                                          \
-    X(S, P, F64, work_load, , "work of the horizontal force on the torso's COM [J]")                                   \
-    X(S, P, F64, slip_dissipation, , "energy dissipated by sliding friction [J]")                                      \
-    X(S, P, F64, impact_dissipation, , "kinetic energy lost in impulses [J]")                                          \
-    X(S, P, I32, events, , "located transitions")                                                                      \
-    X(S, P, I32, painleve, , "uses of the Painleve rule")                                                              \
-    X(S, P, I32, settles, , "Zeno settles")                                                                            \
-    X(S, P, I32, rk4_steps, , "RK4 steps integrated, the re-integrations that located the events included")
 typedef struct {
     LEG_TALLY_FIELDS(FIELD_DECLARE, , )
 } leg_tally;
 
 /* The located transitions of one hybrid control step, in order. */
-#define LEG_LOG_FIELDS(X, S, P)                                                                                        \
-    X(S, P, I32, event_kind, [LEG_LOG_SIZE], "leg_event of each located transition, -1 after the last")               \
-    X(S, P, F64, event_time, [LEG_LOG_SIZE], "its time since the step's start [s], NaN after the last")
 typedef struct {
     LEG_LOG_FIELDS(FIELD_DECLARE, , )
 } leg_log;
 
 /* What one hybrid control step did (leg_env.physics.hybrid.HybridStep). */
-#define LEG_RECORD_FIELDS(X, S, P)                                                                                     \
-    X(S, P, TALLY, tally, , "what the step added up")                                                                  \
-    X(S, P, LOG, log, , "the events it located")
 typedef struct {
     LEG_RECORD_FIELDS(FIELD_DECLARE, , )
 } leg_record;

@@ -52,19 +52,8 @@ from .._core import kernels
 from .arrays import NQ, NU, batched, core_params, vec
 from .params import LegParams
 
-__all__ = [
-    "STICK",
-    "SLIP_FORWARD",
-    "SLIP_BACKWARD",
-    "FLIGHT",
-    "MODE_NAMES",
-    "REST_SPEED",
-    "slip_dynamics",
-    "impact_map",
-    "contact_mode",
-    "mu_critical",
-    "free_foot_acceleration",
-]
+__all__ = ["STICK", "SLIP_FORWARD", "SLIP_BACKWARD", "FLIGHT", "MODE_NAMES", "REST_SPEED", "slip_dynamics",
+           "impact_map", "contact_mode", "mu_critical", "free_foot_acceleration"]
 
 STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT = kernels.STICK, kernels.SLIP_FORWARD, kernels.SLIP_BACKWARD, kernels.FLIGHT
 MODE_NAMES = ("stick", "slip", "slip", "flight")

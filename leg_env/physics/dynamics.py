@@ -55,22 +55,9 @@ from .._core import kernels
 from .arrays import NO_LOAD, NQ, NU, as_params, batched, core_params, single_robot, vec
 from .params import LegParams
 
-__all__ = [
-    "S",
-    "mass_matrix",
-    "bias_forces",
-    "gravity_forces",
-    "contact_jacobian",
-    "contact_jdot_qd",
-    "foot_position",
-    "contact_inertia",
-    "stance_dynamics",
-    "flight_dynamics",
-    "kinetic_energy",
-    "potential_energy",
-    "com_position",
-    "static_equilibrium",
-]
+__all__ = ["S", "mass_matrix", "bias_forces", "gravity_forces", "contact_jacobian", "contact_jdot_qd",
+           "foot_position", "contact_inertia", "stance_dynamics", "flight_dynamics", "kinetic_energy",
+           "potential_energy", "com_position", "static_equilibrium"]
 
 S = np.array([[0.0, 0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0]])
 S.setflags(write=False)

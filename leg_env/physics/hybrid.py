@@ -71,20 +71,8 @@ from .integrate import DT, MAX_ANGLE, SUBSTEPS, checked_steps
 from .layout import RECORD
 from .params import LegParams
 
-__all__ = [
-    "hybrid_step",
-    "HybridStep",
-    "LIFTOFF",
-    "SLIP_ONSET",
-    "SLIDING_STOP",
-    "TOUCHDOWN",
-    "EVENT_NAMES",
-    "MAX_EVENTS",
-    "LOG_SIZE",
-    "GROUND_TOL",
-    "SETTLE_SPEED",
-    "ROOT_TIME",
-]
+__all__ = ["hybrid_step", "HybridStep", "LIFTOFF", "SLIP_ONSET", "SLIDING_STOP", "TOUCHDOWN", "EVENT_NAMES",
+           "MAX_EVENTS", "LOG_SIZE", "GROUND_TOL", "SETTLE_SPEED", "ROOT_TIME"]
 
 LIFTOFF, SLIP_ONSET, SLIDING_STOP, TOUCHDOWN = kernels.LIFTOFF, kernels.SLIP_ONSET, kernels.SLIDING_STOP, kernels.TOUCHDOWN
 EVENT_NAMES = ("liftoff", "slip_onset", "sliding_stop", "touchdown")

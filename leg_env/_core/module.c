@@ -210,7 +210,7 @@ static int bad_value(const arg_spec *a, const char *what)
 static int fetch_arg(const arg_spec *a, PyObject *obj, int j, call *c, held *h)
 {
     if (a->kind == 'r') {
-        const double v = PyFloat_AsDouble(obj);
+        const double v = PyFloat_CheckExact(obj) ? PyFloat_AS_DOUBLE(obj) : PyFloat_AsDouble(obj);
         if (v == -1.0 && PyErr_Occurred())
             return PyErr_Clear(), error(PyExc_TypeError, "%s must be a real number, got %.80R", a->name, obj);
         if (!in_range(v, a) || ((a->opts & OPT_WHOLE) && v != floor(v))) {

@@ -141,7 +141,7 @@ class LegEnv(gym.Env):
         info = self._info()
         if self._human:
             self.render()
-        return self._obs_row.copy(), reward, bool(self._out_row["terminated"]), False, info
+        return self._obs_row.copy(), reward, info["ending"] != 0, False, info  # terminated is exactly an ending
 
     def render(self):
         if self.render_mode is None:

@@ -127,12 +127,12 @@ class InfoBuilder:
         n = out.shape[0]
         doubles, ints = np.empty((counts["d"], n)), np.empty((counts["i"], n), dtype=np.int64)
         flags, vectors = np.empty((counts["?"], n), dtype=np.bool_), np.empty((counts["v"], n, 2))
-        kernels.info_columns(spec, out, state, doubles, ints, flags, vectors)
+        named = kernels.info_columns(spec, out, state, doubles, ints, flags, vectors)
         blocks = {"d": doubles, "i": ints, "m": ints, "?": flags, "v": vectors}
         columns = {key: blocks[kind][row] for key, kind, row in keys}
         for key in self._mode_keys:
             modes = columns[key]
-            if modes.size and (modes.min() < 0 or modes.max() >= len(MODE_NAMES)):
+            if not named:
                 raise ValueError(f"info: a contact mode outside 0 .. {len(MODE_NAMES) - 1} in out: {modes[(modes < 0) | (modes >= len(MODE_NAMES))][:3]}")
             columns[key] = _MODE_NAMES[modes]
         return columns

@@ -220,33 +220,49 @@ static void k_info_columns(call *c)
     const int64_t *spec = (const int64_t *)c->a[0];
     const char *rows[2] = {(const char *)c->a[1], (const char *)c->a[2]};
     const size_t stride[2] = {sizeof(env_out), sizeof(env_state)};
-    for (Py_ssize_t i0 = 0; i0 < c->n; i0 += INFO_BLOCK_ROWS) {
-        const Py_ssize_t i1 = i0 + INFO_BLOCK_ROWS < c->n ? i0 + INFO_BLOCK_ROWS : c->n;
-        for (Py_ssize_t k = 0; k < c->rows[0]; k++) {
+    const Py_ssize_t n = c->n, m = c->rows[0];
+    double *doubles = (double *)c->a[3], *vectors = (double *)c->a[6];
+    int64_t *ints = (int64_t *)c->a[4];
+    char *flags = (char *)c->a[5];
+    int named = 1;
+    for (Py_ssize_t i0 = 0; i0 < n; i0 += INFO_BLOCK_ROWS) {
+        const Py_ssize_t i1 = i0 + INFO_BLOCK_ROWS < n ? i0 + INFO_BLOCK_ROWS : n;
+        for (Py_ssize_t k = 0; k < m; k++) {
             const int64_t *e = spec + 4 * k;
             const char *at = rows[e[0]] + e[1];
             const size_t step = stride[e[0]];
-            const Py_ssize_t first = e[3] * c->n;
+            const Py_ssize_t first = e[3] * n;
             switch (e[2]) { /* one strided read, one contiguous write, a copy of constant size */
-            case INFO_DOUBLE:
+            case INFO_DOUBLE: {
+                double *dst = doubles + first;
                 for (Py_ssize_t i = i0; i < i1; i++)
-                    memcpy((double *)c->a[3] + first + i, at + i * step, 8);
+                    memcpy(dst + i, at + i * step, 8);
                 break;
-            case INFO_FLAG:
+            }
+            case INFO_FLAG: {
+                char *dst = flags + first;
                 for (Py_ssize_t i = i0; i < i1; i++)
-                    ((char *)c->a[5])[first + i] = at[i * step] != 0;
+                    dst[i] = at[i * step] != 0;
                 break;
-            case INFO_VECTOR:
+            }
+            case INFO_VECTOR: {
+                double *dst = vectors + 2 * first;
                 for (Py_ssize_t i = i0; i < i1; i++)
-                    memcpy((double *)c->a[6] + 2 * (first + i), at + i * step, 16);
+                    memcpy(dst + 2 * i, at + i * step, 16);
                 break;
-            default: /* an int32, or a contact mode */
+            }
+            default: { /* an int32, or a contact mode (the call answers whether every mode has a name) */
+                int64_t *dst = ints + first;
+                const int mode = e[2] == INFO_MODE;
                 for (Py_ssize_t i = i0; i < i1; i++) {
                     int32_t v;
                     memcpy(&v, at + i * step, 4);
-                    ((int64_t *)c->a[4])[first + i] = v;
+                    dst[i] = v;
+                    named &= !mode || (v >= 0 && v < LEG_N_MODES);
                 }
+            }
             }
         }
     }
+    c->result = named;
 }

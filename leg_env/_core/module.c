@@ -135,8 +135,8 @@ static const entry ENTRIES[] = {
      k_draw_robots, check_draws, HELD,
      {{"generators", 'g', 0, 'u', 0, ANY, 0}, {"rows", 'q', 'N', 'i', 1, 0.0, PY_SSIZE_T_MAX, 0}, SPEC, ROBOT_ROW(base, 'i'), LIMITS,
       INTEGER(max_draws, 1, DRAWS_MAX), {"robots", 'B', '*', 'u', 1, ANY, 0}, {"rejected", 'q', 'N', 'o', 1, ANY, 0}}},
-    {"info_columns", "Every row's info keys, each into its row of a block by spec (source, offset, kind, row).", k_info_columns,
-     check_info, HELD,
+    {"info_columns", "Every row's info keys, each into its row of a block by spec (source, offset, kind, row); whether every contact "
+                     "mode has a name.", k_info_columns, check_info, ANSWERS,
      {{"spec", 'q', '*', 'i', 4, 0.0, PY_SSIZE_T_MAX, 0}, {"out", 'O', 'N', 'i', 1, ANY, 0}, {"state", 'S', 'N', 'i', 1, ANY, 0},
       {"doubles", 'd', 'T', 'o', 1, ANY, 0}, {"ints", 'q', 'T', 'o', 1, ANY, 0}, {"flags", '?', 'T', 'o', 1, ANY, 0},
       {"vectors", 'd', 'T', 'o', 2, ANY, 0}}},

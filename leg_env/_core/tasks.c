@@ -171,9 +171,10 @@ static int evaluate(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *
 static void guard_observation(const env_batch *b, Py_ssize_t i, const float *kept, int n_terms)
 {
     env_out *o = out_row(b, i);
-    float *obs = b->obs + i * b->obs_cols;
+    const Py_ssize_t cols = b->obs_cols;
+    float *obs = b->obs + i * cols;
     uint32_t non_finite = 0; /* an all-ones exponent: inf or NaN (a test of the bits, with no chain of additions) */
-    for (Py_ssize_t j = 0; j < b->obs_cols; j++) {
+    for (Py_ssize_t j = 0; j < cols; j++) {
         uint32_t bits;
         memcpy(&bits, obs + j, sizeof bits);
         non_finite |= (bits & 0x7f800000u) == 0x7f800000u;
@@ -437,8 +438,9 @@ static void task_assess(int task, const env_batch *b, Py_ssize_t lo, Py_ssize_t 
         shared = &one;
     }
     float kept[OBS_MAX_DIM];
+    const Py_ssize_t cols = b->obs_cols;
     for (Py_ssize_t i = lo; i < hi; i++) {
-        memcpy(kept, b->obs + i * b->obs_cols, b->obs_cols * sizeof(float));
+        memcpy(kept, b->obs + i * cols, cols * sizeof(float));
         if (task == TASK_PUSH) {
             push_assess(b, i, shared, kept);
         } else if (task == TASK_HOP) {

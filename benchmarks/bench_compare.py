@@ -87,6 +87,17 @@ def _child(tree: Path | None, kind: str, env_id: str, kwargs: dict) -> float:
     return json.loads(out.stdout.strip().splitlines()[-1])["rate"]
 
 
+def _cpu() -> str:
+    """The CPU's model name, with its family and model numbers (AMD's family 25 model 17 is a Zen 4)."""
+    if not os.path.exists("/proc/cpuinfo"):
+        return platform.processor()
+    info = {}
+    for line in open("/proc/cpuinfo"):
+        key, _, value = line.partition(":")
+        info.setdefault(key.strip(), value.strip())
+    return f"{info.get('model name', '?')} (cpu family {info.get('cpu family', '?')}, model {info.get('model', '?')})"
+
+
 def _before_tree(ref: str) -> tuple[Path, str]:
     sha = subprocess.run(["git", "rev-parse", "--short", ref], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
     tree = Path(tempfile.gettempdir()) / f"leg-env-before-{sha}"
@@ -123,8 +134,7 @@ def main() -> None:
     def ratio(a, b):
         return statistics.median(x / y for x, y in zip(rates[a], rates[b]))
 
-    cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")), platform.processor()) \
-        if os.path.exists("/proc/cpuinfo") else platform.processor()
+    cpu = _cpu()
     lines = [
         "# leg-env beside an earlier version: the rows a change of the compiled boundary can move",
         "",

@@ -251,9 +251,9 @@ static int fetch_arg(const arg_spec *a, PyObject *obj, int j, call *c, held *h)
                                     a->role != 'i' ? ", writable" : "", type, (PyObject *)Py_TYPE(obj));
     h->names[h->n] = a->name;
     h->written[h->n++] = a->role != 'i';
-    if (v->itemsize != size || (code && !format_is(v->format, code)) || (!code && v->ndim != 1))
-        return error(PyExc_ValueError, "%s must be a %s%s array (got format %s, item size %zd, %d dimensions)", a->name,
-                             code ? "" : "1-d ", type, v->format ? v->format : "?", v->itemsize, v->ndim);
+    if (v->itemsize != size || (code && !format_is(v->format, code)) || (!code && v->ndim != 1) || (uintptr_t)v->buf % (size < 8 ? size : 8))
+        return error(PyExc_ValueError, "%s must be an aligned %s%s array (got format %s, item size %zd, %d dimensions, address %p)", a->name,
+                     code ? "" : "1-d ", type, v->format ? v->format : "?", v->itemsize, v->ndim, v->buf);
     const Py_ssize_t items = v->len / size;
     c->a[j] = v->buf;
     c->cols[j] = a->width;

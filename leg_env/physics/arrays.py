@@ -69,7 +69,7 @@ _SHAPE_TAU = (NU,)
 
 
 def single_robot(q, qd, tau) -> bool:
-    """Fast-path test: ``q``, ``qd`` of shape (5,) and ``tau`` of shape (2,), all contiguous float64.
+    """Fast-path test: ``q``, ``qd`` of shape (5,) and ``tau`` of shape (2,), all contiguous, aligned float64.
 
     One expression, no calls (this sits on the per-evaluation path). ``dtype is`` compares with
     numpy's float64 singleton; an equal but distinct dtype object only takes the general path.
@@ -87,6 +87,9 @@ def single_robot(q, qd, tau) -> bool:
         and q.flags.c_contiguous
         and qd.flags.c_contiguous
         and tau.flags.c_contiguous
+        and q.flags.aligned
+        and qd.flags.aligned
+        and tau.flags.aligned
     )
 
 
@@ -111,5 +114,5 @@ def batched(*named):
     for _, a in named:
         if a.shape[:-1] != lead:
             a = np.broadcast_to(a, lead + a.shape[-1:])
-        flat.append(np.ascontiguousarray(a.reshape(-1, a.shape[-1])))
+        flat.append(np.require(a.reshape(-1, a.shape[-1]), requirements=("C", "A")))  # C order, aligned: what the core reads
     return lead, flat

@@ -104,7 +104,7 @@ def stance_step(
         # one robot: the same kernel on (1, n) views, without the broadcasting machinery
         if anchor is None:
             anchor = foot_position(q, p)
-        if type(anchor) is np.ndarray and anchor.shape == (2,) and anchor.dtype is F64 and anchor.flags.c_contiguous:
+        if type(anchor) is np.ndarray and anchor.shape == (2,) and anchor.dtype is F64 and anchor.flags.c_contiguous and anchor.flags.aligned:
             q1, qd1, lam = q.reshape(1, NQ).copy(), qd.reshape(1, NQ).copy(), np.empty((1, 2))
             step_inplace(q1, qd1, tau.reshape(1, NU), core_params(p), anchor.reshape(1, 2), dt, substeps, max_angle,
                          True, lam)

@@ -1,4 +1,4 @@
-"""Issue 13, the env side: a rejected call changes nothing, every bad input names itself.
+"""The env side of bad input: a rejected call changes nothing, every bad input names itself.
 
 Each test turns one reproducer of the issue (items 5-9, 12-14, 16) into a check that failed on the
 code before the fix.
@@ -56,7 +56,7 @@ def assert_same_state(a, b):
         np.testing.assert_array_equal(x, y)
 
 
-# ---------------------------------------------------------------- item 5: transactional reset
+# ---------------------------------------------------------------- transactional reset
 
 
 @pytest.mark.parametrize("options", BAD_OPTIONS, ids=repr)
@@ -121,7 +121,7 @@ def test_rejected_reset_changes_nothing_in_the_sb3_adapter(options):
     assert_same_state(venv.env.state, twin.env.state)
 
 
-# ---------------------------------------------------------------- item 6: step before reset
+# ---------------------------------------------------------------- step before reset
 
 
 @pytest.mark.parametrize("mode", list(AutoresetMode), ids=str)
@@ -156,7 +156,7 @@ def test_sb3_step_before_reset_raises_and_changes_nothing():
     venv.step(np.zeros((2, 2)))
 
 
-# ---------------------------------------------------------------- item 7: one validation path, with bounds
+# ---------------------------------------------------------------- one validation path, with bounds
 
 
 @pytest.mark.parametrize("field", sorted(FIELD_RANGES), ids=str)
@@ -186,7 +186,7 @@ def test_substeps_at_the_bound_and_unknown_keywords():
         LegEnv(substep=2)
 
 
-# ---------------------------------------------------------------- item 8: nothing overflows float32 silently
+# ---------------------------------------------------------------- nothing overflows float32 silently
 
 
 @pytest.mark.parametrize("g", [1e-300, 1e-7, -1.0, np.nan, 1e7])
@@ -236,7 +236,7 @@ def test_an_observation_that_overflows_float32_is_a_flagged_numerical_failure(co
         np.testing.assert_array_equal(state[field], before_state[field])
 
 
-# ---------------------------------------------------------------- item 9: strict coercion
+# ---------------------------------------------------------------- strict coercion
 
 
 BAD_TYPED_ACTIONS = [["0.5", "0.5"], np.array([0.5 + 1j, 0.5]), [0.5 + 0j, 0.5], [True, False], np.array([True, False])]
@@ -295,7 +295,7 @@ def test_vector_reset_refuses_bad_seeds_clearly_and_changes_nothing(seed):
     assert_same_state(envs.state, state)
 
 
-# ---------------------------------------------------------------- item 12: human rendering without a display
+# ---------------------------------------------------------------- human rendering without a display
 
 _HUMAN = """
 import warnings, numpy as np, gymnasium as gym, leg_env
@@ -391,7 +391,7 @@ def test_a_read_only_package_without_a_writable_home_steps_every_task_at_once():
         shutil.rmtree(top)
 
 
-# ---------------------------------------------------------------- item 14: fork after threads (now safe)
+# ---------------------------------------------------------------- fork after threads (now safe)
 
 
 def test_threads_work_in_a_child_forked_after_the_parent_ran_them():
@@ -437,7 +437,7 @@ def test_threads_work_in_a_child_forked_after_the_parent_ran_them():
     assert lines["spawn"] == lines["parent"] == lines["fork"], done.stdout
 
 
-# ---------------------------------------------------------------- item 16: g = 0
+# ---------------------------------------------------------------- g = 0
 
 
 @pytest.mark.parametrize("contact", CONTACTS)

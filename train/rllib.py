@@ -95,7 +95,7 @@ invocations)."""
 class RLlibArgs(RunArgs):
     """Train PPO on a leg-env task with Ray RLlib (new API stack) and write a run folder (see train/rllib.py)."""
 
-    RENAMED: ClassVar[dict[str, str]] = {"env": "env_id"}
+    RENAMED: ClassVar[dict[str, str]] = {"env": "env_id", "numba_threads": "env_threads"}
 
     out: Path = Path("runs/rllib_stance")
     """Run folder: the policy, configuration, progress and checkpoints are written here."""
@@ -109,8 +109,6 @@ class RLlibArgs(RunArgs):
     """CPUs Ray reserves for each env runner (None: env_threads)."""
     env_threads: int = 1
     """Threads each env runner's native batch is stepped with (the batch's ``num_threads``)."""
-    numba_threads: int | None = None
-    """Deprecated name of env_threads, from when the physics was numba code; removed in the next release."""
     address: str | None = None
     """Ray cluster to join (e.g. 10.0.0.1:6379). None: RAY_ADDRESS if set, else a local Ray."""
     num_cpus: int | None = None
@@ -118,10 +116,6 @@ class RLlibArgs(RunArgs):
 
     def __post_init__(self):
         super().__post_init__()
-        if self.numba_threads is not None:
-            warnings.warn("--numba-threads is deprecated and will be removed in the next release: use --env-threads",
-                          DeprecationWarning, stacklevel=2)  # fmt: skip
-            self.env_threads, self.numba_threads = self.numba_threads, None
         for name in ("num_env_runners", "num_learners"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")

@@ -289,14 +289,16 @@ def test_evaluate_takes_a_model_file(run_copy):
     assert out == run_copy / "eval" and (out / "policy.json").is_file() and (out / "learning_curve.png").is_file()
 
 
-def test_rllib_env_threads_and_its_deprecated_numba_name():
-    """``--env-threads`` sets the threads of each runner's batch; ``--numba-threads``, its old name, still does,
-    with a DeprecationWarning; a count below 1 is refused by name."""
+def test_rllib_env_threads_and_its_old_name():
+    """``--env-threads`` sets the threads of each runner's batch; ``--numba-threads``, its old name, is an error that
+    names it (nothing was released); a count below 1 is refused by name."""
+    from train.cli import parse_args
     from train.rllib import RLlibArgs
 
     assert RLlibArgs(env_threads=2).env_threads == 2
-    with pytest.warns(DeprecationWarning, match="--env-threads"):
-        args = RLlibArgs(numba_threads=3)
-    assert args.env_threads == 3 and args.numba_threads is None
+    with pytest.raises(TypeError):
+        RLlibArgs(numba_threads=3)
+    with pytest.raises(SystemExit):
+        parse_args(RLlibArgs, ["--numba-threads", "3"])
     with pytest.raises(ValueError, match="env_threads"):
         RLlibArgs(env_threads=0)

@@ -210,6 +210,39 @@ def generate(app=None) -> None:
         "",
     ]))
     shutil.copyfile(ROOT / "examples" / "lesson.ipynb", GENERATED / "lesson.ipynb")
+    _write(GENERATED / "core.md", _core_page())
+
+
+def _core_page() -> str:
+    """The compiled core's structs, field by field, and its entry points, argument by argument: from the module's own
+    report of its one table of fields (``leg_env.physics.layout.FIELD_DOCS``) and of entry points
+    (``leg_env._core.signatures()``)."""
+    from leg_env._core import kernels, signatures
+
+    lines = ["# The compiled core", "",
+             "Read from the compiled module itself: every struct it shares with Python, written once as a list of fields in "
+             "`leg_env/_core/structs.def`, and every entry point, a row of the table `ENTRIES` in `module.c` that one binder "
+             "reads to fetch and check its arguments. A batch of robots is one numpy structured array per struct "
+             "(`leg_env.physics.layout`).", "", "## Structs", ""]
+    for struct, (itemsize, fields) in kernels.layouts().items():
+        lines += [f"### `{struct}`", "", f"{itemsize} bytes" + (" (a task's fields, in the struct's union)" if "." in struct else "") + ".", "",
+                  "| field | type | count | offset | what it holds |", "|---|---|---:|---:|---|"]
+        lines += [f"| `{name}` | {kind} | {count} | {offset} | {doc} |" for name, offset, kind, count, doc in fields]
+        lines.append("")
+    lines += ["## Entry points", "", "Shape rules: N one row per robot (the first such argument sets N), M one row shared by every "
+              "robot or one per robot, 1 one row, * any number of rows, T blocks of N rows.", ""]
+    for name, sig in signatures().items():
+        lines += [f"### `kernels.{name}`", "", sig["doc"] + (" Releases the GIL." if sig["releases_gil"] else ""), "",
+                  "| argument | dtype | rows | values per row | role | accepted |", "|---|---|---|---:|---|---|"]
+        for a in sig["args"]:
+            ends = ["finite" if abs(x) == 1.7976931348623157e308 else ("+inf" if x == float("inf") else f"{x:g}") for x in a["range"] or ()]
+            accepted = "" if a["range"] is None else f"{'(' if a['open'] else '['}{ends[0]}, {ends[1]}]"
+            accepted += " whole" if a["whole"] else ""
+            accepted += " or None" if a["optional"] else ""
+            lines.append(f"| `{a['name']}` | {a['dtype']} | {a['rows'] or '-'} | {a['width'] or ('-' if not a['rows'] else 'its own')} | "
+                         f"{a['role']} | {accepted} |")
+        lines.append("")
+    return "\n".join(lines)
 
 
 _PROPERTY_DOCSTRINGS: dict[str, list[str]] = {}

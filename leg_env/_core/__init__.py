@@ -13,7 +13,7 @@ from . import kernels
 
 __all__ = ["kernels", "signatures"]
 
-_DTYPES = {"d": "float64", "P": "float64", "q": "int64", "f": "float32", "?": "bool", "R": "leg_record", "S": "env_state",
+_DTYPES = {"d": "float64", "P": "float64 (leg_params)", "q": "int64", "f": "float32", "?": "bool", "R": "leg_record", "S": "env_state",
            "B": "env_robot", "C": "env_settings", "O": "env_out", "r": "real", "i": "integer", "l": "flag", "g": "object"}
 _ROLES = {"i": "in", "o": "out", "u": "inout"}
 _OPT_NONE, _OPT_WHOLE, _OPT_OPEN = 1, 2, 4

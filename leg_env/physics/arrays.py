@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import checks
-from .params import LegParams
+from .params import PARAM_RANGE, LegParams
 
 __all__ = ["NQ", "NU", "NP", "LOAD_X", "params_array", "as_params", "core_params", "single_robot", "vec", "batched"]
 
@@ -27,20 +27,34 @@ def params_array(p: LegParams | np.ndarray, load_x: float = 0.0) -> np.ndarray:
     ``load_x`` is the horizontal force on the torso's COM [N] held over a step (0: no load). An array of
     11 values gets the load appended; one of 12 passes through.
     """
-    load_x = checks.real("load_x", load_x, -_LOAD_MAX, _LOAD_MAX, unit="N")
+    load_x = 0.0 if load_x == 0.0 and type(load_x) in (float, int) else checks.real("load_x", load_x, -_LOAD_MAX, _LOAD_MAX, unit="N")
     if isinstance(p, LegParams):
         return _loaded(p.array, load_x)
+    if type(p) is np.ndarray and p.dtype == np.float64 and p.shape == (NP,) and _valid_fields(p):  # the common case
+        return _loaded(p, load_x)
     a = checks.real_array("p", p, f"LegParams or {NP} real numbers (or {NP + 1} with the load)")
     if a.shape not in ((NP,), (NP + 1,)):
         raise ValueError(f"p must be LegParams or an array of {NP} values (or {NP + 1} with the load), got shape {a.shape}")
-    try:
-        LegParams(*a[:NP].tolist())  # every value checked as a LegParams field
-    except ValueError as e:
-        raise ValueError(f"p: {e}") from None  # names p and the field
+    if not _valid_fields(a[:NP]):
+        try:
+            LegParams(*a[:NP].tolist())  # the field that is not a valid LegParams one, by name
+        except ValueError as e:
+            raise ValueError(f"p: {e}") from None  # names p and the field
     if a.shape == (NP,):
         return _loaded(a, load_x)
     checks.real("p's load (entry 11)", float(a[NP]), -_LOAD_MAX, _LOAD_MAX, unit="N")
     return a
+
+
+_LOW = np.full(NP, PARAM_RANGE[0])
+_LOW[NP - 1] = 0.0  # g may be 0, or at least G_MIN
+
+
+def _valid_fields(a: np.ndarray) -> bool:
+    """Whether 11 values are the fields of a ``LegParams`` (its own checks, at numpy's speed: ``LegParams(*a)``
+    costs about 20 us, a parameter array's check at every step of ``step_inplace`` should not)."""
+    g = a[NP - 1]
+    return bool(np.all((a >= _LOW) & (a <= PARAM_RANGE[1]))) and (g == 0.0 or g >= PARAM_RANGE[0])
 
 
 def as_params(p) -> LegParams:

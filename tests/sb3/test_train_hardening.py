@@ -1,5 +1,5 @@
 """Training and evaluation under failure: normalize:false end to end, missing or corrupt checkpoints,
-a start that failed or was killed, two processes on one run folder, bad evaluation arguments (issue 13)."""
+a start that failed or was killed, two processes on one run folder, bad evaluation arguments."""
 
 import json
 import re

@@ -143,7 +143,7 @@ def _as_sync_info(info: dict, reward_keys) -> dict:
 
 def _strings_as_objects(x):
     """String arrays as object arrays, with None where their mask says no value (as SyncVectorEnv fills
-    them; the native batch has had ``""`` there since issue 9, kept for bitwise v0)."""
+    them; the native batch has ``""`` there, kept for bitwise v0)."""
     if isinstance(x, dict):
         out = {}
         for k, v in x.items():
@@ -849,8 +849,8 @@ RECOVERIES = Path(__file__).resolve().parents[1] / "policies" / "baselines" / "s
 
 @pytest.mark.parametrize("path", sorted(RECOVERIES.glob("*.npy")), ids=lambda p: p.stem)
 def test_stance_v1_starts_every_controller_fails_are_recoverable(path):
-    """The saved action sequences survive the seven starts the LQR and PPO fail (issue 10's evidence that
-    its 95% bar is not capped by the physics): replayed open loop from their seeds, whole episodes."""
+    """The saved action sequences survive the seven starts the LQR and PPO fail (the evidence that the
+    task's 95% bar is not capped by the physics): replayed open loop from their seeds, whole episodes."""
     seed = int(path.stem.rsplit("_", 1)[1])
     actions = np.load(path)
     env = gym.make("leg_env/PlanarLegBalance-v0")

@@ -241,7 +241,7 @@ def test_shipped_policy_survives():
 
 
 def test_shipped_randomised_policy_survives_held_out_robots():
-    """The randomised variant (issue 11) stands on robots drawn by seeds it never trained on, and on the nominal one."""
+    """The randomised variant stands on robots drawn by seeds it never trained on, and on the nominal one."""
     policy = load_policy(ROOT / "policies" / "ppo_stance_randomized")
     assert policy.env_kwargs == {}  # evaluated on the task as registered unless asked
     summary, _ = run_episodes(policy, EVAL_SEEDS, env_kwargs={"randomize": True})

@@ -29,7 +29,8 @@ Rows:
     touchdowns included; ratio to the pinned batch), and both models balancing: the stance LQR's action
     plus uniform noise of +-``BALANCE_NOISE``, only ``step`` timed, after ``BALANCE_WARMUP`` steps (ratio of
     unilateral to pinned).
-(e) every other registered task (``leg_env.tasks.REGISTRY``: ``PlanarLegBalance-v0``, ``PlanarLegPush-v0``)
+(e) every other registered task (``leg_env.tasks.REGISTRY``: ``PlanarLegBalance-v0``, ``PlanarLegPush-v1``,
+    ``PlanarLegHop-v3``)
     through ``gym.make_vec`` at N = 4096, under random actions and balancing, each as a share of the
     unilateral stance batch's rate under the same actions (the target: at least 90%).
 With ``--ppo``: SB3 PPO (``MlpPolicy``, SB3's default hyperparameters, 16,384-step rollouts) for

@@ -37,22 +37,14 @@ CONTACTS = ("pinned", "unilateral")
 CASES = {  # name: (env id, keyword arguments)
     "stance pinned": (leg_env.ENV_ID, {"contact": "pinned"}),
     "stance unilateral": (leg_env.ENV_ID, {"contact": "unilateral"}),
-    "push": ("leg_env/PlanarLegPush-v0", {}),
-    "push v1": ("leg_env/PlanarLegPush-v1", {}),
-    "hop": ("leg_env/PlanarLegHop-v0", {}),
-    "hop v1": ("leg_env/PlanarLegHop-v1", {}),
-    "hop v2": ("leg_env/PlanarLegHop-v2", {}),
-    "hop v3": ("leg_env/PlanarLegHop-v3", {}),
+    "push": ("leg_env/PlanarLegPush-v1", {}),
+    "hop": ("leg_env/PlanarLegHop-v3", {}),
     "stance pinned randomised": (leg_env.ENV_ID, {"contact": "pinned", "randomize": True}),
     "stance unilateral randomised": (leg_env.ENV_ID, {"contact": "unilateral", "randomize": True}),
-    "push randomised": ("leg_env/PlanarLegPush-v0", {"randomize": True}),
-    "push v1 randomised": ("leg_env/PlanarLegPush-v1", {"randomize": True}),
-    "hop randomised": ("leg_env/PlanarLegHop-v0", {"randomize": True}),
-    "hop v1 randomised": ("leg_env/PlanarLegHop-v1", {"randomize": True}),
-    "hop v2 randomised": ("leg_env/PlanarLegHop-v2", {"randomize": True}),
-    "hop v3 randomised": ("leg_env/PlanarLegHop-v3", {"randomize": True}),
-    "hop v3 command schedule": ("leg_env/PlanarLegHop-v3", {"command_period": 0.5}),  # the training setting
-    "hop v3 training charges": ("leg_env/PlanarLegHop-v3", {"drift_near_weight": 390.0, "drift_near_cap": 1.0, "limit_weight": 400.0}),
+    "push randomised": ("leg_env/PlanarLegPush-v1", {"randomize": True}),
+    "hop randomised": ("leg_env/PlanarLegHop-v3", {"randomize": True}),
+    "hop command schedule": ("leg_env/PlanarLegHop-v3", {"command_period": 0.5}),  # the training setting
+    "hop training charges": ("leg_env/PlanarLegHop-v3", {"drift_near_weight": 390.0, "drift_near_cap": 1.0, "limit_weight": 400.0}),
 }
 ACTIONS = ("random", "bang_bang")
 TORQUE_LIMIT = 500.0  # ten times the default 50 N m

@@ -79,10 +79,7 @@ def _gifs() -> dict[str, Path]:
             continue
         for line in config.read_text().splitlines():
             if line.startswith("env_id:"):
-                from leg_env.tasks import ALIASES
-
-                env_id = line.split(":", 1)[1].strip().strip("'\"")
-                found.setdefault(ALIASES.get(env_id, env_id), gif)  # a deprecated id's policy is its task's
+                found.setdefault(line.split(":", 1)[1].strip().strip("'\""), gif)
     return found
 
 

@@ -205,12 +205,8 @@ def make_sb3_vec_env(num_envs: int, seed: int | None = None, env_id: str | None 
     With ``seed``, the first ``reset`` seeds sub-env ``i`` with ``seed + i``.
     """
     if env_id is not None:
-        from .tasks import ALIASES, REGISTRY
+        from .tasks import REGISTRY
 
-        if env_id in ALIASES:
-            warnings.warn(f"{env_id} is deprecated and will be removed in the next release: it is now {ALIASES[env_id]}",
-                          DeprecationWarning, stacklevel=2)  # fmt: skip
-            env_id = ALIASES[env_id]
         if env_id not in REGISTRY:
             raise ValueError(f"env_id must be one of {sorted(REGISTRY)}, got {env_id!r}")
         task, fixed = REGISTRY[env_id]

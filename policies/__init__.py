@@ -8,7 +8,6 @@ per-robot state, SB3's ``episode_start``; all read the observation by the task's
 (``leg_env.tasks.base.Obs``).
 
 The shipped PPO policies are folders, each with its card (``README.md``): ``ppo_stance``, ``ppo_stance_randomized``,
-``ppo_balance``, ``ppo_push_v1``, ``ppo_push_randomized``, ``ppo_hop_v1``, ``ppo_hop_v2`` and ``ppo_hop_v3`` are plain PPO
-from scratch; ``ppo_stance_v1``, ``ppo_push`` and ``ppo_hop`` are residual PPO on a
-controller. Load any of them with ``train.evaluate.load_policy``.
+``ppo_balance``, ``ppo_push_v1``, ``ppo_push_randomized`` and ``ppo_hop_v3`` are plain PPO from scratch;
+``ppo_balance_residual`` is residual PPO on the gated controller. Load any of them with ``train.evaluate.load_policy``.
 """

@@ -2,7 +2,7 @@
 
 On the unilateral ground the stance LQR (``policies.lqr``) falls from every start whose capture point is far
 behind the foot: with the foot planted, the torso swings to its 1 rad limit. One small backward hop moves the
-foot under the falling COM, and the LQR then balances (``policies/baselines/stance_v1_recoveries/``). This
+foot under the falling COM, and the LQR then balances (``policies/baselines/balance_recoveries/``). This
 controller makes that choice once per episode, at its first observation:
 
     x_cp = x_com + x_com' / sqrt(g / y_com)        (the linear inverted pendulum's capture point, relative to the foot)

@@ -138,10 +138,9 @@ class HopperController(BatchedController):
         self.T_s, self.k_v, self.k_x = stance_time, speed_gain, position_gain
         self.attitude_gains, self.friction_margin, self.swing_gains = attitude_gains, friction_margin, swing_gains
 
-    # PlanarLegHop's 19 entries (v0), 21 (v1, v2) or 22 (v3), whose entries after the command (the COM's drift, the
-    # ground time, the last hop's apex) the controller does not read: it keeps its own dead reckoning and apex
-    # estimate and hops all the time
-    widths, task, dtype = (19, 21, 22), "PlanarLegHop: 19 entries (v0), 21 (v1, v2) or 22 (v3)", np.float64
+    # PlanarLegHop's 22 entries, whose entries after the command (the COM's drift, the ground time, the last hop's
+    # apex) the controller does not read: it keeps its own dead reckoning and apex estimate and hops all the time
+    widths, task, dtype = (22,), "PlanarLegHop-v3: 22 entries", np.float64
 
     def _allocate(self, n: int) -> None:
         self._x0, self._bias, self._apex = np.zeros(n), np.zeros(n), np.zeros(n)
@@ -155,7 +154,7 @@ class HopperController(BatchedController):
         self._was_flight[rows] = False
 
     def torque(self, obs: np.ndarray) -> np.ndarray:
-        """Joint torques [N m] for observations ``(N, 19)`` or ``(N, 21)``; advances the per-robot phase and apex bias."""
+        """Joint torques [N m] for observations ``(N, 22)``; advances the per-robot phase and apex bias."""
         p, m, a, b = self.params, self.m, self.a, self.b
         l1, l2, g, dt = p.l1, p.l2, p.g, self.config.dt
         thb, q1, q2 = obs[:, Obs.th_b], obs[:, Obs.q1], obs[:, Obs.q2]
@@ -282,12 +281,13 @@ class HopperController(BatchedController):
         task's own entries after the 18 are not read) and an apex command.
 
         The recovery hop of another controller (``policies.gated``, ``policies.stepping``): the hopper runs on the
-        whole batch, its state being per robot, with ``command`` [m] as the observation's last entry; the robots
+        whole batch, its state being per robot, with ``command`` [m] as the hop task's command entry; the robots
         in ``starts`` start afresh (a hop's first step).
         """
         n = observation.shape[0]
-        ground = observation[:, :OBS_DIM_UNILATERAL].astype(np.float32)  # the unilateral ground's 18 entries
-        hop_obs = np.concatenate([ground, np.full((n, 1), command, dtype=np.float32)], axis=1)
+        hop_obs = np.full((n, self.widths[0]), np.nan, dtype=np.float32)  # the hop's entries after the command: not read
+        hop_obs[:, :OBS_DIM_UNILATERAL] = observation[:, :OBS_DIM_UNILATERAL]  # the unilateral ground's 18 entries
+        hop_obs[:, Obs.command] = command
         hop_action, _ = self.predict(hop_obs, episode_start=starts)
         action[rows] = hop_action[rows]
 

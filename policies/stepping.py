@@ -1,4 +1,4 @@
-"""A model-based push-recovery controller for ``leg_env/PlanarLegPush-v0``: the LQR, and a quick hop for large pushes.
+"""A model-based push-recovery controller for ``leg_env/PlanarLegPush-v1``: the LQR, and a quick hop for large pushes.
 
 With the foot planted, the only way to stop a push is the torso: the stance LQR (``policies.lqr``) turns it to
 tilt the ground force, and from about 25 N over 0.1 s the torso reaches its 1 rad limit or the knee folds

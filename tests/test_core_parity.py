@@ -22,9 +22,9 @@ CASES = [
     ("leg_env/PlanarLegStance-v0", False),
     ("leg_env/PlanarLegBalance-v0", False),
     ("leg_env/PlanarLegBalance-v0", True),
-    ("leg_env/PlanarLegPush-v0", False),
-    ("leg_env/PlanarLegHop-v0", False),
-    ("leg_env/PlanarLegHop-v0", True),
+    ("leg_env/PlanarLegPush-v1", False),
+    ("leg_env/PlanarLegHop-v3", False),
+    ("leg_env/PlanarLegHop-v3", True),
 ]
 STEPS = 150
 

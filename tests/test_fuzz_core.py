@@ -769,15 +769,12 @@ def _values_of(base):
     return (0, 1, 2, 255)  # bool: raw bytes
 
 
-def _obs_dim(task, unilateral, observe_progress, observe_apex=False, observe_com=False):
-    """The observation's width the C core requires: the hop's 19, 21 observing its progress (v1), 22 observing the last
-    apex too (v3; None, refused, without the progress); else the ground's, and one more for the push observing its
-    COM (v1)."""
-    if task != 2:
-        return (18 if unilateral else 12) + (1 if task == 1 and observe_com else 0)
-    if observe_apex:
-        return 22 if observe_progress else None
-    return 21 if observe_progress else 19
+def _obs_dim(task, unilateral):
+    """The observation's width the C core requires: the balance's 12 on the pinned foot, 18 on the unilateral ground;
+    the push's 19 and the hop's 22, on the unilateral ground only (None: refused)."""
+    if task == 0:
+        return 18 if unilateral else 12
+    return (19 if task == 1 else 22) if unilateral else None
 
 
 def field_rule(array, field, value, task, obs_cols, modes, takes_obs):
@@ -789,16 +786,8 @@ def field_rule(array, field, value, task, obs_cols, modes, takes_obs):
               "substeps": lambda v: 1 <= v <= 4096}.get(field)
         if ok is not None:
             return (A if ok(value) else R), ("settings",)
-        progress, apex = obs_cols in (21, 22), obs_cols == 22  # the hop's flags that gave obs its width
-        com = task == 1 and obs_cols in (13, 19)  # the push's
-        if field == "unilateral" and takes_obs:
-            return (A if _obs_dim(task, bool(value), progress, apex, com) == obs_cols else R), ("obs", "settings")
-        if field == "observe_com" and takes_obs:  # the push's (its own settings only)
-            return (A if _obs_dim(task, obs_cols >= 18, False, False, bool(value)) == obs_cols else R), ("obs", "settings")
-        if field == "observe_progress" and takes_obs:  # the hop's (its own settings only)
-            return (A if _obs_dim(task, False, bool(value), apex) == obs_cols else R), ("obs", "settings")
-        if field == "observe_apex" and takes_obs:
-            return (A if _obs_dim(task, False, progress, bool(value)) == obs_cols else R), ("obs", "settings")
+        if field == "unilateral" and takes_obs:  # the ground, which sets obs's width
+            return (A if _obs_dim(task, bool(value)) == obs_cols else R), ("obs", "settings")
     if array == "state" and field in ("mode", "prev_mode") and modes:
         return (A if value in (0, 1, 2, 3) else R), ("state",)
     return A, (array,)

@@ -37,6 +37,16 @@ def test_capture_point_is_the_com_plus_its_velocity_term():
         assert capture_point(obs, p) == pytest.approx(c[0] + v[0] / np.sqrt(p.g / c[1]), abs=1e-9)
 
 
+def _hop_obs(obs, command):
+    """The hop task's observation of a balance observation and a command: the entries after the command are not read
+    by the hopper (NaN would show if they were)."""
+    from leg_env.tasks.base import Obs
+
+    hop = np.full(22, np.nan, dtype=np.float32)
+    hop[:18], hop[Obs.command] = obs, command
+    return hop
+
+
 def test_decision_follows_the_capture_point_rule():
     env, _ = _start(0)
     u = env.unwrapped
@@ -52,9 +62,9 @@ def test_decision_follows_the_capture_point_rule():
     for seed in (10003, 10000):
         obs = env.reset(seed=seed)[0]
         hopper = HopperController(u.params, None, **HOP_GAINS)
-        expect = hopper.predict(np.append(obs, np.float32(0.06)))[0] if seed in HOP_SEEDS else lqr.predict(obs)[0]
+        expect = hopper.predict(_hop_obs(obs, 0.06))[0] if seed in HOP_SEEDS else lqr.predict(obs)[0]
         np.testing.assert_array_equal(GatedController(u.params, u.config).predict(obs)[0], expect)
-        assert not np.array_equal(expect, (lqr.predict(obs)[0] if seed in HOP_SEEDS else hopper.predict(np.append(obs, np.float32(0.06)))[0]))
+        assert not np.array_equal(expect, (lqr.predict(obs)[0] if seed in HOP_SEEDS else hopper.predict(_hop_obs(obs, 0.06))[0]))
     never = GatedController(u.params, u.config, threshold=-1.0)
     np.testing.assert_array_equal(never.predict(env.reset(seed=10003)[0])[0], lqr.predict(env.reset(seed=10003)[0])[0])
 
@@ -129,15 +139,15 @@ def test_residual_on_the_gated_controller_reloads_as_the_sum(tmp_path):
 
 
 @pytest.mark.sb3
-def test_shipped_stance_v1_policy_loads_and_survives():
-    """policies/ppo_stance_v1: the residual network on the gated controller, rebuilt from its config.yaml, stands
+def test_shipped_residual_balance_policy_loads_and_survives():
+    """policies/ppo_balance_residual: the residual network on the gated controller, rebuilt from its config.yaml, stands
     from an ordinary start and recovers two starts the LQR falls from (a backward hop)."""
     from pathlib import Path
 
     from train.evaluate import run_episodes
     from train.residual import ResidualPolicy
 
-    folder = Path(__file__).resolve().parents[1] / "policies" / "ppo_stance_v1"
+    folder = Path(__file__).resolve().parents[1] / "policies" / "ppo_balance_residual"
     policy = load_policy(folder)
     assert isinstance(policy, ResidualPolicy) and isinstance(policy.controller, GatedController)
     assert policy.env_id == ENV_ID and policy.env_kwargs == {}  # evaluated on the task as registered

@@ -21,7 +21,7 @@ from test_vector import SEED, STEPS, assert_same, random_actions
 
 ROOT = Path(__file__).resolve().parents[1]
 TASK_IDS = leg_env.ENV_IDS
-STANCE_V1 = "leg_env/PlanarLegBalance-v0"
+BALANCE = "leg_env/PlanarLegBalance-v0"
 N = 6
 
 
@@ -36,11 +36,11 @@ def robot(info_params: dict, i: int | None = None) -> tuple[LegParams, float, np
 
 
 def test_without_randomize_the_shipped_lqr_evaluation_reproduces_bit_for_bit():
-    """randomize=None draws nothing and changes nothing: the shipped Stance-v1 LQR episodes, exactly."""
+    """randomize=None draws nothing and changes nothing: the shipped balance LQR episodes, exactly."""
     from policies.lqr import LQRController
 
-    shipped = json.loads((ROOT / "policies/baselines/lqr_stance_v1/lqr.json").read_text())
-    env = gym.make(STANCE_V1)
+    shipped = json.loads((ROOT / "policies/baselines/lqr_balance/lqr.json").read_text())
+    env = gym.make(BALANCE)
     policy = LQRController(env.unwrapped.params, env.unwrapped.config)
     for episode in shipped["per_episode"][:8]:
         obs, info = env.reset(seed=episode["seed"])
@@ -56,7 +56,7 @@ def test_without_randomize_the_shipped_lqr_evaluation_reproduces_bit_for_bit():
 
 
 def test_without_randomize_there_is_one_robot_row_and_no_params_key():
-    envs = gym.make_vec(STANCE_V1, num_envs=3)
+    envs = gym.make_vec(BALANCE, num_envs=3)
     _, info = envs.reset(seed=0)
     assert "params" not in info and envs.unwrapped._robots.shape[0] == 1
 
@@ -118,7 +118,7 @@ def test_each_sub_env_runs_leg_env_dynamics_with_its_drawn_parameters(contact):
 
 
 def test_defaults_stay_in_their_ranges_and_never_compound():
-    env = gym.make(STANCE_V1, randomize=True)
+    env = gym.make(BALANCE, randomize=True)
     nominal = {**{n: getattr(LegParams(), n) for n in PARAM_NAMES}, "mu": 0.5, "hip_torque_limit": 40.0, "knee_torque_limit": 40.0}
     nominal["hip_torque_limit"], nominal["knee_torque_limit"] = env.unwrapped.config.torque_limit
     seen = {name: [] for name in FIELDS}
@@ -159,7 +159,7 @@ def test_painleve_prone_friction_is_refused_on_the_unilateral_ground():
     """mu from 0.7 to 1.2 straddles the Painleve bound at the nominal posture (about 1.0): robots at or past it are
     redrawn, so every robot that runs has mu below its own bound there; on the pinned ground mu is kept."""
     ranges = {"mu": ("range", 0.7, 1.2), "m1": ("scale", 0.8, 1.2)}
-    env = gym.make(STANCE_V1, randomize=ranges)
+    env = gym.make(BALANCE, randomize=ranges)
     env.reset(seed=2)
     rejected = 0
     for _ in range(100):
@@ -191,16 +191,16 @@ def test_painleve_prone_friction_is_refused_on_the_unilateral_ground():
 )
 def test_bad_ranges_raise_naming_the_field(randomize, error, match):
     with pytest.raises(error, match=match):
-        gym.make(STANCE_V1, randomize=randomize)
+        gym.make(BALANCE, randomize=randomize)
     with pytest.raises(error, match=match):
-        gym.make_vec(STANCE_V1, num_envs=2, randomize=randomize)
+        gym.make_vec(BALANCE, num_envs=2, randomize=randomize)
 
 
 # ------------------------------------------------------------------ explicit robots
 
 
 def test_reset_option_params_sets_a_robot_for_one_episode():
-    env = gym.make(STANCE_V1)
+    env = gym.make(BALANCE)
     _, info = env.reset(seed=0, options={"params": {"m_b": 12.0, "mu": 0.3}})
     assert info["params"]["m_b"] == 12.0 and info["params"]["mu"] == 0.3 and info["params"]["m1"] == 3.0
     assert "params_rejected" not in info
@@ -211,12 +211,12 @@ def test_reset_option_params_sets_a_robot_for_one_episode():
     _, info = env.reset(seed=0)
     assert "params" not in info and env.unwrapped.robot_params == LegParams()
     obs_a = env.reset(seed=4)[0]
-    obs_b = gym.make(STANCE_V1).reset(seed=4)[0]
+    obs_b = gym.make(BALANCE).reset(seed=4)[0]
     np.testing.assert_array_equal(obs_a, obs_b)  # back to the nominal robot exactly
 
 
 def test_vector_reset_option_params_per_sub_env_and_masked_info():
-    envs = gym.make_vec(STANCE_V1, num_envs=3, autoreset_mode=AutoresetMode.DISABLED)
+    envs = gym.make_vec(BALANCE, num_envs=3, autoreset_mode=AutoresetMode.DISABLED)
     _, info = envs.reset(seed=0, options={"params": {"m_b": np.array([9.0, 10.0, 11.0])}})
     np.testing.assert_array_equal(info["params"]["m_b"], [9.0, 10.0, 11.0])
     assert info["_params"].all()
@@ -240,7 +240,7 @@ def test_vector_reset_option_params_per_sub_env_and_masked_info():
     ],
 )
 def test_bad_reset_params_raise_and_change_nothing(params, match):
-    env = gym.make(STANCE_V1)
+    env = gym.make(BALANCE)
     env.reset(seed=0)
     env.step(np.array([0.1, -0.1], dtype=np.float32))
     before = env.unwrapped.state
@@ -255,7 +255,7 @@ def test_bad_reset_params_raise_and_change_nothing(params, match):
 
 
 def test_pickled_randomised_env_continues_identically():
-    env = gym.make("leg_env/PlanarLegPush-v0", randomize=True).unwrapped
+    env = gym.make("leg_env/PlanarLegPush-v1", randomize=True).unwrapped
     env.reset(seed=3)
     clone = pickle.loads(pickle.dumps(env))
     for a in random_actions(60, 1, seed=4)[:, 0]:
@@ -269,7 +269,7 @@ def test_pickled_randomised_env_continues_identically():
 def test_sb3_adapter_takes_randomize_and_reports_the_robots():
     from leg_env.sb3 import make_sb3_vec_env
 
-    venv = make_sb3_vec_env(3, seed=0, env_id=STANCE_V1, randomize=True)
+    venv = make_sb3_vec_env(3, seed=0, env_id=BALANCE, randomize=True)
     venv.reset()
     masses = [info["params"]["m_b"] for info in venv.reset_infos]
     assert len(set(masses)) == 3

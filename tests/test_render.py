@@ -99,7 +99,7 @@ def test_a_push_shows_as_an_arrow_at_the_torso():
     pushes from, and not before or after it."""
     from leg_env.render import PUSH, _Camera
 
-    env = gym.make("leg_env/PlanarLegPush-v0", render_mode="rgb_array", push_force=(100.0, 100.0), first_push=(0.05, 0.05))
+    env = gym.make("leg_env/PlanarLegPush-v1", render_mode="rgb_array", push_force=(100.0, 100.0), first_push=(0.05, 0.05))
     env.reset(seed=1)
     assert count(env.render(), PUSH) == 0
     for _ in range(10):  # the push starts 0.05 s in and lasts 10 steps of 0.01 s
@@ -121,7 +121,7 @@ def test_a_push_shows_as_an_arrow_at_the_torso():
     assert info["push_force"] == 0.0 and count(env.render(), PUSH) == 0
 
 
-@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegStance-v0", "leg_env/PlanarLegHop-v0"])
+@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegStance-v0", "leg_env/PlanarLegHop-v3"])
 def test_a_randomised_batch_draws_each_robot_with_its_own_parameters(env_id):
     """Every sub-env's frame is its own robot (its link lengths, its friction cone) at its own state, the frame
     the single env draws for that robot; with drawn lengths the nominal robot's frame differs."""

@@ -70,7 +70,7 @@ def test_a_reward_weight_holds_from_the_next_step(kind):
         ({"mu": 0.4}, ValueError, r"set_config\(mu\).*the robot"),
         ({"min_base_height": 0.45}, ValueError, r"set_config\(min_base_height\).*posture limits"),
         ({"dt": 0.02}, ValueError, r"set_config\(dt\).*control period"),
-        ({"observe_apex": False}, ValueError, r"observation's shape"),
+        ({"contact": "pinned"}, ValueError, "contact"),
         ({"alive_bonus": float("nan")}, ValueError, "alive_bonus"),
         ({"command_range": (0.1, 0.05)}, ValueError, "command_range"),
         ({"hip_range": (-3.0, -2.5)}, ValueError, "already terminal"),

@@ -20,7 +20,7 @@ from train.episodes import push_survival
 from train.task_metrics import HopTracker, largest_survived_impulse
 
 ROOT = Path(__file__).resolve().parents[1]
-TASK_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v0", "leg_env/PlanarLegHop-v0")
+TASK_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v1", "leg_env/PlanarLegHop-v3")
 TINY = ["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]
 
 
@@ -58,9 +58,9 @@ def test_lqr_reads_the_unilateral_observation():
 
 
 def test_hopper_is_loaded_for_the_hop_task_and_is_batched():
-    hopper = load_policy("hopper", env_id="leg_env/PlanarLegHop-v0")
+    hopper = load_policy("hopper", env_id="leg_env/PlanarLegHop-v3")
     assert isinstance(hopper, HopperController)
-    envs = gym.make_vec("leg_env/PlanarLegHop-v0", num_envs=3)
+    envs = gym.make_vec("leg_env/PlanarLegHop-v3", num_envs=3)
     obs, _ = envs.reset(seed=5)
     batch, _ = hopper.predict(obs)
     singles = []
@@ -69,14 +69,14 @@ def test_hopper_is_loaded_for_the_hop_task_and_is_batched():
         singles.append(hopper.predict(row)[0])
     np.testing.assert_array_equal(batch, np.stack(singles))
     assert batch.shape == (3, 2) and np.all(np.abs(batch) <= 1.0)
-    with pytest.raises(ValueError, match="19"):
-        hopper.predict(np.zeros(18))
+    with pytest.raises(ValueError, match="22"):
+        hopper.predict(np.zeros(19))
 
 
 def test_hop_tracker_apex_is_the_ballistic_apex():
     """A robot thrown upwards with zero torques: the tracker's apex is the same at every instant of the
     flight and lies above the highest sampled COM height by at most g dt^2 / 8."""
-    envs = gym.make_vec("leg_env/PlanarLegHop-v0", num_envs=1)
+    envs = gym.make_vec("leg_env/PlanarLegHop-v3", num_envs=1)
     envs.reset(seed=0)
     q, _, _ = envs.state
     q = q[0].copy()
@@ -103,7 +103,7 @@ def test_hop_tracker_apex_is_the_ballistic_apex():
 
 def test_hop_tracker_counts_hops_and_errors_of_the_hopper():
     hopper = HopperController()
-    summary, series = run_episodes(hopper, [10_000], record=0, env_id="leg_env/PlanarLegHop-v0")
+    summary, series = run_episodes(hopper, [10_000], record=0, env_id="leg_env/PlanarLegHop-v3")
     assert {"hops", "mean_abs_apex_error", "rms_apex_error", "mean_hop_period", "mean_landing_impulse"} <= set(summary)
     hop = series["hop"]
     assert len(hop["com_height"]) == summary["per_episode"][0]["length"]
@@ -145,7 +145,7 @@ def test_hop_tracker_splits_the_apex_errors_by_command():
 
 
 def test_push_survival_uses_the_same_seeds_and_fixed_forces():
-    lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v0")
+    lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v1")
     rows = push_survival(lqr, [0.0, 200.0], episodes=4, seed=10_000)
     assert [r["force"] for r in rows] == [0.0, 200.0]
     assert rows[0]["survival_rate"] == 1.0  # no push: the LQR balances
@@ -157,7 +157,7 @@ def test_push_survival_uses_the_same_seeds_and_fixed_forces():
 
 
 def test_push_curve_needs_the_push_task(tmp_path):
-    with pytest.raises(ValueError, match="PlanarLegPush-v0"):
+    with pytest.raises(ValueError, match="PlanarLegPush-v1"):
         evaluate(EvalArgs(policy="lqr", env_id="leg_env/PlanarLegBalance-v0", episodes=1, push_curve=True, out=tmp_path, plot=False))
 
 
@@ -219,9 +219,9 @@ def test_residual_env_applies_the_controller_plus_the_scaled_correction():
     from train.residual import ResidualVecEnv, residual_action
 
     np.testing.assert_array_equal(residual_action(np.array([0.5, -0.9]), np.array([3.0, -0.5]), 0.3), np.float32([0.8, -1.0]))
-    lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v0")
-    wrapped = ResidualVecEnv(make_sb3_vec_env(3, seed=7, env_id="leg_env/PlanarLegPush-v0"), lqr, 0.5)
-    plain = make_sb3_vec_env(3, seed=7, env_id="leg_env/PlanarLegPush-v0")
+    lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v1")
+    wrapped = ResidualVecEnv(make_sb3_vec_env(3, seed=7, env_id="leg_env/PlanarLegPush-v1"), lqr, 0.5)
+    plain = make_sb3_vec_env(3, seed=7, env_id="leg_env/PlanarLegPush-v1")
     obs_w, obs_p = wrapped.reset(), plain.reset()
     rng = np.random.default_rng(0)
     for _ in range(30):
@@ -235,12 +235,12 @@ def test_residual_env_applies_the_controller_plus_the_scaled_correction():
 def test_residual_run_reloads_as_the_sum(tmp_path):
     from train.residual import ResidualPolicy
 
-    out = train(TrainArgs(out=tmp_path / "run", env_id="leg_env/PlanarLegHop-v0", residual="hopper", residual_scale=0.2,
+    out = train(TrainArgs(out=tmp_path / "run", env_id="leg_env/PlanarLegHop-v3", residual="hopper", residual_scale=0.2,
                           params=list(TINY), total_timesteps=128, eval_freq=128, eval_episodes=2, checkpoint_freq=0,
                           progress_bar=False, verbose=0))  # fmt: skip
     policy = load_policy(out)
     assert isinstance(policy, ResidualPolicy) and policy.scale == 0.2
-    obs = gym.make("leg_env/PlanarLegHop-v0").reset(seed=4)[0]
+    obs = gym.make("leg_env/PlanarLegHop-v3").reset(seed=4)[0]
     hopper = HopperController()
     expected = np.clip(hopper.predict(obs)[0] + 0.2 * np.clip(policy.network.predict(obs)[0], -1, 1), -1, 1)
     policy.reset()

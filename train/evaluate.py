@@ -4,7 +4,7 @@
     python -m train.evaluate policies/ppo_stance
     python -m train.evaluate lqr --out runs/lqr_eval
     python -m train.evaluate policies/ppo_push_v1 --baseline stepping lqr --episodes 100 --push-curve
-    python -m train.evaluate policies/ppo_hop --baseline hopper --episodes 100 --gif
+    python -m train.evaluate policies/ppo_hop_v3 --baseline hopper --episodes 100 --gif
 
 ``policy`` is a run or policy folder (``model.zip``, ``vecnormalize.pkl``, optionally ``config.yaml``
 whose ``eval_env_kwargs`` the evaluation env uses: by default none, the registered task as is, even
@@ -462,7 +462,7 @@ def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs
     from train.task_metrics import is_push_task, largest_survived_impulse
 
     if not is_push_task(env_id):
-        raise ValueError(f"--push-curve needs a push task (leg_env/PlanarLegPush-v0 or -v1), not {env_id}")
+        raise ValueError(f"--push-curve needs the push task (leg_env/PlanarLegPush-v1), not {env_id}")
     curves = {label: push_survival(c, PUSH_FORCES, args.episodes, args.seed, env_kwargs, env_id) for label, c in controllers.items()}
     best = {label: largest_survived_impulse(rows) for label, rows in curves.items()}
     (out / "push_curve.json").write_text(json.dumps({"seeds": [args.seed, args.seed + args.episodes - 1], "curves": curves, "impulse_90": best}, indent=2) + "\n")

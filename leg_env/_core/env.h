@@ -91,16 +91,15 @@ typedef enum {
     OBS_PINNED_DIM, /* the pinned foot's observation ends here */
     OBS_FOOT_HEIGHT = OBS_PINNED_DIM, OBS_FOOT_VX, OBS_FOOT_VY, OBS_CONTACT, OBS_SLIP, OBS_IMPULSE_Y,
     OBS_UNILATERAL_DIM, /* the unilateral ground's */
-    OBS_COMMAND = OBS_UNILATERAL_DIM,
+    OBS_COMMAND = OBS_UNILATERAL_DIM, /* the hop's: its command, */
+    OBS_COM_DRIFT,                    /* the COM's x from its start, */
+    OBS_GROUND_TIME,                  /* the time since the last hop, */
+    OBS_LAST_APEX,                    /* the last landed hop's apex rise */
     OBS_HOP_DIM,
-    OBS_COM_DRIFT = OBS_HOP_DIM, /* with the hop's observe_progress */
-    OBS_GROUND_TIME,
-    OBS_PROGRESS_DIM,
-    OBS_LAST_APEX = OBS_PROGRESS_DIM, /* with the hop's observe_apex */
-    OBS_MAX_DIM
+    OBS_MAX_DIM = OBS_HOP_DIM
 } obs_index;
 
-/* The push task's entry (with its observe_com, on the unilateral ground): the COM's x from its start. */
+/* The push task's entry (on the unilateral ground): the COM's x from its start. */
 #define OBS_PUSH_COM_DRIFT OBS_UNILATERAL_DIM
 #define OBS_PUSH_DIM (OBS_UNILATERAL_DIM + 1)
 

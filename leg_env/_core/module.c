@@ -371,11 +371,10 @@ static int env_values(const env_batch *b, int task, int modes)
         if (b->state[i].mode < LEG_STICK || b->state[i].mode > LEG_FLIGHT || b->state[i].prev_mode < LEG_STICK || b->state[i].prev_mode > LEG_FLIGHT)
             return error(PyExc_ValueError, "state row %zd: the contact modes must be 0, 1, 2 or 3, got %d (prev_mode %d)", i,
                                  (int)b->state[i].mode, (int)b->state[i].prev_mode);
-    if (task == TASK_HOP && s->task.hop.observe_apex && !s->task.hop.observe_progress)
-        return error(PyExc_ValueError, "obs cannot fit task %d with these settings: observe_apex needs observe_progress", task);
+    if (task != TASK_STANCE && !s->unilateral)
+        return error(PyExc_ValueError, "settings: task %d needs the unilateral ground (settings[\"unilateral\"])", task);
     if (b->obs_cols != task_obs_dim(task, s))
-        return error(PyExc_ValueError, "obs must have shape (%zd, %zd) for task %d and its settings (unilateral, observe_progress, "
-                             "observe_apex, observe_com), got (%zd, %zd)", b->n, task_obs_dim(task, s), task, b->n, b->obs_cols);
+        return error(PyExc_ValueError, "obs must have shape (%zd, %zd) for task %d and its ground, got (%zd, %zd)", b->n, task_obs_dim(task, s), task, b->n, b->obs_cols);
     return 1;
 }
 
@@ -548,8 +547,7 @@ static PyObject *py_observation(PyObject *self, PyObject *unused)
         OBS(foot_height, OBS_FOOT_HEIGHT), OBS(foot_vx, OBS_FOOT_VX), OBS(foot_vy, OBS_FOOT_VY), OBS(contact, OBS_CONTACT), OBS(slip, OBS_SLIP),
         OBS(impulse_y, OBS_IMPULSE_Y), OBS(command, OBS_COMMAND), OBS(com_drift, OBS_COM_DRIFT), OBS(ground_time, OBS_GROUND_TIME),
         OBS(last_apex, OBS_LAST_APEX), OBS(push_com_drift, OBS_PUSH_COM_DRIFT), OBS(pinned_dim, OBS_PINNED_DIM),
-        OBS(unilateral_dim, OBS_UNILATERAL_DIM), OBS(hop_dim, OBS_HOP_DIM), OBS(hop_progress_dim, OBS_PROGRESS_DIM),
-        OBS(hop_apex_dim, OBS_MAX_DIM), OBS(push_com_dim, OBS_PUSH_DIM)};
+        OBS(unilateral_dim, OBS_UNILATERAL_DIM), OBS(hop_dim, OBS_HOP_DIM), OBS(push_dim, OBS_PUSH_DIM)};
     PyObject *dict = PyDict_New();
     for (size_t k = 0; dict != NULL && k < sizeof COLUMNS / sizeof COLUMNS[0]; k++)
         if (!put(dict, COLUMNS[k].name, PyLong_FromLong(COLUMNS[k].column)))

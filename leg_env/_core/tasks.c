@@ -213,8 +213,7 @@ static void push_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inert
     if (evaluate(b, i, shared, o->terms, PUSH_TERMS)) {
         const double dx = o->com[0] - t->x_com0;
         o->terms[PUSH_TERMS - 1] = -b->settings->task.push.w_com * dx * dx;
-        if (b->settings->task.push.observe_com) /* the last column (the width is checked against the settings) */
-            b->obs[(i + 1) * b->obs_cols - 1] = (float)dx;
+        b->obs[i * b->obs_cols + OBS_PUSH_COM_DRIFT] = (float)dx;
     }
     guard_observation(b, i, kept, PUSH_TERMS);
     o->task.push.push_force = force;
@@ -236,8 +235,7 @@ static void push_start(const env_batch *b, Py_ssize_t i)
     o->task.push.work_push = 0.0;
     t->steps = 0;
     t->x_com0 = o->com[0];
-    if (b->settings->task.push.observe_com)
-        b->obs[(i + 1) * b->obs_cols - 1] = 0.0f;
+    b->obs[i * b->obs_cols + OBS_PUSH_COM_DRIFT] = 0.0f;
     s->load = push_load_at(t, 0, b->settings->task.push.push_steps);
 }
 
@@ -326,52 +324,24 @@ static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inerti
     /* hops: a flight of at least min_flight; the ground time runs from the end of the last one */
     const int landed = s->mode != LEG_FLIGHT && t->flight_run > 0.0; /* a flight ended in this step */
     const double flight_length = t->flight_run + o->tally.flight_time; /* with this step's share */
-    const int hop_began = s->mode == LEG_FLIGHT && flight_length >= c->task.hop.min_flight
-                          && (t->flight_run < c->task.hop.min_flight || t->flight_run == 0.0); /* this flight became a hop */
     t->flight_run = s->mode == LEG_FLIGHT ? t->flight_run + o->tally.flight_time : 0.0;
     t->ground_time = t->flight_run >= c->task.hop.min_flight ? 0.0 : t->ground_time + c->dt;
     terms[0] = stance_terms[0]; /* alive: the balance task's health predicate */
     if (t->ground_time > c->task.hop.max_ground_time) /* and hopping */
         terms[0] = 0.0;
-    if (s->mode == LEG_FLIGHT) /* in flight E_v / (m g) is the arc's apex height above the ground (no apex without gravity) */
+    if (s->mode == LEG_FLIGHT) { /* in flight E_v / (m g) is the arc's apex height above the ground (none without gravity) */
         t->arc_apex = g > 0.0 ? e_v / (m * g) - y_stand : 0.0;
-    if (landed && flight_length >= c->task.hop.min_flight)
+        t->arc_kernel = height_kernel(e_v - e_star, weight, height_scale, c->task.hop.height_scale_fine);
+    }
+    if (landed && flight_length >= c->task.hop.min_flight) { /* a hop landed: its apex is the one paid from now on */
         t->apex = t->arc_apex;
-    terms[1] = 0.0;
-    if (c->task.hop.hold_height) { /* the kernel of the last landed hop's apex, paid at every step while hopping */
-        if (s->mode == LEG_FLIGHT) /* in flight E_v is m g times the arc's apex height */
-            t->arc_kernel = height_kernel(e_v - e_star, weight, height_scale, c->task.hop.height_scale_fine);
-        if (landed && flight_length >= c->task.hop.min_flight) /* a hop landed: its apex is the one paid from now on */
-            t->held = t->arc_kernel;
-        if (t->ground_time <= c->task.hop.max_ground_time)
-            terms[1] = w_height * t->held;
-    } else if (!c->task.hop.flight_height || s->mode == LEG_FLIGHT) { /* (the kernels are not evaluated when unpaid) */
-        terms[1] = w_height * height_kernel(e_v - e_star, weight, height_scale, c->task.hop.height_scale_fine);
-        if (c->task.hop.flight_height) /* in flight E_v is m g times the arc's apex height: paid for the step's flight */
-            terms[1] = terms[1] * (o->tally.flight_time / c->dt);
+        t->held = t->arc_kernel;
     }
-    if (c->task.hop.pay_on_landing) { /* banked over the flight, paid when it lands (and not if the landing falls) */
-        t->banked += terms[1];
-        terms[1] = 0.0;
-        if (landed) { /* a flight shorter than a hop (a stumble, a chattering foot) pays nothing if pay_hops_only */
-            terms[1] = c->task.hop.pay_hops_only && flight_length < c->task.hop.min_flight ? 0.0 : t->banked;
-            t->banked = 0.0;
-            if (c->task.hop.pay_on_next_hop) { /* a hop counts once the robot has hopped again: a jump and a fall pays nothing */
-                t->pending += terms[1];
-                terms[1] = 0.0;
-            }
-        }
-        if (c->task.hop.pay_on_next_hop && hop_began) {
-            terms[1] = t->pending;
-            t->pending = 0.0;
-        }
-    }
-    if (c->task.hop.observe_progress) {
-        b->obs[i * b->obs_cols + OBS_COM_DRIFT] = (float)dx;
-        b->obs[i * b->obs_cols + OBS_GROUND_TIME] = (float)t->ground_time;
-    }
-    if (c->task.hop.observe_apex)
-        b->obs[i * b->obs_cols + OBS_LAST_APEX] = (float)t->apex;
+    /* the height term: the kernel of the last landed hop's apex, paid at every step while hopping */
+    terms[1] = t->ground_time <= c->task.hop.max_ground_time ? w_height * t->held : 0.0;
+    b->obs[i * b->obs_cols + OBS_COM_DRIFT] = (float)dx;
+    b->obs[i * b->obs_cols + OBS_GROUND_TIME] = (float)t->ground_time;
+    b->obs[i * b->obs_cols + OBS_LAST_APEX] = (float)t->apex;
     terms[2] = -b->settings->task.hop.w_drift * dx * dx
                - near_drift_charge(dx, b->settings->task.hop.w_drift_near, b->settings->task.hop.drift_near_cap);
     terms[3] = -b->settings->task.hop.w_tilt * s->q[2] * s->q[2];
@@ -396,20 +366,15 @@ static void hop_start(const env_batch *b, Py_ssize_t i)
     b->obs[i * b->obs_cols + OBS_COMMAND] = (float)s->task.hop.command;
     s->task.hop.flight_run = 0.0;
     s->task.hop.ground_time = 0.0;
-    s->task.hop.banked = 0.0;
-    s->task.hop.pending = 0.0;
     s->task.hop.arc_kernel = 0.0;
     s->task.hop.held = 0.0;
     s->task.hop.arc_apex = 0.0;
     s->task.hop.apex = 0.0;
     s->task.hop.command_age = 0;
     s->task.hop.next_command = 0;
-    if (b->settings->task.hop.observe_progress) {
-        b->obs[i * b->obs_cols + OBS_COM_DRIFT] = 0.0f;
-        b->obs[i * b->obs_cols + OBS_GROUND_TIME] = 0.0f;
-    }
-    if (b->settings->task.hop.observe_apex)
-        b->obs[i * b->obs_cols + OBS_LAST_APEX] = 0.0f;
+    b->obs[i * b->obs_cols + OBS_COM_DRIFT] = 0.0f;
+    b->obs[i * b->obs_cols + OBS_GROUND_TIME] = 0.0f;
+    b->obs[i * b->obs_cols + OBS_LAST_APEX] = 0.0f;
     s->task.hop.x_com0 = o->com[0];
 }
 
@@ -422,9 +387,10 @@ static int task_terms(int task) { return task == TASK_STANCE ? STANCE_TERMS : (t
 static Py_ssize_t task_obs_dim(int task, const env_settings *c)
 {
     if (task == TASK_HOP)
-        return c->task.hop.observe_apex ? OBS_MAX_DIM : (c->task.hop.observe_progress ? OBS_PROGRESS_DIM : OBS_HOP_DIM);
-    const Py_ssize_t dim = c->unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM;
-    return task == TASK_PUSH && c->task.push.observe_com ? dim + 1 : dim;
+        return OBS_HOP_DIM;
+    if (task == TASK_PUSH)
+        return OBS_PUSH_DIM;
+    return c->unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM;
 }
 
 /* The task after a control step of robots lo .. hi - 1. When every row shares one robot, its flight inertia

@@ -80,9 +80,9 @@ def out_dtype(task: str) -> np.dtype:
 
 
 OBS = dict(kernels.observation())
-"""The observation's columns by name (``base_x`` .. ``command``, the hop's ``com_drift``, ``ground_time`` and
-``last_apex``, the push task's ``push_com_drift``), and its widths (``pinned_dim``, ``unilateral_dim``, ``hop_dim``,
-``hop_progress_dim``, ``hop_apex_dim``, ``push_com_dim``)."""
+"""The observation's columns by name (``base_x`` .. ``impulse_y``, the hop's ``command``, ``com_drift``,
+``ground_time`` and ``last_apex``, the push task's ``push_com_drift``), and its widths (``pinned_dim``,
+``unilateral_dim``, ``hop_dim``, ``push_dim``)."""
 
 
 def _bytes(records: np.ndarray) -> np.ndarray:

@@ -9,31 +9,18 @@ from __future__ import annotations
 
 import importlib
 
-__all__ = ["REGISTRY", "ALIASES", "get"]
+__all__ = ["REGISTRY", "get"]
 
 REGISTRY = {
     # id: (task module, keyword arguments of the id)
     "leg_env/PlanarLegStance-v0": ("stance", {}),
     "leg_env/PlanarLegBalance-v0": ("stance", {"contact": "unilateral", "reset_noise_scale": 0.05}),
-    "leg_env/PlanarLegPush-v0": ("push", {}),
-    "leg_env/PlanarLegPush-v1": ("push", {"observe_com": True}),
-    "leg_env/PlanarLegHop-v0": ("hop", {}),
-    "leg_env/PlanarLegHop-v1": ("hop", {"flight_height": True, "max_ground_time": 1.0, "observe_progress": True, "height_scale_fine": 0.01,
-                                 "pay_on_landing": True}),
-    "leg_env/PlanarLegHop-v2": ("hop", {"flight_height": True, "max_ground_time": 1.0, "observe_progress": True, "height_scale_fine": 0.01,
-                                 "pay_on_landing": True, "pay_hops_only": True, "pay_on_next_hop": True}),
-    "leg_env/PlanarLegHop-v3": ("hop", {"max_ground_time": 1.0, "observe_progress": True, "height_scale_fine": 0.01, "hold_height": True,
-                                 "observe_apex": True}),
+    "leg_env/PlanarLegPush-v1": ("push", {}),
+    "leg_env/PlanarLegHop-v3": ("hop", {}),
 }
-"""Every current id: ``(task module, kwargs)``; the balance task's ids keep its own entry points."""
-
-ALIASES = {
-    # deprecated id: the current id it makes, with a DeprecationWarning (removed in the next release)
-    "leg_env/PlanarLegStance-v1": "leg_env/PlanarLegBalance-v0",
-}
-"""Old ids that still work for one release. ``PlanarLegStance-v1`` was the unilateral balance: a different
-contact model is a different task, so it has its own name (``PlanarLegBalance-v0``) rather than a version
-of the pinned balance (``PlanarLegStance-v0``, the lesson's model)."""
+"""Every id, one per task: ``(task module, kwargs)``. A change to a task's dynamics or reward takes a new version
+and removes the old one (``CHANGELOG.md`` lists each); Gymnasium answers an older version of a name with an
+error naming the current one."""
 
 
 def get(name: str):

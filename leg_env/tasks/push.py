@@ -1,9 +1,9 @@
-r"""``leg_env/PlanarLegPush-v0``, ``-v1``: recover from horizontal pushes on the torso, on the unilateral ground.
+r"""``leg_env/PlanarLegPush-v1``: recover from horizontal pushes on the torso, on the unilateral ground.
 
 ## Description
 The robot, the physics and the balance task of ``PlanarLegStance`` (``leg_env.tasks.stance``), on the exact
-unilateral ground (``contact="unilateral"`` by default), with unannounced horizontal pushes on the torso's
-centre of mass. A push is a force ``F`` along ``x`` at the torso's COM, held over whole control steps:
+unilateral ground (``contact="unilateral"``, the only model here: a pinned foot cannot step), with unannounced
+horizontal pushes on the torso's centre of mass. A push is a force ``F`` along ``x`` at the torso's COM, held over whole control steps:
 
     M qdd + h = S^T tau + Jc^T lam + Q_push,    Q_push = J_b^T (F, 0) = (F, 0, 0, 0, 0)
 
@@ -29,12 +29,11 @@ scheduled push (at least 15 s in) there are none. The push is not in the observa
 is the force held over the step, ``info["work_push"]`` its work.
 
 ## Action and Observation Spaces
-Those of ``PlanarLegStance`` (``Box(-1, 1, (2,))`` torques; 18 observations on the unilateral ground,
-12 with ``contact="pinned"``). ``PlanarLegPush-v1`` (``observe_com=True``, the unilateral ground only) adds
-entry 18 (``leg_env.tasks.push.OBS_COM_DRIFT``): the whole-body COM's ``x`` from where the episode started,
-``x_com - x_com,0`` [m], unbounded. That is what ``reward_com`` charges; v0 does not observe it (its base entry
-is measured from the foot's contact point, which moves with every step), so a v0 policy cannot tell how far
-it has wandered.
+``Box(-1, 1, (2,))`` torques, as ``PlanarLegStance``. ``Box((19,), float32)``: the 18 entries of
+``PlanarLegStance`` on the unilateral ground, then entry 18 (``leg_env.tasks.push.OBS_COM_DRIFT``): the
+whole-body COM's ``x`` from where the episode started, ``x_com - x_com,0`` [m], unbounded. That is what
+``reward_com`` charges, and the base entry does not carry it (it is measured from the foot's contact point, which
+moves with every step).
 
 ## Rewards
 ``reward = reward_alive + reward_drift + reward_unilateral + reward_friction + reward_ctrl + reward_com``:
@@ -55,9 +54,8 @@ terminate, ``info["ending"]`` naming which; 1000 steps). Every ``PushConfig`` fi
 | `first_push`     | (0.8, 1.2)    | range of the first push's start [s]                            |
 | `push_interval`  | (2.0, 3.0)    | range of the time between push starts [s]                      |
 | `com_weight`     | 1.0           | per m^2 of whole-body COM displacement along x                 |
-| `observe_com`    | False (v1: True) | the COM's x from its start as observation entry 18          |
 | `unilateral_weight` | 0.5        | per unit of flight time / dt                                   |
-| `contact`        | "unilateral"  | also `"pinned"` (the bilateral pin, for comparison)            |
+| `contact`        | "unilateral"  | the only value                                                 |
 
 ## Solved
 Survival (no termination in 1000 steps) on at least 90% of 100 evaluation episodes with the push
@@ -70,7 +68,7 @@ the episodes with the task's own 20-150 N. The range's upper end is beyond both:
 recovering policy from a falling one only in how long it lasts.
 
 ## PPO from scratch
-On v1, the configuration of ``train/hyperparams/ppo.yml`` (plain PPO, 1024 envs, batch 16384, 4 epochs, a discount
+The configuration of ``train/hyperparams/ppo.yml`` (plain PPO, 1024 envs, batch 16384, 4 epochs, a discount
 of 0.998, an entropy bonus of 0.005, an initial action noise of std 0.61, 24M steps) trains on dense pushes of 20-50 N
 (first at 0.3-0.6 s, then every 1-1.5 s), starts of noise 0.05, ten times the balance task's weight on the base
 offset and ten times the task's weight on the COM's distance from its start, now observed; the charge per step of
@@ -100,18 +98,13 @@ falling on three heavy robots with weak knees on which the stepping controller a
 the LQR 1.0 N s) and up to 6.0 N s on the nominal one. Each seed's 24M steps took 10.9 minutes (median) on one core
 of a 2-core AMD EPYC beside another seed.
 
-On v0, push recovery was not learnt from scratch: dense pushes teach a hop that never stops, which wanders and falls
-at small pushes. The push policy shipped for v0 is a residual on the stepping controller (``policies/ppo_push``). On
-v0 the COM term charges a distance the policy cannot observe (its base entry is measured from the foot's contact
-point): v1 observes it, and on v1 the hop that never stops stays within about a centimetre of its start.
-
-What was tried on the way, on v1 and on v0, is kept with the research records (``research/push_probes.md``).
+What was tried on the way is kept with the research records (``research/push_probes.md``).
 
 ## Version History
-* v1: the whole-body COM's ``x`` from its start is observation entry 18 (``observe_com=True``): the COM term of
-  the reward depends on it, and v0's observation does not carry it. Dynamics, pushes and rewards are v0's;
-  the other 18 entries are v0's bit for bit.
-* v0: Initial release.
+* v1: the whole-body COM's ``x`` from its start is observation entry 18: the COM term of the reward depends on it,
+  and v0's observation did not carry it. On v0 plain PPO did not learn recovery: dense pushes taught a hop that
+  never stops, which wandered and fell at small pushes; on v1 that hop stays within about a centimetre of its start.
+* v0 (removed): initial version.
 """
 
 from __future__ import annotations
@@ -129,7 +122,7 @@ from .stance import REWARD_TERMS as _STANCE_TERMS
 __all__ = ["PushConfig", "TASK", "MAX_PUSHES", "REWARD_TERMS", "INFO_NAMES", "OBS_COM_DRIFT"]
 
 MAX_STEPS = 2**31 - 1  # control steps a setting can count (an int32 of the compiled core)
-OBS_COM_DRIFT = layout.OBS["push_com_drift"]  # 18: the COM's x from its start, with observe_com (v1)
+OBS_COM_DRIFT = layout.OBS["push_com_drift"]  # 18: the COM's x from its start
 MAX_PUSHES = kernels.PUSH_MAX  # pushes scheduled per episode (8): at least 0.8 + 7 x 2 s = 14.8 s of them
 REWARD_TERMS = _STANCE_TERMS + ("com",)
 N_TERMS = len(REWARD_TERMS)
@@ -163,7 +156,6 @@ class PushConfig(StanceConfig):
     first_push: tuple = (0.8, 1.2)  # range of the first push's start [s]
     push_interval: tuple = (2.0, 3.0)  # range of the time between push starts [s]
     com_weight: float = 1.0  # per m^2 of whole-body COM displacement along x
-    observe_com: bool = False  # the COM's x from its start as observation entry 18 (v1; the unilateral ground only)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -179,9 +171,8 @@ class PushConfig(StanceConfig):
             object.__setattr__(self, name, value)
         if round(self.push_duration / self.dt) > MAX_STEPS:
             raise ValueError(f"PushConfig.push_duration must be at most {MAX_STEPS} control steps of dt = {self.dt} s, got {self.push_duration!r} s")
-        object.__setattr__(self, "observe_com", checks.boolean("PushConfig.observe_com", self.observe_com))
-        if self.observe_com and self.contact != "unilateral":
-            raise ValueError(f"PushConfig.observe_com needs contact='unilateral' (its entry follows the unilateral ground's 18), got {self.contact!r}")
+        if self.contact != "unilateral":
+            raise ValueError(f"PushConfig.contact must be 'unilateral' (a pinned foot cannot step), got {self.contact!r}")
 
     @property
     def push_steps(self) -> int:
@@ -189,18 +180,16 @@ class PushConfig(StanceConfig):
         return max(1, int(round(self.push_duration / self.dt)))
 
     def task_settings(self, row: np.ndarray) -> None:
-        """The push's length in control steps, the COM weight and whether the COM is observed, in its ``settings`` row."""
-        row["push_steps"], row["w_com"], row["observe_com"] = self.push_steps, self.com_weight, self.observe_com
+        """The push's length in control steps and the COM weight, in its ``settings`` row."""
+        row["push_steps"], row["w_com"] = self.push_steps, self.com_weight
 
 
 def observation_space(params, config: PushConfig):
-    """``PlanarLegStance``'s (12 entries pinned, 18 on the unilateral ground), then (``observe_com``) the
-    whole-body COM's x from its start [m], unbounded."""
+    """``PlanarLegStance``'s 18 entries on the unilateral ground, then the whole-body COM's x from its start [m],
+    unbounded."""
     from gymnasium import spaces
 
     base = _stance_space(params, config)
-    if not config.observe_com:
-        return base
     return spaces.Box(np.append(base.low, np.float32(-np.inf)), np.append(base.high, np.float32(np.inf)), dtype=np.float32)
 
 

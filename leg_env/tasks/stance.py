@@ -228,9 +228,9 @@ Pickling (and ``copy.deepcopy``) keeps every argument and the full state, random
 included, so a copy continues the same trajectory; an open window is not copied.
 
 ## Solved
-v0: survival in every episode and a mean return of at least 980 over 100 evaluation episodes (the
-LQR of ``policies/lqr.py`` scores 996.45, the shipped PPO policy 994.42). v1: survival of at least 95%
-and a mean return of at least the LQR's, over 100 episodes on seeds not used in training (at a reset
+``PlanarLegStance-v0``: survival in every episode and a mean return of at least 980 over 100 evaluation episodes
+(the LQR of ``policies/lqr.py`` scores 996.45, the shipped PPO policy 994.42). ``PlanarLegBalance-v0``: survival of
+at least 95% and a mean return of at least the LQR's, over 100 episodes on seeds not used in training (at a reset
 noise of 0.05 the LQR survives about 84-86% on the pinned model).
 
 ### What PPO from scratch finds in the unilateral balance's reward
@@ -262,9 +262,9 @@ What was tried on the way, and what each probe found, is kept with the research 
 ## Version History
 ``PlanarLegBalance-v0`` is this task on the unilateral ground (``contact="unilateral"``) with a reset
 noise of 0.05, so that the start is not already inside the LQR's comfort zone:
-``gymnasium.make("leg_env/PlanarLegBalance-v0")`` is ``PlanarLegStance-v0`` with those two arguments. It
-was registered as ``PlanarLegStance-v1`` before it had a name of its own; that id still makes it, with a
-``DeprecationWarning``, until the next release.
+``gymnasium.make("leg_env/PlanarLegBalance-v0")`` is ``PlanarLegStance-v0`` with those two arguments.  It
+was registered as ``PlanarLegStance-v1`` before it had a name of its own (a different contact model is a different
+task, not a version of the pinned one); that id is removed.
 
 * PlanarLegStance-v0: Initial release. The ``contact`` argument (default ``"pinned"``: the release's behaviour, bit
   for bit) adds the unilateral ground as an opt-in model; the ``randomize`` argument (default None:

@@ -18,8 +18,10 @@ Usage (from the repository root, in the package's venv; minutes on a cold numba 
 It records whatever ``leg_env`` it imports (the ``leg_env/`` next to it). The committed file was recorded from a
 clean checkout of commit e4e99ffd (the last commit with the numba kernels, the parent of the C port d1d7942), with
 numpy 2.4.6, numba 0.68.1, gymnasium 1.4.0, Python 3.11 (``meta["provenance"]``), in about 10 s on warm kernels.
-Task ids are the recorded commit's; ``PlanarLegStance-v1`` was renamed ``PlanarLegBalance-v0`` later, and the
-replay makes the new id where it is registered (``runners.current_id``).
+Task ids are the recorded commit's. Those no longer registered are replayed by the id that makes their task now
+(``runners.SUCCESSORS``: ``PlanarLegStance-v1`` renamed ``PlanarLegBalance-v0``; ``PlanarLegPush-v0`` and
+``PlanarLegHop-v0`` by ``-v1`` and ``-v3``, which append observation entries and, for the hop, change its reward:
+the recorded columns and quantities that did not change are compared).
 
 Everything goes through the public API (``tests/reference/runners.py``), so the recording survives a rewrite of
 the internals. What is recorded (``meta`` has one entry per group, with every trajectory's spec, its compared

@@ -46,18 +46,37 @@ SHADOW_MARGIN = 0.1  # the shadow run may depart by this fraction of F64_TOL
 SHADOW_MARGIN_F32 = 0.2  # ... and of F32_TOL for float32 observations (one float32 step is below it)
 MAX_STEPS = 300  # longest single-env episode
 MODE_CODES = {"stick": 0, "slip": 1, "flight": 2}  # info["contact_mode"] as stored
-RENAMED_IDS = {"leg_env/PlanarLegStance-v1": "leg_env/PlanarLegBalance-v0"}  # ids renamed after the recording
+SUCCESSORS = {
+    # id at the recording: (the id that makes its task now, the recorded quantities its reward changed). A
+    # successor's dynamics, starts and ends are the recorded id's, and its observation is the recorded one with
+    # entries appended after it, so the recorded columns are compared.
+    "leg_env/PlanarLegStance-v1": ("leg_env/PlanarLegBalance-v0", ()),  # renamed: the same task
+    "leg_env/PlanarLegPush-v0": ("leg_env/PlanarLegPush-v1", ()),  # the COM's x from its start appended (entry 18)
+    # the height term and the alive bonus paid while hopping; the COM's x, the ground time and the last apex appended
+    "leg_env/PlanarLegHop-v0": ("leg_env/PlanarLegHop-v3", ("reward", "info/reward_height", "info/reward_alive")),
+}
+"""The recorded ids that are no longer registered, and the id that replays each."""
+RETIRED_POLICIES = {"policies/ppo_hop": "PlanarLegHop-v0", "policies/ppo_push": "PlanarLegPush-v0"}
+"""Recorded shipped policies removed with their task's id: their episodes are still replayed open loop (their
+recorded actions on the successor id), their networks' actions no longer."""
+RENAMED_POLICIES = {"policies/ppo_stance_v1": "policies/ppo_balance_residual"}
 
 
 def current_id(env_id: str) -> str:
-    """The id to make a recorded task by: the recorded id (those of the numba implementation's commit), or its new
-    name (``RENAMED_IDS``) where the package under test registers that (the old one may be a deprecated alias)."""
+    """The id to make a recorded task by: the recorded id (those of the numba implementation's commit) where it is
+    still registered, else its successor (``SUCCESSORS``)."""
     import gymnasium as gym
 
     import leg_env  # noqa: F401  (registers the ids)
 
-    new = RENAMED_IDS.get(env_id)
-    return new if new is not None and new in gym.registry else env_id
+    if env_id in gym.registry:
+        return env_id
+    return SUCCESSORS[env_id][0]
+
+
+def changed_keys(env_id: str) -> tuple:
+    """The recorded quantities that the id replaying ``env_id`` computes differently (``SUCCESSORS``): not compared."""
+    return SUCCESSORS[env_id][1] if current_id(env_id) != env_id else ()
 
 
 # --------------------------------------------------------------------------------------------------
@@ -401,7 +420,7 @@ def make_policy(name: str, env_id: str):
     if name.startswith("policies/"):
         from train.evaluate import load_policy
 
-        return load_policy(ROOT / name)
+        return load_policy(ROOT / RENAMED_POLICIES.get(name, name))
     import gymnasium as gym
 
     import leg_env  # noqa: F401

@@ -1,5 +1,5 @@
-"""The shipped plain-PPO policies (``policies/ppo_balance``, ``ppo_push_v1``, ``ppo_push_randomized``, ``ppo_hop_v1``,
-``ppo_hop_v2``, ``ppo_hop_v3``): a network alone, and their cards' episodes as they score them."""
+"""The shipped plain-PPO policies (``policies/ppo_balance``, ``ppo_push_v1``, ``ppo_push_randomized``, ``ppo_hop_v3``):
+a network alone, and their cards' episodes as they score them."""
 
 from __future__ import annotations
 
@@ -16,8 +16,6 @@ SHIPPED = {  # policy folder: the task it was trained and is evaluated on
     "ppo_balance": "leg_env/PlanarLegBalance-v0",
     "ppo_push_v1": "leg_env/PlanarLegPush-v1",
     "ppo_push_randomized": "leg_env/PlanarLegPush-v1",
-    "ppo_hop_v1": "leg_env/PlanarLegHop-v1",
-    "ppo_hop_v2": "leg_env/PlanarLegHop-v2",
     "ppo_hop_v3": "leg_env/PlanarLegHop-v3",
 }
 EVAL_KWARGS = {  # the evaluation env of a policy selected on other than the task as registered (its table.md's)
@@ -46,8 +44,8 @@ def test_shipped_scratch_policy_reproduces_its_card_on_held_out_seeds(name):
     """The first ten held-out episodes of ``eval/policy.json`` (seeds 10000+), replayed: the same seeds, at most one
     fall more or fewer, and the same mean return to 10%. (On the machine that wrote a card they are the same episodes,
     returns to 1e-3. Elsewhere they need not be: the network's float32 arithmetic depends on the CPU, torch picking
-    its kernels by the instruction set, and a hopping gait amplifies the difference. The ``ppo_hop_v1`` card, written
-    on an Intel Xeon, replays on an AMD EPYC with nine returns within 2% and one episode that fell there surviving
+    its kernels by the instruction set, and a hopping gait amplifies the difference. A hop card written
+    on an Intel Xeon replayed on an AMD EPYC with nine returns within 2% and one episode that fell there surviving
     here: a mean 4.5% higher. The balance policy's episodes replay to the bit.)"""
     folder, env_id = ROOT / "policies" / name, SHIPPED[name]
     card = json.loads((folder / CARD.get(name, "eval") / "policy.json").read_text())

@@ -10,6 +10,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from train.episodes import HOP_EVAL_KEYS, evaluate_now  # evaluate_now: train.episodes', also named here
+from train.motion import KEYS as MOTION_KEYS
 from train.run import Every
 
 __all__ = [
@@ -83,7 +84,7 @@ def leg_adapter(venv):
 
 class PeriodicEvaluation(BaseCallback):
     """The run's periodic evaluation (``train.run.Run.evaluate_if_due``), asked at every step; each result is logged
-    to TensorBoard under ``eval/``.
+    to TensorBoard under ``eval/`` (how the robot moved under ``eval/motion/``).
 
     ``evaluate(steps)`` evaluates the policy when ``steps`` has passed the next multiple of the evaluation frequency
     (then returns the result; otherwise None): deterministic episodes of the model being trained, its observations
@@ -100,6 +101,8 @@ class PeriodicEvaluation(BaseCallback):
             for key in ("mean_return", "std_return", "mean_length", "survival_rate", "rms_base_drift", *HOP_EVAL_KEYS):
                 if key in result:
                     self.logger.record(f"eval/{key}", result[key])
+            for key in MOTION_KEYS[1:]:  # how the robot moved (train.motion)
+                self.logger.record(f"eval/motion/{key}", result["motion"][key])
             self.logger.dump(self.num_timesteps)
         return True
 

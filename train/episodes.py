@@ -9,8 +9,9 @@ every step, with SB3's ``episode_start`` for controllers that keep a state per r
 has ended is autoreset by the batch and stepped on with the others, but nothing of it is counted any more.
 
 What an evaluation measures beyond returns, lengths and survival is a ``Watcher``: it gets the batch's
-observations and ``info`` after the reset and after every step, with the mask of the episodes still running.
-``evaluate_now`` is the in-training evaluation of either trainer (``train.run``): the summary of one batch.
+observations and ``info`` after the reset and after every step, with the mask of the episodes still running
+(``train.motion.Motion``: how the robot moves). ``evaluate_now`` is the in-training evaluation of either trainer
+(``train.run``): the summary of one batch.
 """
 
 from __future__ import annotations
@@ -127,17 +128,20 @@ def evaluate_now(policy, envs, seed: int) -> dict:
     native batch ``envs``, sub-env ``i`` seeded ``seed + i`` (``run_batch``), summarised.
 
     Returns per-episode ``returns`` and ``lengths``, their means, the survival rate (episodes ended by the time
-    limit, not by a fall) and the RMS base drift over all steps [m]; on the hop task also its measures of Solved
+    limit, not by a fall), the RMS base drift over all steps [m], ``motion``: how the robot moved (``train.motion``:
+    torso tilt, action rate, saturated share, actuator power, peak normal force, flights, COM excursion, over every
+    episode, as ``train.evaluate`` reports them); on the hop task also its measures of Solved
     (``train.task_metrics.HopTracker``, as ``train.evaluate`` reports them): ``hops_per_episode``,
     ``mean_abs_apex_error`` and ``mean_apex_error`` [m] (nan without a hop), ``mean_drift_10s`` [m] (nan if no
     episode ran to its end) and ``apex_error_by_command`` (``HopTracker.by_command``).
     """
     from leg_env.tasks.hop import HopConfig
+    from train.motion import Motion
     from train.task_metrics import HopTracker
 
-    drift = _Drift()
+    drift, motion = _Drift(), Motion()
     hop = HopTracker() if isinstance(envs.config, HopConfig) else None
-    batch = run_batch(policy_predict(policy), envs, range(seed, seed + envs.num_envs), [drift] if hop is None else [drift, hop])
+    batch = run_batch(policy_predict(policy), envs, range(seed, seed + envs.num_envs), [drift, motion] + ([] if hop is None else [hop]))
     result = {
         "mean_return": float(batch.returns.mean()),
         "std_return": float(batch.returns.std()),
@@ -146,6 +150,7 @@ def evaluate_now(policy, envs, seed: int) -> dict:
         "rms_base_drift": float(np.sqrt(drift.sum_sq / batch.lengths.sum())),
         "returns": batch.returns.round(4).tolist(),
         "lengths": batch.lengths.tolist(),
+        "motion": motion.summary(),
     }
     if hop is not None:
         hop.end(batch.survived)

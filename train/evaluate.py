@@ -17,8 +17,9 @@ from a start whose capture point is behind the foot, then the LQR; the unilatera
 (default 10_000 + i: training uses small seeds, in-training evaluation 20_000 + i); the episodes run as one batch
 (``train.episodes.run_batch``), each the episode of the single env from ``gymnasium.make`` with its 1000-step time
 limit. Policies load through ``train.policy_loading.load_policy`` (re-exported here). Results go to ``<policy>/eval/``
-(or ``--out``): one JSON per controller, ``table.md`` with the side-by-side table that is also
-printed, ``timeseries.png`` (base drift, torques and contact force of the first episode), for a run
+(or ``--out``): one JSON per controller, ``table.md`` with the side-by-side tables that are also
+printed (headed by the date, the machine and the versions, which the JSONs record too), ``timeseries.png`` (base
+drift, torques and contact force of the first episode), ``motion.png`` (how each controller moves, below), for a run
 folder ``learning_curve.png`` (the run's curve with the baseline's level drawn in) and with ``--gif``
 an animation of the first episode.
 
@@ -29,10 +30,33 @@ Metrics (over all episodes; "steps" are all control steps of all episodes):
 - ``endings``: how many episodes ended early in each way (the task's ``info["ending"]``, named by
   ``leg_env.ENDINGS``: ``torso_angle``, ``knee_high``, ...); each episode's own is in ``per_episode``;
 - ``rms_base_drift``, ``max_base_drift`` [m]: base distance from its nominal position;
-- ``rms_torso_angle`` [rad]: the torso's tilt (0 in the nominal posture);
+- ``rms_torso_angle`` [rad]: the torso's tilt (0 in the nominal posture; ``motion``'s ``tilt_rms`` in radians);
 - ``unilateral_violation_frac``: fraction of steps with ``lam_y < 0`` (the ground would have to pull);
 - ``friction_violation_frac``: fraction of steps with ``|lam_x| > mu lam_y``;
 - ``rms_torque`` [N m]: hip and knee; ``mean_reward_terms``: each reward term per episode (the task's terms).
+
+How the robot moves, ``motion`` (``train.motion``, which defines each exactly; each episode's own in its
+``per_episode`` entry), with actions as the env applies them, clipped to [-1, 1]:
+
+- ``tilt_rms`` [deg]: the RMS of the torso angle ``th_b`` over all steps of all episodes;
+- ``action_rate``: the mean of ``|a_t - a_{t-1}|`` over both entries and every step after an episode's first;
+- ``saturated_share``: the share of action entries at the bound, ``|a| >= 1``;
+- ``actuator_power`` [W]: positive actuator work per second, the sum over the steps of ``max(0, W)`` over the
+  simulated time, ``W`` the step's ``info["work_actuators"]`` on the unilateral ground and, on the pinned foot (no
+  such key), ``tau . (q_after - q_before)`` over the hip and knee (exact: the torques are held over the step);
+- ``peak_normal_force``, ``peak_normal_force_max`` [body weights]: each episode's largest ``info["normal_force"] /
+  (m g)``, averaged over the episodes, and its largest over them (with ``g = 0``: in newtons,
+  ``normal_force_unit``);
+- ``flights_per_episode``, ``flights_per_10s``: flight phases (the contact mode going to ``"flight"``; 0 on the
+  pinned foot) per episode, and per 10 s of simulated time;
+- ``com_excursion`` [m]: each episode's largest horizontal distance of the whole-body COM
+  (``info["com_position"][0]``) from where it started, averaged over the episodes.
+
+The same measures restricted to the episodes that both the policy (the first controller) and each other controller
+survive, for both, are ``both_survived`` (a falling robot's actions swing, so on all episodes a policy looks calmer
+beside a controller that falls): in each controller's JSON under the other's name, with the ``seeds`` kept. On the
+push task every controller also runs the same seeds with no push at all (``push_force=(0, 0)``): ``no_push`` has its
+survival, return and ``motion``, so that a policy that chatters or hops while nothing pushes it shows it.
 
 The hop task adds the metrics of ``train.task_metrics.HopTracker`` (apex error, hop period, drift after
 10 s, landing impulses) and ``hops.png``, a few hops of the first episode (COM height against its target,
@@ -44,6 +68,7 @@ impulse for every controller on the same seeds (``train.episodes.push_survival``
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -72,8 +97,8 @@ GIF_SIZE = 320  # pixels
 
 class EpisodeMetrics:
     """The common metrics of ``run_episodes``, a ``train.episodes.Watcher``: per episode the reward terms and the
-    squared base drift; over every step the torques, torso angle and violations; and the time series (and frames)
-    of the episode of row ``record``."""
+    squared base drift; over every step the torques and violations; and the time series (and frames) of the
+    episode of row ``record``. How the robot moves is ``train.motion.Motion``'s."""
 
     def __init__(self, record: int | None = None, frames: bool = False):
         self.record, self.frames = record, frames
@@ -86,7 +111,7 @@ class EpisodeMetrics:
         self.terms = np.zeros((n, len(self.reward_terms)))
         self.drift_sq = np.zeros(n)
         self.ending = np.zeros(n, dtype=np.int64)  # why each episode ended early (leg_env.ENDINGS; 0: it did not)
-        self.drift_max, self.torque_sq, self.tilt_sq, self.unilateral, self.friction = 0.0, np.zeros(2), 0.0, 0, 0
+        self.drift_max, self.torque_sq, self.unilateral, self.friction = 0.0, np.zeros(2), 0, 0
         self.robots = None
         if "params" in info:  # a drawn robot per episode (randomize)
             params = info["params"]
@@ -107,8 +132,6 @@ class EpisodeMetrics:
         self.drift_sq[active] += d[active] * d[active]
         self.drift_max = max(self.drift_max, float(d[active].max()))
         self.torque_sq += (tau * tau).sum(axis=0)
-        tilt = obs[active, Obs.th_b].astype(np.float64)
-        self.tilt_sq += float(np.sum(tilt * tilt))
         self.unilateral += int(np.count_nonzero(info["unilateral_violation"][active]))
         self.friction += int(np.count_nonzero(info["friction_violation"][active]))
         r = self.record
@@ -145,27 +168,25 @@ def run_episodes(
         (T, 2), and on the hop task the ``HopTracker`` series.
     """
     from train.episodes import make_batch, policy_predict, run_batch
+    from train.motion import Motion
     from train.task_metrics import HopTracker
 
     if len(seeds) == 0:
         raise ValueError("run_episodes needs at least one seed")
     if record is not None and not 0 <= record < len(seeds):
         raise ValueError(f"record must be the index of one of the {len(seeds)} episodes, got {record}")
-    metrics = EpisodeMetrics(record, frames)
+    metrics, motion = EpisodeMetrics(record, frames), Motion()
     hop = HopTracker(record) if env_id.startswith("leg_env/PlanarLegHop-v") else None
     envs = make_batch(env_id, len(seeds), env_kwargs, record, frames, GIF_SIZE)
     try:
-        batch = run_batch(policy_predict(policy), envs, seeds, [metrics] if hop is None else [metrics, hop])
-        dt, weight = envs.dt, envs.params.weight
-        robot = metrics.robots[record] if record is not None and metrics.robots is not None else None
-        if robot is not None:  # the recorded episode's own robot
-            weight = (robot["m_b"] + robot["m1"] + robot["m2"]) * robot["g"]
+        batch = run_batch(policy_predict(policy), envs, seeds, [metrics, motion] + ([] if hop is None else [hop]))
+        dt = envs.dt
     finally:
         envs.close()
     if hop is not None:
         hop.end(batch.survived)
-    series = None if record is None else _series(metrics, hop, weight, dt, frames)
-    return _summary(batch, metrics, hop), series
+    series = None if record is None else _series(metrics, hop, float(motion.weight[record]), dt, frames)  # its own robot's weight
+    return _summary(batch, metrics, motion, hop), series
 
 
 def _series(metrics: EpisodeMetrics, hop, weight: float, dt: float, frames: bool) -> dict:
@@ -186,9 +207,11 @@ def _series(metrics: EpisodeMetrics, hop, weight: float, dt: float, frames: bool
     }
 
 
-def _per_episode(batch, metrics: EpisodeMetrics) -> list[dict]:
-    """Each episode's seed, return, length, survival, ending, RMS drift, reward terms (and drawn robot)."""
+def _per_episode(batch, metrics: EpisodeMetrics, motion) -> list[dict]:
+    """Each episode's seed, return, length, survival, ending, RMS drift, reward terms, how the robot moved
+    (``train.motion.PER_EPISODE``) (and drawn robot)."""
     per_episode = []
+    moved = motion.records()
     for i, seed in enumerate(batch.seeds):
         length = int(batch.lengths[i])
         per_episode.append(
@@ -200,15 +223,17 @@ def _per_episode(batch, metrics: EpisodeMetrics) -> list[dict]:
                 "ending": ENDINGS[metrics.ending[i]],
                 "rms_base_drift": float(np.sqrt(metrics.drift_sq[i] / length)),
                 "reward_terms": {k: round(float(metrics.terms[i, j]), 4) for j, k in enumerate(metrics.reward_terms)},
+                "motion": moved[i],
                 **({"robot": metrics.robots[i]} if metrics.robots is not None and metrics.robots[i] is not None else {}),
             }
         )
     return per_episode
 
 
-def _summary(batch, metrics: EpisodeMetrics, hop) -> dict:
+def _summary(batch, metrics: EpisodeMetrics, motion, hop) -> dict:
     """The metrics of ``run_episodes`` (module docstring) over the episodes of ``batch``, with the per-episode list."""
-    per_episode = _per_episode(batch, metrics)
+    per_episode = _per_episode(batch, metrics, motion)
+    moved = motion.summary()
     steps = int(batch.lengths.sum())
     returns = np.array([e["return"] for e in per_episode])
     return {
@@ -220,12 +245,13 @@ def _summary(batch, metrics: EpisodeMetrics, hop) -> dict:
         "endings": {ENDINGS[k]: int(count) for k, count in enumerate(np.bincount(metrics.ending, minlength=len(ENDINGS))) if k and count},
         "rms_base_drift": float(np.sqrt(metrics.drift_sq.sum() / steps)),
         "max_base_drift": float(metrics.drift_max),
-        "rms_torso_angle": float(np.sqrt(metrics.tilt_sq / steps)),
+        "rms_torso_angle": float(np.radians(moved["tilt_rms"])),
         "unilateral_violation_frac": metrics.unilateral / steps,
         "friction_violation_frac": metrics.friction / steps,
         "rms_torque": np.sqrt(metrics.torque_sq / steps).round(4).tolist(),
         "mean_reward_terms": {k: float(np.mean([e["reward_terms"][k] for e in per_episode])) for k in metrics.reward_terms},
         "steps": steps,
+        "motion": moved,
         **(hop.summary() if hop is not None else {}),
         "per_episode": per_episode,
     }
@@ -239,7 +265,6 @@ _ROWS = (
     ("episodes ended early, by ending", "endings", lambda v: ", ".join(f"{name} {count}" for name, count in v.items()) or "-"),
     ("RMS base drift [cm]", "rms_base_drift", lambda v: f"{100 * v:.3f}"),
     ("max base drift [cm]", "max_base_drift", lambda v: f"{100 * v:.3f}"),
-    ("RMS torso angle [deg]", "rms_torso_angle", lambda v: f"{np.degrees(v):.2f}"),
     ("steps with lam_y < 0", "unilateral_violation_frac", lambda v: f"{100 * v:.2f}%"),
     ("steps outside friction cone", "friction_violation_frac", lambda v: f"{100 * v:.2f}%"),
     ("RMS torque hip / knee [N m]", "rms_torque", lambda v: f"{v[0]:.2f} / {v[1]:.2f}"),
@@ -270,7 +295,16 @@ def _band_rows(bands: list[list[dict]]) -> list[str]:
 
 
 def format_table(results: dict[str, dict]) -> str:
-    """A Markdown table with one column per controller."""
+    """Markdown tables with one column per controller: the metrics, then how the robot moves (``train.motion``) over
+    all episodes, on the episodes that both the first controller (the policy) and each other one survive (when the
+    results carry ``both_survived``) and without pushes (when they carry ``no_push``)."""
+    from train.motion import motion_sections
+
+    return "\n\n".join([_metrics_table(results)] + motion_sections(results))
+
+
+def _metrics_table(results: dict[str, dict]) -> str:
+    """The metrics' table, one column per controller."""
     names = list(results)
     lines = ["| metric | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
     for label, key, fmt in _ROWS:
@@ -358,6 +392,25 @@ class EvalArgs:
         return None if self.env_kwargs is None else dict(parse_override(item) for item in self.env_kwargs)
 
 
+_NO_PUSH_KEYS = ("survival_rate", "mean_return", "mean_length", "endings", "motion")
+"""What ``train.evaluate`` keeps of each controller's episodes without pushes (push task), in its ``no_push``."""
+
+
+def _write_results(results: dict[str, dict], out: Path) -> None:
+    """One JSON per controller: ``policy.json``, a controller's by its name (``lqr.json``), a folder baseline's
+    ``baseline.json`` (``baseline_2.json``, ... for more)."""
+    written = set()
+    for k, (label, summary) in enumerate(results.items()):
+        base = label.split(" ")[0]
+        name = base if base in BASELINES else ("policy" if k == 0 else "baseline")
+        stem, n = name, 1
+        while name in written:
+            n += 1
+            name = f"{stem}_{n}"
+        written.add(name)
+        (out / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
+
+
 def _label(spec: str) -> str:
     return spec.lower() if spec.lower() in BASELINES else (Path(spec).name or "policy")
 
@@ -386,35 +439,39 @@ def evaluate(args: EvalArgs) -> Path:
     out = Path(args.out) if args.out is not None else (Path(f"runs/eval_{args.policy.lower()}") if is_model else policy.path / "eval")
     out.mkdir(parents=True, exist_ok=True)
 
-    results, series, written = {}, {}, set()
+    from train.machine import describe
+    from train.motion import both_survived
+    from train.task_metrics import is_push_task
+
+    measured = {"machine": describe(), "date": time.strftime("%Y-%m-%d")}
+    results, series = {}, {}
     for k, (label, controller) in enumerate(controllers.items()):
         summary, rec = run_episodes(controller, seeds, env_kwargs, record=0, frames=args.gif and k == 0, env_id=env_id)
-        summary = {"controller": specs[label], "env_id": env_id, "env_kwargs": env_kwargs, "seeds": seeds, **summary}
-        results[label] = summary
+        results[label] = {"controller": specs[label], "env_id": env_id, "env_kwargs": env_kwargs, "seeds": seeds, **measured, **summary}
         series[label] = rec
-        base = label.split(" ")[0]
-        name = base if base in BASELINES else ("policy" if k == 0 else "baseline")
-        stem, n = name, 1
-        while name in written:  # a second folder baseline: baseline_2.json, ...
-            n += 1
-            name = f"{stem}_{n}"
-        written.add(name)
-        (out / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
         if k == 0 and args.gif and rec["frames"]:
             _write_gif(rec["frames"], out / "episode.gif", 1.0 / (rec["dt"] * GIF_FRAME_SKIP))
+    dt = series[next(iter(series))]["dt"]
+    both_survived(results, next(iter(results)), dt)
+    if is_push_task(env_id):  # the same seeds with no push at all: does the policy stand still when nothing happens?
+        calm = {**env_kwargs, "push_force": [0.0, 0.0]}
+        for label, controller in controllers.items():
+            summary, _ = run_episodes(controller, seeds, calm, env_id=env_id)
+            results[label]["no_push"] = {"env_kwargs": calm, **{key: summary[key] for key in _NO_PUSH_KEYS}}
+    _write_results(results, out)
 
     table = format_table(results)
     (out / "table.md").write_text(
-        f"{env_id}: {args.episodes} deterministic episodes, seeds {seeds[0]}..{seeds[-1]}, env kwargs {env_kwargs or 'default'}\n\n"
-        + table
-        + "\n"
+        f"{env_id}: {args.episodes} deterministic episodes, seeds {seeds[0]}..{seeds[-1]}, env kwargs {env_kwargs or 'default'}\n"
+        f"Measured {measured['date']} on {measured['machine']}\n\n" + table + "\n"
     )
     print(table)
     if args.plot:
-        from train.plots import plot_learning_curve, plot_time_series
+        from train.plots import plot_learning_curve, plot_motion, plot_time_series
 
         first = next(iter(series.values()))
         plot_time_series(series, out / "timeseries.png", first["dt"], first["torque_limit"])
+        plot_motion(results, out / "motion.png")
         if first.get("hop") is not None:
             from train.plots import plot_hops
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["plot_learning_curve", "plot_time_series", "plot_hops", "plot_push_curve"]
+__all__ = ["plot_learning_curve", "plot_time_series", "plot_hops", "plot_push_curve", "plot_motion"]
 
 
 def pyplot():
@@ -155,6 +155,57 @@ def plot_push_curve(curves: dict[str, list], best: dict[str, float], path: Path)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+_MOTION_PANELS = (
+    # key of train.motion's summary, title, scale
+    ("tilt_rms", "torso tilt RMS [deg]", 1.0),
+    ("action_rate", "action rate [1/step]", 1.0),
+    ("saturated_share", "saturated action entries [%]", 100.0),
+    ("actuator_power", "actuator power [W]", 1.0),
+    ("peak_normal_force", "peak normal force [{unit}]", 1.0),
+    ("flights_per_10s", "flights per 10 s", 1.0),
+    ("com_excursion", "COM excursion [cm]", 100.0),
+)
+
+
+def plot_motion(results: dict[str, dict], path: Path) -> Path:
+    """How each controller moves (``train.motion``): one bar panel per measure, a bar per controller over all episodes
+    and, for the push task (results with ``no_push``), a hatched one without pushes; the peak normal force's bar is the
+    mean over episodes, its mark the largest."""
+    import numpy as np
+
+    plt = pyplot()
+    names = list(results)
+    cases = [("all episodes", {n: results[n]["motion"] for n in names})]
+    if all("no_push" in results[n] for n in names):
+        cases.append(("no push", {n: results[n]["no_push"]["motion"] for n in names}))
+    unit = results[names[0]]["motion"]["normal_force_unit"]
+    fig, axes = plt.subplots(1, len(_MOTION_PANELS), figsize=(2.1 * len(_MOTION_PANELS), 3.4), dpi=100)
+    width = 0.8 / len(cases)
+    x = np.arange(len(names))
+    for ax, (key, title, scale) in zip(axes, _MOTION_PANELS):
+        for j, (case, motions) in enumerate(cases):
+            values = [scale * motions[n][key] for n in names]
+            offset = x - 0.4 + width * (j + 0.5)
+            ax.bar(offset, values, width, color=[f"C{k}" for k in range(len(names))], hatch="//" if j else None,
+                   edgecolor="k", lw=0.5)  # fmt: skip
+            if key == "peak_normal_force":
+                ax.plot(offset, [motions[n]["peak_normal_force_max"] for n in names], "k_", ms=10, mew=2)
+        ax.set_title(title.format(unit=unit), fontsize=8)
+        ax.set_xticks(x, names, rotation=35, ha="right", fontsize=7)
+        ax.tick_params(axis="y", labelsize=7)
+        ax.grid(axis="y", alpha=0.3)
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    keys = [Patch(facecolor="w", edgecolor="k", hatch="//" if j else None, label=case) for j, (case, _) in enumerate(cases)]
+    keys.append(Line2D([], [], color="k", marker="_", ls="", ms=10, mew=2, label="peak normal force: largest of the episodes"))
+    fig.legend(handles=keys, loc="lower center", ncol=len(keys), fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     fig.savefig(path)
     plt.close(fig)
     return Path(path)

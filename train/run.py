@@ -188,6 +188,12 @@ def _hop_line(result: dict) -> str:
             f"drift after 10 s {cm(result['mean_drift_10s'])}")
 
 
+def _motion_line(motion: dict) -> str:
+    """How the robot moved in an evaluation (``train.motion``), for the training log."""
+    return (f"; tilt {motion['tilt_rms']:.1f} deg, action rate {motion['action_rate']:.3f}, saturated "
+            f"{100 * motion['saturated_share']:.1f}%, power {motion['actuator_power']:.1f} W, {motion['flights_per_episode']:.1f} flights")
+
+
 def _score(info: dict) -> tuple:
     """What the selection of the best policy compares: survival rate, then mean return."""
     return (info["survival_rate"], info["mean_return"])
@@ -261,7 +267,8 @@ class Run:
                 f"[{steps:>9,} steps, {result['time'] / 60:5.1f} min, {rate:,.0f} steps/s] return "
                 f"{result['mean_return']:7.1f} +- {result['std_return']:5.1f}, length {result['mean_length']:6.1f}, "
                 f"survival {100 * result['survival_rate']:5.1f}%, RMS drift {100 * result['rms_base_drift']:.2f} cm"
-                + (_hop_line(result) if "hops_per_episode" in result else ""),
+                + (_hop_line(result) if "hops_per_episode" in result else "")
+                + _motion_line(result["motion"]),
                 flush=True,
             )
         return result

@@ -57,6 +57,7 @@ def test_run_folder_has_everything(run):
     assert evaluations["total_timesteps"] == STEPS
     assert [e["timesteps"] for e in evaluations["evaluations"]] == [128, 256]
     assert all(len(e["returns"]) == 2 for e in evaluations["evaluations"])
+    assert all(e["motion"]["episodes"] == 2 and e["motion"]["tilt_rms"] > 0 for e in evaluations["evaluations"])  # how it moved
     assert list((run / "tb").iterdir()), "no TensorBoard log"
     # the shipped model is the best evaluated one; the last one is kept next to it
     selected = evaluations["selected"]
@@ -97,11 +98,13 @@ def test_result_reloads_through_the_evaluation_loader(run):
 
 def test_evaluate_command_writes_the_comparison(run, tmp_path, capsys):
     out = evaluate(EvalArgs(policy=str(run), baseline="lqr", episodes=2, out=tmp_path / "eval", gif=True))
-    for name in ("policy.json", "lqr.json", "table.md", "timeseries.png", "learning_curve.png", "episode.gif"):
+    for name in ("policy.json", "lqr.json", "table.md", "timeseries.png", "motion.png", "learning_curve.png", "episode.gif"):
         assert (out / name).is_file(), name
     lqr = json.loads((out / "lqr.json").read_text())
     assert lqr["seeds"] == [10_000, 10_001] and lqr["survival_rate"] == 1.0
-    assert "| survival rate |" in capsys.readouterr().out
+    assert lqr["motion"]["episodes"] == 2 and set(lqr["both_survived"]) == {"run"}
+    printed = capsys.readouterr().out
+    assert "| survival rate |" in printed and "| torso tilt RMS [deg] |" in printed
 
 
 def test_evaluate_takes_several_baselines(run, tmp_path):
@@ -117,7 +120,7 @@ def test_evaluate_takes_several_baselines(run, tmp_path):
     policy, lqr, again = (json.loads((out / f"{name}.json").read_text()) for name in ("policy", "lqr", "baseline"))
     assert lqr["controller"] == "lqr" and again["controller"] == str(run)
     assert [e["return"] for e in again["per_episode"]] == [e["return"] for e in policy["per_episode"]]
-    header = (out / "table.md").read_text().splitlines()[2]
+    header = next(line for line in (out / "table.md").read_text().splitlines() if line.startswith("| metric"))
     assert header.count("|") == 5, header  # metric + three controllers
     assert EvalArgs(baseline="lqr").baseline == ["lqr"] and EvalArgs().baseline == []
 

@@ -7,7 +7,7 @@ The stateful ones share ``policies.base.BatchedController``: one ``predict`` for
 per-robot state, SB3's ``episode_start``; all read the observation by the task's named columns
 (``leg_env.tasks.base.Obs``).
 
-The shipped PPO policies are folders, each with its card (``README.md``): ``ppo_stance``, ``ppo_stance_randomized``,
-``ppo_balance``, ``ppo_push_v1``, ``ppo_push_randomized`` and ``ppo_hop_v3`` are plain PPO from scratch;
-``ppo_balance_residual`` is residual PPO on the gated controller. Load any of them with ``train.evaluate.load_policy``.
+The shipped PPO policies are folders, each with its card (``README.md``), all plain PPO from scratch: ``ppo_stance``
+(the pinned balance), ``ppo_balance``, ``ppo_push_v1``, ``ppo_push_randomized`` (trained on randomised robots) and
+``ppo_hop_v3``. Load any of them with ``train.evaluate.load_policy``.
 """

@@ -136,23 +136,3 @@ def test_residual_on_the_gated_controller_reloads_as_the_sum(tmp_path):
     expected = np.clip(GatedController(u.params, u.config).predict(obs)[0] + 0.1 * np.clip(policy.network.predict(obs)[0], -1, 1), -1, 1)
     policy.reset()
     np.testing.assert_allclose(policy.predict(obs)[0], expected, atol=1e-6)
-
-
-@pytest.mark.sb3
-def test_shipped_residual_balance_policy_loads_and_survives():
-    """policies/ppo_balance_residual: the residual network on the gated controller, rebuilt from its config.yaml, stands
-    from an ordinary start and recovers two starts the LQR falls from (a backward hop)."""
-    from pathlib import Path
-
-    from train.evaluate import run_episodes
-    from train.residual import ResidualPolicy
-
-    folder = Path(__file__).resolve().parents[1] / "policies" / "ppo_balance_residual"
-    policy = load_policy(folder)
-    assert isinstance(policy, ResidualPolicy) and isinstance(policy.controller, GatedController)
-    assert policy.env_id == ENV_ID and policy.env_kwargs == {}  # evaluated on the task as registered
-    assert policy.controller.config.drift_position_weight == 100.0  # the controller of training (config.yaml's env_kwargs)
-    summary, _ = run_episodes(policy, (10000, 10003, 10023), env_id=ENV_ID)
-    assert summary["survival_rate"] == 1.0
-    lqr, _ = run_episodes(LQRController(**{k: getattr(gym.make(ENV_ID).unwrapped, k) for k in ("params", "config")}), (10003, 10023), env_id=ENV_ID)
-    assert lqr["survival_rate"] == 0.0

@@ -56,10 +56,14 @@ SUCCESSORS = {
     "leg_env/PlanarLegHop-v0": ("leg_env/PlanarLegHop-v3", ("reward", "info/reward_height", "info/reward_alive")),
 }
 """The recorded ids that are no longer registered, and the id that replays each."""
-RETIRED_POLICIES = {"policies/ppo_hop": "PlanarLegHop-v0", "policies/ppo_push": "PlanarLegPush-v0"}
-"""Recorded shipped policies removed with their task's id: their episodes are still replayed open loop (their
-recorded actions on the successor id), their networks' actions no longer."""
-RENAMED_POLICIES = {"policies/ppo_stance_v1": "policies/ppo_balance_residual"}
+RETIRED_POLICIES = {
+    # recorded shipped policy: why it is no longer shipped
+    "policies/ppo_hop": "its task's id, PlanarLegHop-v0, is removed",
+    "policies/ppo_push": "its task's id, PlanarLegPush-v0, is removed",
+    "policies/ppo_stance_v1": "no residual policy is shipped (residual training is an option of train.ppo)",
+}
+"""Recorded shipped policies no longer shipped: their episodes are still replayed open loop (their recorded actions,
+on the id that makes their task now), their networks' actions no longer."""
 
 
 def current_id(env_id: str) -> str:
@@ -420,7 +424,7 @@ def make_policy(name: str, env_id: str):
     if name.startswith("policies/"):
         from train.evaluate import load_policy
 
-        return load_policy(ROOT / RENAMED_POLICIES.get(name, name))
+        return load_policy(ROOT / name)
     import gymnasium as gym
 
     import leg_env  # noqa: F401

@@ -45,8 +45,8 @@ How the robot moves, ``motion`` (``train.motion``, which defines each exactly; e
   simulated time, ``W`` the step's ``info["work_actuators"]`` on the unilateral ground and, on the pinned foot (no
   such key), ``tau . (q_after - q_before)`` over the hip and knee (exact: the torques are held over the step);
 - ``peak_normal_force``, ``peak_normal_force_max`` [body weights]: each episode's largest ``info["normal_force"] /
-  (m g)``, averaged over the episodes, and its largest over them (with ``g = 0``: in newtons,
-  ``normal_force_unit``);
+  (m g)`` (a step's mean normal force, without a landing's impact impulse), averaged over the episodes, and its
+  largest over them (with ``g = 0``: in newtons, ``normal_force_unit``);
 - ``flights_per_episode``, ``flights_per_10s``: flight phases (the contact mode going to ``"flight"``; 0 on the
   pinned foot) per episode, and per 10 s of simulated time;
 - ``com_excursion`` [m]: each episode's largest horizontal distance of the whole-body COM
@@ -56,7 +56,8 @@ The same measures restricted to the episodes that both the policy (the first con
 survive, for both, are ``both_survived`` (a falling robot's actions swing, so on all episodes a policy looks calmer
 beside a controller that falls): in each controller's JSON under the other's name, with the ``seeds`` kept. On the
 push task every controller also runs the same seeds with no push at all (``push_force=(0, 0)``): ``no_push`` has its
-survival, return and ``motion``, so that a policy that chatters or hops while nothing pushes it shows it.
+survival (and the seeds of the episodes it ``fell`` in), return and ``motion``, so that a policy that chatters or hops
+while nothing pushes it shows it.
 
 The hop task adds the metrics of ``train.task_metrics.HopTracker`` (apex error, hop period, drift after
 10 s, landing impulses) and ``hops.png``, a few hops of the first episode (COM height against its target,
@@ -457,7 +458,8 @@ def evaluate(args: EvalArgs) -> Path:
         calm = {**env_kwargs, "push_force": [0.0, 0.0]}
         for label, controller in controllers.items():
             summary, _ = run_episodes(controller, seeds, calm, env_id=env_id)
-            results[label]["no_push"] = {"env_kwargs": calm, **{key: summary[key] for key in _NO_PUSH_KEYS}}
+            fell = [e["seed"] for e in summary["per_episode"] if not e["survived"]]
+            results[label]["no_push"] = {"env_kwargs": calm, **{key: summary[key] for key in _NO_PUSH_KEYS}, "fell": fell}
     _write_results(results, out)
 
     table = format_table(results)

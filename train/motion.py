@@ -73,7 +73,8 @@ class Motion:
     """The measures of the module docstring for each episode of a ``run_batch`` (a ``train.episodes.Watcher``).
 
     After the run, ``per_episode()`` gives each episode's measures and ``summary()`` (``pool``) those over all of
-    them. ``weight`` holds each episode's robot's weight [N] (the divisor of its normal force, 1 for ``g = 0``).
+    them. ``weight`` holds each episode's robot's weight [N], the divisor of its normal force (0 for a robot with
+``g = 0``, whose force is then in newtons).
     """
 
     def start(self, envs, obs: np.ndarray, info: dict) -> None:

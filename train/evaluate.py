@@ -412,6 +412,11 @@ def _write_results(results: dict[str, dict], out: Path) -> None:
         (out / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
 
 
+def _measured_line(measured: dict) -> str:
+    """The line that heads a results file: when and on what it was measured."""
+    return f"Measured {measured['date']} on {measured['machine']}"
+
+
 def _label(spec: str) -> str:
     return spec.lower() if spec.lower() in BASELINES else (Path(spec).name or "policy")
 
@@ -465,7 +470,7 @@ def evaluate(args: EvalArgs) -> Path:
     table = format_table(results)
     (out / "table.md").write_text(
         f"{env_id}: {args.episodes} deterministic episodes, seeds {seeds[0]}..{seeds[-1]}, env kwargs {env_kwargs or 'default'}\n"
-        f"Measured {measured['date']} on {measured['machine']}\n\n" + table + "\n"
+        f"{_measured_line(measured)}\n\n" + table + "\n"
     )
     print(table)
     if args.plot:
@@ -484,9 +489,9 @@ def evaluate(args: EvalArgs) -> Path:
             history = json.loads(log.read_text())["evaluations"]
             plot_learning_curve(history, out / "learning_curve.png", env_id, reference)
     if args.push_curve:
-        _push_curve(controllers, env_id, env_kwargs, args, out)
+        _push_curve(controllers, env_id, env_kwargs, args, out, measured)
     if args.randomize:
-        (out / "robots.md").write_text(robots_table(results) + "\n")
+        (out / "robots.md").write_text(f"{_measured_line(measured)}\n\n" + robots_table(results) + "\n")
     print(f"results written to {out}/")
     return out
 
@@ -515,7 +520,7 @@ PUSH_FORCES = tuple(2.5 * k for k in range(1, 25)) + tuple(range(70, 201, 10))
 where the controllers' limits lie), then to 200 N (20 N s) in steps of 10 N."""
 
 
-def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs, out: Path) -> dict:
+def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs, out: Path, measured: dict) -> dict:
     """Survival against the push impulse for every controller (``train.episodes.push_survival``)."""
     from train.episodes import push_survival
     from train.task_metrics import is_push_task, largest_survived_impulse
@@ -532,7 +537,8 @@ def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs
         lines.append(f"| {force:g} | {impulse:.2f} | " + " | ".join(f"{100 * curves[n][k]['survival_rate']:.0f}%" for n in names) + " |")
     lines.append("| **90% survival up to** | | " + " | ".join(f"**{best[n]:.2f} N s**" for n in names) + " |")
     table = "\n".join(lines)
-    (out / "push_curve.md").write_text(f"{args.episodes} episodes per push magnitude, seeds {args.seed}..{args.seed + args.episodes - 1}\n\n{table}\n")
+    (out / "push_curve.md").write_text(f"{args.episodes} episodes per push magnitude, seeds {args.seed}..{args.seed + args.episodes - 1}\n"
+                                       f"{_measured_line(measured)}\n\n{table}\n")  # fmt: skip
     print(table)
     if args.plot:
         from train.plots import plot_push_curve

@@ -218,6 +218,6 @@ def test_the_push_task_is_also_evaluated_without_pushes(tmp_path):
         assert not any(e["pushed"] for e in reference)
         expected = pooled(reference)
         assert {k: calm["motion"][k] for k in KEYS} == pytest.approx(expected, rel=1e-9)
-        assert calm["survival_rate"] == 1.0 and calm["motion"]["com_excursion"] < result["motion"]["com_excursion"]
+        assert calm["survival_rate"] == 1.0 and calm["fell"] == [] and calm["motion"]["com_excursion"] < result["motion"]["com_excursion"]
     assert "How it moves without pushes" in (out / "table.md").read_text()
     assert (out / "motion.png").stat().st_size > 10_000

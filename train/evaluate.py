@@ -45,8 +45,8 @@ How the robot moves, ``motion`` (``train.motion``, which defines each exactly; e
   simulated time, ``W`` the step's ``info["work_actuators"]`` on the unilateral ground and, on the pinned foot (no
   such key), ``tau . (q_after - q_before)`` over the hip and knee (exact: the torques are held over the step);
 - ``peak_normal_force``, ``peak_normal_force_max`` [body weights]: each episode's largest ``info["normal_force"] /
-  (m g)``, averaged over the episodes, and its largest over them (with ``g = 0``: in newtons,
-  ``normal_force_unit``);
+  (m g)`` (a step's mean normal force, without a landing's impact impulse), averaged over the episodes, and its
+  largest over them (with ``g = 0``: in newtons, ``normal_force_unit``);
 - ``flights_per_episode``, ``flights_per_10s``: flight phases (the contact mode going to ``"flight"``; 0 on the
   pinned foot) per episode, and per 10 s of simulated time;
 - ``com_excursion`` [m]: each episode's largest horizontal distance of the whole-body COM
@@ -56,7 +56,8 @@ The same measures restricted to the episodes that both the policy (the first con
 survive, for both, are ``both_survived`` (a falling robot's actions swing, so on all episodes a policy looks calmer
 beside a controller that falls): in each controller's JSON under the other's name, with the ``seeds`` kept. On the
 push task every controller also runs the same seeds with no push at all (``push_force=(0, 0)``): ``no_push`` has its
-survival, return and ``motion``, so that a policy that chatters or hops while nothing pushes it shows it.
+survival (and the seeds of the episodes it ``fell`` in), return and ``motion``, so that a policy that chatters or hops
+while nothing pushes it shows it.
 
 The hop task adds the metrics of ``train.task_metrics.HopTracker`` (apex error, hop period, drift after
 10 s, landing impulses) and ``hops.png``, a few hops of the first episode (COM height against its target,
@@ -411,6 +412,11 @@ def _write_results(results: dict[str, dict], out: Path) -> None:
         (out / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
 
 
+def _measured_line(measured: dict) -> str:
+    """The line that heads a results file: when and on what it was measured."""
+    return f"Measured {measured['date']} on {measured['machine']}"
+
+
 def _label(spec: str) -> str:
     return spec.lower() if spec.lower() in BASELINES else (Path(spec).name or "policy")
 
@@ -457,13 +463,14 @@ def evaluate(args: EvalArgs) -> Path:
         calm = {**env_kwargs, "push_force": [0.0, 0.0]}
         for label, controller in controllers.items():
             summary, _ = run_episodes(controller, seeds, calm, env_id=env_id)
-            results[label]["no_push"] = {"env_kwargs": calm, **{key: summary[key] for key in _NO_PUSH_KEYS}}
+            fell = [e["seed"] for e in summary["per_episode"] if not e["survived"]]
+            results[label]["no_push"] = {"env_kwargs": calm, **{key: summary[key] for key in _NO_PUSH_KEYS}, "fell": fell}
     _write_results(results, out)
 
     table = format_table(results)
     (out / "table.md").write_text(
         f"{env_id}: {args.episodes} deterministic episodes, seeds {seeds[0]}..{seeds[-1]}, env kwargs {env_kwargs or 'default'}\n"
-        f"Measured {measured['date']} on {measured['machine']}\n\n" + table + "\n"
+        f"{_measured_line(measured)}\n\n" + table + "\n"
     )
     print(table)
     if args.plot:
@@ -482,9 +489,9 @@ def evaluate(args: EvalArgs) -> Path:
             history = json.loads(log.read_text())["evaluations"]
             plot_learning_curve(history, out / "learning_curve.png", env_id, reference)
     if args.push_curve:
-        _push_curve(controllers, env_id, env_kwargs, args, out)
+        _push_curve(controllers, env_id, env_kwargs, args, out, measured)
     if args.randomize:
-        (out / "robots.md").write_text(robots_table(results) + "\n")
+        (out / "robots.md").write_text(f"{_measured_line(measured)}\n\n" + robots_table(results) + "\n")
     print(f"results written to {out}/")
     return out
 
@@ -513,7 +520,7 @@ PUSH_FORCES = tuple(2.5 * k for k in range(1, 25)) + tuple(range(70, 201, 10))
 where the controllers' limits lie), then to 200 N (20 N s) in steps of 10 N."""
 
 
-def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs, out: Path) -> dict:
+def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs, out: Path, measured: dict) -> dict:
     """Survival against the push impulse for every controller (``train.episodes.push_survival``)."""
     from train.episodes import push_survival
     from train.task_metrics import is_push_task, largest_survived_impulse
@@ -530,7 +537,8 @@ def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs
         lines.append(f"| {force:g} | {impulse:.2f} | " + " | ".join(f"{100 * curves[n][k]['survival_rate']:.0f}%" for n in names) + " |")
     lines.append("| **90% survival up to** | | " + " | ".join(f"**{best[n]:.2f} N s**" for n in names) + " |")
     table = "\n".join(lines)
-    (out / "push_curve.md").write_text(f"{args.episodes} episodes per push magnitude, seeds {args.seed}..{args.seed + args.episodes - 1}\n\n{table}\n")
+    (out / "push_curve.md").write_text(f"{args.episodes} episodes per push magnitude, seeds {args.seed}..{args.seed + args.episodes - 1}\n"
+                                       f"{_measured_line(measured)}\n\n{table}\n")  # fmt: skip
     print(table)
     if args.plot:
         from train.plots import plot_push_curve

@@ -18,8 +18,9 @@ episode of ``L`` control steps of ``dt`` seconds (``PER_EPISODE``):
   whose ``info`` has no such key, ``tau . (q_after - q_before)`` over the hip and knee angles (``q[3:5]`` of the
   state), which is that work exactly, the torques being held over the step (``tau = a * torque_limit``, with the
   episode's own robot's limits when robots are randomised);
-- ``peak_normal_force`` [body weights]: the largest ``info["normal_force"]`` (the step's mean normal force) divided
-  by the episode's robot's weight ``m g``; for a robot with ``g = 0``, which has no weight, in newtons;
+- ``peak_normal_force`` [body weights]: the largest ``info["normal_force"]`` (the step's mean normal force; on the
+  unilateral ground without the impact impulses of a landing, which ``info["impulse"]`` carries) divided by the
+  episode's robot's weight ``m g``; for a robot with ``g = 0``, which has no weight, in newtons;
 - ``flights``: the flight phases, steps after which the contact mode (``info["contact_mode"]``) is ``"flight"`` and
   before which (or at the reset) it was not; 0 on the pinned foot, which never leaves the ground. A flight that
   starts and ends within one control step is not seen;
@@ -72,7 +73,8 @@ class Motion:
     """The measures of the module docstring for each episode of a ``run_batch`` (a ``train.episodes.Watcher``).
 
     After the run, ``per_episode()`` gives each episode's measures and ``summary()`` (``pool``) those over all of
-    them. ``weight`` holds each episode's robot's weight [N] (the divisor of its normal force, 1 for ``g = 0``).
+    them. ``weight`` holds each episode's robot's weight [N], the divisor of its normal force (0 for a robot with
+``g = 0``, whose force is then in newtons).
     """
 
     def start(self, envs, obs: np.ndarray, info: dict) -> None:
@@ -202,9 +204,9 @@ def _cell(value: float, pattern: str) -> str:
 _ROWS = (
     # label, cells of a measure summary
     ("torso tilt RMS [deg]", lambda m: _cell(m["tilt_rms"], "{:.2f}")),
-    ("action rate (mean abs change per step)", lambda m: _cell(m["action_rate"], "{:.4f}")),
+    ("action rate (mean abs change per step)", lambda m: _cell(m["action_rate"], "{:.3g}")),
     ("saturated action entries", lambda m: _cell(100 * m["saturated_share"], "{:.1f}%")),
-    ("actuator power (positive work) [W]", lambda m: _cell(m["actuator_power"], "{:.1f}")),
+    ("actuator power (positive work) [W]", lambda m: _cell(m["actuator_power"], "{:.2f}")),
     ("peak normal force, mean / max [{unit}]", lambda m: _cell(m["peak_normal_force"], "{:.2f}") + " / " + _cell(m["peak_normal_force_max"], "{:.2f}")),
     ("flights per episode / per 10 s", lambda m: _cell(m["flights_per_episode"], "{:.1f}") + " / " + _cell(m["flights_per_10s"], "{:.1f}")),
     ("COM excursion from the start [cm]", lambda m: _cell(100 * m["com_excursion"], "{:.2f}")),

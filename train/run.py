@@ -190,7 +190,7 @@ def _hop_line(result: dict) -> str:
 
 def _motion_line(motion: dict) -> str:
     """How the robot moved in an evaluation (``train.motion``), for the training log."""
-    return (f"; tilt {motion['tilt_rms']:.1f} deg, action rate {motion['action_rate']:.3f}, saturated "
+    return (f"; tilt {motion['tilt_rms']:.1f} deg, action rate {motion['action_rate']:.3g}, saturated "
             f"{100 * motion['saturated_share']:.1f}%, power {motion['actuator_power']:.1f} W, {motion['flights_per_episode']:.1f} flights")
 
 

@@ -146,8 +146,10 @@ def test_evaluate_on_held_out_robots_lists_every_robot(tmp_path):
     lqr = json.loads((out / "lqr.json").read_text())
     robots = [e["robot"] for e in lqr["per_episode"]]
     assert len({r["m_b"] for r in robots}) == 3 and all(8.0 <= r["m_b"] <= 12.0 for r in robots)
-    table = (out / "robots.md").read_text().splitlines()
-    assert len(table) == 2 + 3 + 1 and table[2].startswith("| 10000 | ") and f"{robots[0]['m_b']:.3g}" in table[2]
+    head, _, table = (out / "robots.md").read_text().partition("\n\n")
+    table = table.splitlines()
+    assert head.startswith("Measured ") and len(table) == 2 + 3 + 1
+    assert table[2].startswith("| 10000 | ") and f"{robots[0]['m_b']:.3g}" in table[2]
     assert lqr["env_kwargs"] == {"randomize": True}
 
 

@@ -8,7 +8,9 @@ env's ``info`` arrays, which the SB3 adapter splits into its per-env dicts). Key
   ``normal_force`` [N], ``unilateral_violation``, ``friction_violation``, ``numerical_failure`` (bools),
   ``ending`` (why the episode ended at this step, an index into ``ENDINGS``: 0, ``"none"``, while it goes on),
   ``base_drift``, ``foot_error`` [m], ``com_position`` and ``com_velocity`` (the whole-body centre of mass and
-  its velocity, world frame [m, m/s]);
+  its velocity, world frame [m, m/s]), ``torque`` (the hip and knee torques held over the step [N m]: the clipped
+  action times the torque limits, or with the motor model what the motors give at the joints' speeds; after a
+  reset, the holding torques the reset's contact force is worked out under);
 * on the unilateral ground (``UNILATERAL``): ``contact_mode`` (``"stick"``, ``"slip"`` or ``"flight"`` at the
   end of the step), ``foot_height`` [m], ``impulse`` (the sum of impact impulses on the foot in the step
   [N s]), ``stick_time``, ``slip_time``, ``flight_time`` [s] (they sum to ``dt``), ``slip_distance`` [m],
@@ -50,6 +52,7 @@ KEYS = (
     ("foot_error", "foot_error"),
     ("com_position", "com"),
     ("com_velocity", "com_velocity"),
+    ("torque", "torque"),
 )
 """The keys of every task's ``info`` and the ``out`` field of each."""
 

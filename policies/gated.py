@@ -86,7 +86,7 @@ class GatedController(BatchedController):
         self.params, self.config, self.lqr, self.hopper = lqr_and_hopper(params, config, StanceConfig, gains)
         self.threshold, self.hop_steps, self.hop_command = float(threshold), int(hop_steps), float(hop_command)
 
-    widths, task = (18,), "the unilateral balance tasks"
+    widths, task = (18, 20), "the unilateral balance: 18 entries, 20 with observe_action (the last action is not read)"
 
     def decide(self, observation) -> np.ndarray:
         """Whether each robot, at this (first) observation of its episode, hops: ``capture_point < threshold``."""

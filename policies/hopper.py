@@ -140,7 +140,7 @@ class HopperController(BatchedController):
 
     # PlanarLegHop's 22 entries, whose entries after the command (the COM's drift, the ground time, the last hop's
     # apex) the controller does not read: it keeps its own dead reckoning and apex estimate and hops all the time
-    widths, task, dtype = (22,), "PlanarLegHop-v3: 22 entries", np.float64
+    widths, task, dtype = (22, 24), "PlanarLegHop-v3: 22 entries, 24 with observe_action", np.float64
 
     def _allocate(self, n: int) -> None:
         self._x0, self._bias, self._apex = np.zeros(n), np.zeros(n), np.zeros(n)

@@ -124,8 +124,8 @@ class LQRController(BatchedController):
         x_eq, tau_eq: the equilibrium in minimal coordinates and its holding torques [N m].
     """
 
-    widths = (12, 18, 19)
-    task = "the balance and push tasks: 12 entries pinned, 18 on the unilateral ground, 19 on PlanarLegPush-v1"
+    widths = (12, 18, 19, 14, 20, 21)  # the balance pinned and unilateral, the push; each with observe_action
+    task = "the balance and push tasks: 12 entries pinned, 18 on the unilateral ground, 19 on PlanarLegPush-v1; 2 more with observe_action"
     dtype = np.float64
 
     def __init__(

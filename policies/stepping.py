@@ -104,7 +104,7 @@ class SteppingController(BatchedController):
         self.mass = p.m_b + p.m1 + p.m2
         self.weight = self.mass * p.g
 
-    widths, task = (18, 19), "the unilateral balance tasks: 18 entries, 19 on PlanarLegPush-v1 (its COM entry is not read)"
+    widths, task = (18, 19, 20, 21), "the unilateral balance tasks: 18 entries, 19 on PlanarLegPush-v1, 2 more with observe_action (read: the first 18)"
 
     def _allocate(self, n: int) -> None:
         self.hopping, self.push_estimate = np.zeros(n, dtype=bool), np.zeros(n)

@@ -769,12 +769,16 @@ def _values_of(base):
     return (0, 1, 2, 255)  # bool: raw bytes
 
 
-def _obs_dim(task, unilateral):
+def _obs_dim(task, unilateral, action=False):
     """The observation's width the C core requires: the balance's 12 on the pinned foot, 18 on the unilateral ground;
-    the push's 19 and the hop's 22, on the unilateral ground only (None: refused)."""
+    the push's 19 and the hop's 22, on the unilateral ground only (None: refused); 2 more with observe_action."""
     if task == 0:
-        return 18 if unilateral else 12
-    return (19 if task == 1 else 22) if unilateral else None
+        width = 18 if unilateral else 12
+    elif not unilateral:
+        return None
+    else:
+        width = 19 if task == 1 else 22
+    return width + (2 if action else 0)
 
 
 def field_rule(array, field, value, task, obs_cols, modes, takes_obs):
@@ -783,11 +787,13 @@ def field_rule(array, field, value, task, obs_cols, modes, takes_obs):
     # robots: checked where a row is written (LegParams, leg_env.randomize), not at every call: any value is allowed
     if array == "settings":
         ok = {"dt": lambda v: 0 < v < INF, "max_angle": lambda v: v > 0, "max_rate": lambda v: v > 0,
-              "substeps": lambda v: 1 <= v <= 4096}.get(field)
+              "substeps": lambda v: 1 <= v <= 4096, "motor_speed": lambda v: v > 0}.get(field)
         if ok is not None:
             return (A if ok(value) else R), ("settings",)
-        if field == "unilateral" and takes_obs:  # the ground, which sets obs's width
+        if field == "unilateral" and takes_obs:  # the ground, which sets obs's width (the valid rows observe no action)
             return (A if _obs_dim(task, bool(value)) == obs_cols else R), ("obs", "settings")
+        if field == "observe_action" and takes_obs:  # two more columns
+            return (A if _obs_dim(task, task != 0 or obs_cols >= 18, bool(value)) == obs_cols else R), ("obs", "settings")
     if array == "state" and field in ("mode", "prev_mode") and modes:
         return (A if value in (0, 1, 2, 3) else R), ("state",)
     return A, (array,)

@@ -46,6 +46,18 @@ static inline void com_of(const leg_params *P, const env_state *s, double *com, 
     com_trig(P, s->q, s->qd, s->trig[0], s->trig[1], s->trig[2], s->trig[3], com, vel);
 }
 
+/* The torque a joint's motor gives for the commanded torque tau at the joint speed w [rad/s] at the step's start,
+ * held over the step: an ideal torque source (w0 infinite), or a motor whose torque falls linearly with the speed
+ * in the torque's direction, from the commanded one at rest to none at the no-load speed w0 (a torque braking the
+ * joint, against its motion, is given whole). */
+static inline double motor_torque(double tau, double w, double w0)
+{
+    if (isinf(w0) || tau == 0.0)
+        return tau;
+    const double along = tau > 0.0 ? w : -w; /* the speed in the torque's direction */
+    return tau * leg_fmin(1.0, leg_fmax(0.0, 1.0 - along / w0));
+}
+
 /* One control step of robots lo .. hi - 1, in place. A numerical failure (a non-finite state or force, or
  * a rate above max_rate) restores the state before the step, zeroes lam and the record and sets the
  * robot's numerical_failure; otherwise it is cleared and trig follows the new q. Robots are
@@ -69,8 +81,10 @@ static void physics_range(const env_batch *b, Py_ssize_t lo, Py_ssize_t hi)
         for (int j = 0; j < 4; j++)
             s->prev_trig[j] = s->trig[j];
         leg_drive u;
-        u.tau_hip = leg_fmin(1.0, leg_fmax(-1.0, s->action[0])) * r->torque_limit[0];
-        u.tau_knee = leg_fmin(1.0, leg_fmax(-1.0, s->action[1])) * r->torque_limit[1];
+        u.tau_hip = motor_torque(leg_fmin(1.0, leg_fmax(-1.0, s->action[0])) * r->torque_limit[0], s->qd[3], c->motor_speed);
+        u.tau_knee = motor_torque(leg_fmin(1.0, leg_fmax(-1.0, s->action[1])) * r->torque_limit[1], s->qd[4], c->motor_speed);
+        o->torque[0] = u.tau_hip;
+        o->torque[1] = u.tau_knee;
         u.load_x = s->load;
         u.mu = r->mu;
         if (unilateral) {
@@ -159,6 +173,8 @@ static void start_row(const env_batch *b, Py_ssize_t i)
     env_state *s = state_row(b, i);
     env_out *o = out_row(b, i);
     s->load = 0.0; /* a start has no load; the task's start kernel sets the first step's */
+    o->torque[0] = r->tau_nom[0]; /* the torques its contact force is worked out under */
+    o->torque[1] = r->tau_nom[1];
     if (b->settings->unilateral) {
         s->mode = start_unilateral(&r->p, s->q, s->qd, s->anchor, r->tau_nom, r->mu, o);
     } else {

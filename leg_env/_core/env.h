@@ -17,7 +17,7 @@ typedef enum { TASK_STANCE = 0, TASK_PUSH = 1, TASK_HOP = 2, N_TASKS = 3 } env_t
 
 #define PUSH_MAX 8     /* pushes scheduled per episode */
 #define HOP_COMMANDS 4 /* hop commands drawn ahead at a reset, for a command schedule (command_steps) */
-#define MAX_TERMS 8    /* reward terms of a task, at most */
+#define MAX_TERMS 10   /* reward terms of a task, at most */
 
 /* The push-recovery task's state: its push schedule. */
 typedef struct {
@@ -83,6 +83,9 @@ typedef struct {
     } task;
 } env_out;
 
+/* With observe_action, the last action (clipped) is the observation's last two entries, after the task's own. */
+#define OBS_ACTION_DIM 2
+
 /* Observation indices (float32 columns), the same for every task: the hop task's command last. */
 typedef enum {
     OBS_BASE_X = 0, OBS_BASE_Y, OBS_TH_B, OBS_Q1, OBS_Q2,
@@ -96,7 +99,7 @@ typedef enum {
     OBS_GROUND_TIME,                  /* the time since the last hop, */
     OBS_LAST_APEX,                    /* the last landed hop's apex rise */
     OBS_HOP_DIM,
-    OBS_MAX_DIM = OBS_HOP_DIM
+    OBS_MAX_DIM = OBS_HOP_DIM + OBS_ACTION_DIM
 } obs_index;
 
 /* The push task's entry (on the unilateral ground): the COM's x from its start. */

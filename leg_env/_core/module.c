@@ -365,8 +365,9 @@ static PyObject *dispatch(PyObject *self, PyObject *const *args, Py_ssize_t narg
 static int env_values(const env_batch *b, int task, int modes)
 {
     const env_settings *s = b->settings;
-    if (!(s->dt > 0.0 && s->dt < INFINITY && s->substeps >= 1 && s->substeps <= LEG_MAX_SUBSTEPS && s->max_angle > 0.0 && s->max_rate > 0.0))
-        return error(PyExc_ValueError, "settings: dt, substeps, max_angle or max_rate out of range");
+    if (!(s->dt > 0.0 && s->dt < INFINITY && s->substeps >= 1 && s->substeps <= LEG_MAX_SUBSTEPS && s->max_angle > 0.0 && s->max_rate > 0.0
+          && s->motor_speed > 0.0))
+        return error(PyExc_ValueError, "settings: dt, substeps, max_angle, max_rate or motor_speed out of range");
     for (Py_ssize_t i = 0; modes && i < b->n; i++)
         if (b->state[i].mode < LEG_STICK || b->state[i].mode > LEG_FLIGHT || b->state[i].prev_mode < LEG_STICK || b->state[i].prev_mode > LEG_FLIGHT)
             return error(PyExc_ValueError, "state row %zd: the contact modes must be 0, 1, 2 or 3, got %d (prev_mode %d)", i,
@@ -374,7 +375,8 @@ static int env_values(const env_batch *b, int task, int modes)
     if (task != TASK_STANCE && !s->unilateral)
         return error(PyExc_ValueError, "settings: task %d needs the unilateral ground (settings[\"unilateral\"])", task);
     if (b->obs_cols != task_obs_dim(task, s))
-        return error(PyExc_ValueError, "obs must have shape (%zd, %zd) for task %d and its ground, got (%zd, %zd)", b->n, task_obs_dim(task, s), task, b->n, b->obs_cols);
+        return error(PyExc_ValueError, "obs must have shape (%zd, %zd) for task %d, its ground and observe_action, got (%zd, %zd)", b->n,
+                     task_obs_dim(task, s), task, b->n, b->obs_cols);
     return 1;
 }
 

@@ -7,9 +7,9 @@
 
 #include "env.h"
 
-#define STANCE_TERMS 5 /* alive, drift, unilateral, friction, ctrl */
-#define PUSH_TERMS 6   /* the balance task's and com */
-#define HOP_TERMS 8    /* alive, height, drift, tilt, impact, slip, ctrl, limit */
+#define STANCE_TERMS 7 /* alive, drift, unilateral, friction, ctrl, action_rate, power */
+#define PUSH_TERMS 8   /* the balance task's and com */
+#define HOP_TERMS 10   /* alive, height, drift, tilt, impact, slip, ctrl, limit, action_rate, power */
 
 /* m g of the robot, or 1 without gravity (the observed force is then in newtons). */
 static inline double weight_of(const leg_params *P)
@@ -149,6 +149,44 @@ static void fail_row(const env_batch *b, Py_ssize_t i, double *terms, int n_term
     com_of(&r->p, s, o->com, o->com_velocity);
 }
 
+/* The action a (clipped) becomes robot i's last action, and with observe_action the observation's last two entries. */
+static void set_last_action(const env_batch *b, Py_ssize_t i, double a0, double a1)
+{
+    env_state *s = state_row(b, i);
+    s->last_action[0] = a0;
+    s->last_action[1] = a1;
+    if (b->settings->observe_action) {
+        float *obs = b->obs + (i + 1) * b->obs_cols - OBS_ACTION_DIM;
+        obs[0] = (float)a0;
+        obs[1] = (float)a1;
+    }
+}
+
+/* The effort terms of robot i's step under the clipped action a, after the balance task's five: the action's change
+ * from the last one, -w_action_rate |a - a_last|^2, and the positive mechanical power of the hip and the knee,
+ * -w_power sum_j max(0, tau_j (q_j - q_j,before)) / dt (each torque held over the step, so tau_j dq_j is the joint's
+ * work exactly); then a is the last action. */
+static void effort_terms(const env_batch *b, Py_ssize_t i, double a0, double a1, double *terms)
+{
+    const env_settings *c = b->settings;
+    const env_state *s = state_row(b, i);
+    const env_out *o = out_row(b, i);
+    const double d0 = a0 - s->last_action[0], d1 = a1 - s->last_action[1];
+    const double work_hip = o->torque[0] * (s->q[3] - s->prev_q[3]), work_knee = o->torque[1] * (s->q[4] - s->prev_q[4]);
+    terms[5] = -c->w_action_rate * (d0 * d0 + d1 * d1);
+    terms[6] = -c->w_power * (leg_fmax(0.0, work_hip) + leg_fmax(0.0, work_knee)) / c->dt;
+    set_last_action(b, i, a0, a1);
+}
+
+/* A freshly started robot's last action: the one that holds its nominal posture (its torques over its limits). */
+static void start_action(const env_batch *b, Py_ssize_t i)
+{
+    const env_robot *r = robot_row(b, i);
+    const double a0 = leg_fmin(1.0, leg_fmax(-1.0, r->tau_nom[0] / r->torque_limit[0]));
+    const double a1 = leg_fmin(1.0, leg_fmax(-1.0, r->tau_nom[1] / r->torque_limit[1]));
+    set_last_action(b, i, a0, a1);
+}
+
 /* Evaluate robot i after physics_range stepped it: its balance terms into `terms` (n_terms zeroed on a
  * failure). A numerical failure of the physics pays nothing and ends the episode. Returns whether the robot was
  * evaluated (no numerical failure); a task then writes its own terms and columns. */
@@ -162,6 +200,7 @@ static int evaluate(const env_batch *b, Py_ssize_t i, const leg_flight_inertia *
     const env_state *s = state_row(b, i);
     const double a0 = leg_fmin(1.0, leg_fmax(-1.0, s->action[0])), a1 = leg_fmin(1.0, leg_fmax(-1.0, s->action[1]));
     stance_assess(b, i, shared, a0, a1, terms);
+    effort_terms(b, i, a0, a1, terms);
     return 1;
 }
 
@@ -349,6 +388,8 @@ static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inerti
     terms[5] = -b->settings->task.hop.w_slip * o->tally.slip_distance / b->settings->dt;
     terms[6] = stance_terms[4]; /* ctrl */
     terms[7] = -b->settings->task.hop.w_limit * limit_excess(s->q, b->settings, b->settings->task.hop.limit_margin);
+    terms[8] = stance_terms[5]; /* action_rate */
+    terms[9] = stance_terms[6]; /* power */
     if (o->terminated) /* terminated: nothing but the penalties */
         terms[1] = 0.0;
     next_hop_command(b, i, t);
@@ -386,11 +427,12 @@ static int task_terms(int task) { return task == TASK_STANCE ? STANCE_TERMS : (t
 /* The observation's width of a task with its settings. */
 static Py_ssize_t task_obs_dim(int task, const env_settings *c)
 {
+    const Py_ssize_t action = c->observe_action ? OBS_ACTION_DIM : 0;
     if (task == TASK_HOP)
-        return OBS_HOP_DIM;
+        return OBS_HOP_DIM + action;
     if (task == TASK_PUSH)
-        return OBS_PUSH_DIM;
-    return c->unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM;
+        return OBS_PUSH_DIM + action;
+    return (c->unilateral ? OBS_UNILATERAL_DIM : OBS_PINNED_DIM) + action;
 }
 
 /* The task after a control step of robots lo .. hi - 1. When every row shares one robot, its flight inertia
@@ -432,6 +474,7 @@ static void task_start(int task, const env_batch *b)
             for (int k = 0; k < STANCE_TERMS; k++)
                 terms[k] = 0.0;
         }
+        start_action(b, i);
     }
 }
 

@@ -74,7 +74,7 @@ class LegEnv(gym.Env):
         # the compiled core's arrays (leg_env.physics.layout), one row, shared with nothing; _bind() hands them to C
         self._robots = robot_row(self.params, self.config, self.nominal)
         self.robots = Robots(randomize, self._robots, self.config, gravity=self.task.needs_gravity)  # leg_env.randomize
-        self.observation_space = self.task.observation_space(self.robots.longest(self.params), self.config)
+        self.observation_space = self.task.space(self.robots.longest(self.params), self.config)
         self._custom_robot = False  # whether the robot is not the nominal one
         self._settings = self.config.settings(self.task.name)
         self._state = np.zeros(1, dtype=self.task.state_dtype)
@@ -284,7 +284,7 @@ def checked_config_change(env, observation_space: spaces.Box, changes: dict):
         moved.append("the robot (its friction, torque limits or nominal posture)")
     if not np.array_equal(posture_limits(new), posture_limits(config)):
         moved.append("the posture limits robots are drawn under")
-    space = env.task.observation_space(env.robots.longest(env.params), new)
+    space = env.task.space(env.robots.longest(env.params), new)
     if space.shape != observation_space.shape:
         moved.append(f"the observation's shape ({observation_space.shape} to {space.shape})")
     else:

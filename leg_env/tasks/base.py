@@ -81,6 +81,17 @@ class Task:
     columns: Callable | None = None
     needs_gravity: bool = False
 
+    def space(self, params: LegParams, config) -> "spaces.Box":
+        """One robot's observation space: the task's entries (``observation_space``), then with ``config.observe_action``
+        the last action's two, in [-1, 1]."""
+        space = self.observation_space(params, config)
+        if not config.observe_action:
+            return space
+        from gymnasium import spaces
+
+        ones = np.ones(ACTION_DIM, dtype=np.float32)
+        return spaces.Box(np.append(space.low, -ones), np.append(space.high, ones), dtype=np.float32)
+
     def assess(self, state, robots, settings, out, obs) -> None:
         """The task after a control step of every robot (the compiled core's control step, ``env.c``), in place: the
         observation, the reward terms (they sum to the reward), the extras and the flags."""
@@ -117,6 +128,7 @@ class Task:
         return self.columns(draws, config)
 
 
+ACTION_DIM = 2  # the action's entries (hip, knee); with observe_action the observation ends with the last action's
 OBS_DIM = layout.OBS["pinned_dim"]  # 12
 OBS_DIM_UNILATERAL = layout.OBS["unilateral_dim"]  # 18: the foot's height, velocity, contact, slip and impulse after them
 Obs = IntEnum("Obs", {name: i for name, i in layout.OBS.items() if not name.endswith("_dim") and not name.startswith("push_")})
@@ -146,6 +158,9 @@ FIELD_RANGES = {
     "unilateral_weight": (0.0, _BIG, False, False, ""),
     "friction_weight": (0.0, _BIG, False, False, ""),
     "ctrl_cost_weight": (0.0, _BIG, False, False, ""),
+    "action_rate_weight": (0.0, _BIG, False, False, ""),
+    "power_weight": (0.0, _BIG, False, False, "per W"),
+    "motor_speed": (0.0, _INF, True, False, "rad/s"),
     "mu": (0.0, _BIG, False, False, ""),
     "min_base_height": (0.0, _BIG, True, False, "m"),
     "max_torso_angle": (0.0, _BIG, True, False, "rad"),
@@ -189,6 +204,8 @@ class StanceConfig:
     unilateral_weight: float = 10.0  # per unit of max(0, -lam_y) / weight
     friction_weight: float = 10.0  # per unit of max(0, |lam_x| - mu lam_y) / weight
     ctrl_cost_weight: float = 0.01  # per unit of |action|^2
+    action_rate_weight: float = 0.0  # per unit of |action - last action|^2 (both clipped to [-1, 1])
+    power_weight: float = 0.0  # per W of the hip's and the knee's positive mechanical power
     mu: float | None = None  # friction coefficient; None: DEFAULT_MU of the contact model (0.8 pinned, 0.5 unilateral)
     # termination
     min_base_height: float = 0.5  # torso above the contact point [m]
@@ -202,6 +219,9 @@ class StanceConfig:
     reset_noise_scale: float = 0.01  # uniform noise half-width on (th_b, q1, q2) [rad] and their rates [rad/s]
     # physics
     contact: str = "pinned"  # "pinned": the foot is a bilateral pin (v0); "unilateral": exact unilateral contact
+    motor_speed: float = _INF  # no-load speed of the joints' motors [rad/s]: torque falls linearly to 0 there; inf: ideal
+    # observation
+    observe_action: bool = False  # the last action (clipped) as the observation's last two entries
 
     def __post_init__(self) -> None:
         if not isinstance(self.contact, str):
@@ -222,6 +242,7 @@ class StanceConfig:
                 value = checks.real(f"StanceConfig.{name}", value, lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
             object.__setattr__(self, name, value)
         object.__setattr__(self, "terminate_on_contact_loss", checks.boolean("StanceConfig.terminate_on_contact_loss", self.terminate_on_contact_loss))
+        object.__setattr__(self, "observe_action", checks.boolean("StanceConfig.observe_action", self.observe_action))
         for name in ("hip_range", "knee_range"):
             lo, hi = getattr(self, name)
             if not lo < hi:
@@ -266,6 +287,8 @@ class StanceConfig:
         row["alive_bonus"] = self.alive_bonus
         row["w_position"], row["w_angle"], row["w_velocity"] = self.drift_position_weight, self.drift_angle_weight, self.drift_velocity_weight
         row["w_unilateral"], row["w_friction"], row["w_ctrl"] = self.unilateral_weight, self.friction_weight, self.ctrl_cost_weight
+        row["w_action_rate"], row["w_power"], row["motor_speed"] = self.action_rate_weight, self.power_weight, self.motor_speed
+        row["observe_action"] = self.observe_action
         row["min_base_height"], row["max_torso_angle"] = self.min_base_height, self.max_torso_angle
         row["hip_range"], row["knee_range"] = self.hip_range, self.knee_range
         row["terminate_on_contact_loss"], row["contact_loss_threshold"] = self.terminate_on_contact_loss, self.contact_loss_threshold
@@ -274,7 +297,7 @@ class StanceConfig:
         return row
 
 
-if set(FIELD_RANGES) | {"terminate_on_contact_loss", "contact"} != {f.name for f in fields(StanceConfig)}:
+if set(FIELD_RANGES) | {"terminate_on_contact_loss", "contact", "observe_action"} != {f.name for f in fields(StanceConfig)}:
     raise RuntimeError("FIELD_RANGES must list every numeric StanceConfig field")  # a developer error
 
 

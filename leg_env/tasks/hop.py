@@ -20,7 +20,7 @@ the COM's apex above ``y_stand`` [m] (entry 21, ``Obs.last_apex``; 0 before the 
 
 ## Rewards
 ``reward = reward_alive + reward_height + reward_drift + reward_tilt + reward_impact + reward_slip
-+ reward_ctrl + reward_limit``, each in ``info``:
++ reward_ctrl + reward_limit + reward_action_rate + reward_power``, each in ``info``:
 
 - ``reward_alive = alive_bonus`` (1) on a healthy step while the ground time is at most ``max_ground_time``
   (1 s): the robot must keep hopping.
@@ -48,6 +48,10 @@ the COM's apex above ``y_stand`` [m] (entry 21, ``Obs.last_apex``; 0 before the 
   (0.05 rad) of its range (``hip_range``, ``knee_range``; an episode ends past either end), 0 elsewhere: a
   training setting, ``limit_weight`` 0 in the registered task, which warns of the range's end before the episode
   ends there.
+- ``reward_action_rate``, ``reward_power``: the action's change and the joints' positive mechanical power, as in
+  ``PlanarLegStance`` (``action_rate_weight``, ``power_weight``; 0 in the registered task). The options
+  ``observe_action`` (the last action as entries 22-23) and ``motor_speed`` (the motor model) are the balance
+  task's too.
 
 Flight is the task, so it is not charged. **Unilateral violation** here means what it means on the
 unilateral ground of ``PlanarLegStance``: ``info["unilateral_violation"]`` (``lam_y < 0``) and
@@ -135,7 +139,7 @@ __all__ = ["HopConfig", "TASK", "REWARD_TERMS", "OBS_DIM"]
 
 MAX_STEPS = 2**31 - 1  # control steps a setting can count (an int32 of the compiled core)
 
-REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl", "limit")
+REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl", "limit", "action_rate", "power")
 N_TERMS = len(REWARD_TERMS)
 OBS_DIM = layout.OBS["hop_dim"]  # 22: the unilateral ground's 18, the command, the COM's drift, the ground time, the last apex
 _BIG = 1.0e6

@@ -36,8 +36,9 @@ whole-body COM's ``x`` from where the episode started, ``x_com - x_com,0`` [m], 
 moves with every step).
 
 ## Rewards
-``reward = reward_alive + reward_drift + reward_unilateral + reward_friction + reward_ctrl + reward_com``:
-the first five are the balance task's (``PlanarLegStance``), with ``unilateral_weight = 0.5`` by default
+``reward = reward_alive + reward_drift + reward_unilateral + reward_friction + reward_ctrl + reward_action_rate
++ reward_power + reward_com``: the first seven are the balance task's (``PlanarLegStance``; the action rate and
+the power are 0 in the registered task, as are its options ``observe_action`` and ``motor_speed``), with ``unilateral_weight = 0.5`` by default
 (a recovery hop costs its flight time, ``-0.5 flight_time / dt`` per step, but is allowed); the base drift
 is measured from wherever the foot now stands (its contact point), so relocating the foot is not charged
 by it. ``reward_com = -com_weight (x_com - x_com,0)^2`` (``com_weight = 1`` per m^2) charges the whole-body

@@ -91,9 +91,13 @@ height) is unbounded, the force in 10-11 is the mean over the step without impac
 | 16  | slip direction (+1, -1; 0 unless slipping)       | -1   | 1    | 1     |
 | 17  | impact impulse of the step `P_y / (m g dt)`      | -Inf | Inf  | 1     |
 
+With ``observe_action=True`` (any task, any ground) two more entries end the observation, after the task's own:
+the last action, clipped to ``[-1, 1]`` (hip, knee), the one the action rate below is measured from; after a
+reset, the action that holds the nominal posture (its torques over the torque limits).
+
 ## Rewards
-``reward = reward_alive + reward_drift + reward_unilateral + reward_friction + reward_ctrl``, each
-term in ``info`` under that name (they sum to the reward exactly, in this order):
+``reward = reward_alive + reward_drift + reward_unilateral + reward_friction + reward_ctrl + reward_action_rate
++ reward_power``, each term in ``info`` under that name (they sum to the reward exactly, in this order):
 
 - ``reward_alive = alive_bonus`` on a healthy step (not terminated), else 0.
 - ``reward_drift = -(drift_position_weight |p_b - p_nom|^2 + drift_angle_weight th_b^2
@@ -103,6 +107,17 @@ term in ``info`` under that name (they sum to the reward exactly, in this order)
 - ``reward_friction = -friction_weight max(0, |lam_x| - mu lam_y) / (m g)``: the force must lie in
   the friction cone.
 - ``reward_ctrl = -ctrl_cost_weight |a|^2`` with ``a`` the clipped action.
+- ``reward_action_rate = -action_rate_weight |a - a_last|^2``: the action's change from the last step's (both
+  clipped; after a reset ``a_last`` is the action that holds the nominal posture). 0 by default.
+- ``reward_power = -power_weight (max(0, tau_hip dq1) + max(0, tau_knee dq2)) / dt`` [per W]: the hip's and the
+  knee's positive mechanical power over the step, ``tau`` the torques held over it (``info["torque"]``) and ``dq``
+  the joint angles' change, so that each product is the joint's work exactly; negative work (braking) is not paid
+  back. 0 by default.
+
+**Motor model** (``motor_speed``, the joints' no-load speed [rad/s]; ``inf`` by default, ideal torque sources). The
+torque a joint gets is the commanded one ``a torque_limit`` scaled by ``clip(1 - w / motor_speed, 0, 1)``, ``w`` the
+joint's speed in the torque's direction at the step's start (a torque that brakes the joint gets its full value),
+held over the step like every torque here: a DC motor's torque-speed line, sampled at the control rate.
 
 With ``contact="unilateral"`` the ground cannot pull or leave the cone, so the two contact terms
 charge what asking for it does instead: ``reward_unilateral = -unilateral_weight flight_time / dt``
@@ -277,7 +292,7 @@ from .base import StanceConfig, Task, observation_space
 
 __all__ = ["TASK", "REWARD_TERMS"]
 
-REWARD_TERMS = ("alive", "drift", "unilateral", "friction", "ctrl")
+REWARD_TERMS = ("alive", "drift", "unilateral", "friction", "ctrl", "action_rate", "power")
 """The balance task's reward terms, in the order they are summed (``info["reward_<name>"]``)."""
 
 TASK = Task(

@@ -49,7 +49,7 @@ def test_the_terms_sum_to_the_returns_of_the_evaluation_runner_and_the_window_av
     np.testing.assert_allclose(sum(report.terms.values()), batch.returns, rtol=1e-12, atol=1e-9)
     np.testing.assert_array_equal(report.lengths, batch.lengths)
     np.testing.assert_array_equal(report.survived, batch.survived)
-    assert set(report.terms) == {f"reward_{k}" for k in ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl", "limit")}
+    assert set(report.terms) == {f"reward_{k}" for k in ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl", "limit", "action_rate", "power")}
     for key, values in report.terms.items():
         np.testing.assert_allclose(report.last[key], values / report.lengths, rtol=1e-12, atol=1e-15)
     assert report.last["reward_alive"][~report.survived].max() <= 3.0  # the scheduled bonus, 0 on the falling step

@@ -1,6 +1,6 @@
 """The acceptance bars (train.bars): each task's bars found by the env id's name in any version, every bar passed by
 a policy that meets it and failed just past its threshold (and only that bar), the bars that cannot be measured
-said so."""
+said so, and train.evaluate's table ending with them."""
 
 from __future__ import annotations
 
@@ -167,3 +167,17 @@ def test_the_bars_table_has_a_row_per_bar_and_one_on_every_bar():
     assert lines[2] == "| survival >= 98% | pass: 100% | **fail**: 97% |"
     assert lines[-1] == "| **every bar** | **yes** | no |"
 
+
+def test_the_evaluation_table_ends_with_the_bars(tmp_path):
+    """train.evaluate writes the policy's bars under its tables, with the numbers of its JSON."""
+    from train.evaluate import EvalArgs, evaluate
+
+    out = evaluate(EvalArgs(policy="gated", baseline=["lqr"], env_id=BALANCE, episodes=3, plot=False, out=tmp_path / "eval"))
+    table = (out / "table.md").read_text()
+    assert "Bars (`train.bars`): gated on these episodes" in table
+    gated = json.loads((out / "gated.json").read_text())
+    survival = "pass" if gated["survival_rate"] >= 0.98 else "**fail**"
+    assert f"| survival >= 98% | {survival}: {100 * gated['survival_rate']:.0f}% |" in table
+    assert "| mean return >= gated's | not measured (the policy is gated itself) |" in table
+    stance = evaluate(EvalArgs(policy="lqr", episodes=2, plot=False, out=tmp_path / "stance"))
+    assert "Bars" not in (stance / "table.md").read_text()  # the pinned foot has no bars

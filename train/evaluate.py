@@ -63,7 +63,14 @@ The hop task adds the metrics of ``train.task_metrics.HopTracker`` (apex error, 
 10 s, landing impulses) and ``hops.png``, a few hops of the first episode (COM height against its target,
 contact mode, contact force, impulses). ``--push-curve`` (push task) adds survival against the push
 impulse for every controller on the same seeds (``train.episodes.push_survival``): ``push_curve.json``,
-``push_curve.md`` and ``push_curve.png``, with the largest impulse each survives 90% of the time.
+``push_curve.md`` and ``push_curve.png``, with the largest impulse each survives 90% of the time (also in each
+controller's JSON, ``push_impulse_90``).
+
+On the balance, hop and push tasks ``table.md`` ends with the policy's acceptance bars (``train.bars``): each bar's
+number, its threshold and whether the policy meets it. A bar that compares with a controller is measured when that
+controller is a ``--baseline`` (the gated controller and the LQR on the balance task, the hopper on the hop task, the
+stepping controller on the push task); the push task's 90% impulse needs ``--push-curve``, and its bars pushed at
+5 N s an evaluation env with ``push_force`` (50, 50).
 """
 
 from __future__ import annotations
@@ -87,6 +94,7 @@ __all__ = [
     "TrainedPolicy",
     "load_policy",
     "run_episodes",
+    "run_without_pushes",
     "evaluate",
     "format_table",
 ]
@@ -397,6 +405,29 @@ _NO_PUSH_KEYS = ("survival_rate", "mean_return", "mean_length", "endings", "moti
 """What ``train.evaluate`` keeps of each controller's episodes without pushes (push task), in its ``no_push``."""
 
 
+def run_without_pushes(controller, seeds, env_kwargs: dict, env_id: str) -> dict:
+    """A controller's episodes of the push task on ``seeds`` with no push at all (``push_force`` (0, 0), the rest of
+    ``env_kwargs`` kept): its ``env_kwargs``, ``_NO_PUSH_KEYS`` of ``run_episodes``' summary and the seeds of the
+    episodes it ``fell`` in. ``train.evaluate``'s ``no_push``."""
+    calm = {**env_kwargs, "push_force": [0.0, 0.0]}
+    summary, _ = run_episodes(controller, seeds, calm, env_id=env_id)
+    fell = [e["seed"] for e in summary["per_episode"] if not e["survived"]]
+    return {"env_kwargs": calm, **{key: summary[key] for key in _NO_PUSH_KEYS}, "fell": fell}
+
+
+def _bars_section(results: dict[str, dict]) -> str:
+    """The table of the policy's acceptance bars (``train.bars``), headed by a line; empty for a task without bars."""
+    from train.bars import bars_table, check_bars
+
+    checks = check_bars(results)
+    if not checks:
+        return ""
+    policy = next(iter(results))
+    return (f"\n\nBars (`train.bars`): {policy} on these episodes; a comparison with a controller on the episodes both survive, "
+            "the return on all of them; a bar is not measured without its controller's run, the push curve (`--push-curve`) "
+            "or its evaluation env:\n\n" + bars_table({policy: checks}))  # fmt: skip
+
+
 def _write_results(results: dict[str, dict], out: Path) -> None:
     """One JSON per controller: ``policy.json``, a controller's by its name (``lqr.json``), a folder baseline's
     ``baseline.json`` (``baseline_2.json``, ... for more)."""
@@ -460,14 +491,14 @@ def evaluate(args: EvalArgs) -> Path:
     dt = series[next(iter(series))]["dt"]
     both_survived(results, next(iter(results)), dt)
     if is_push_task(env_id):  # the same seeds with no push at all: does the policy stand still when nothing happens?
-        calm = {**env_kwargs, "push_force": [0.0, 0.0]}
         for label, controller in controllers.items():
-            summary, _ = run_episodes(controller, seeds, calm, env_id=env_id)
-            fell = [e["seed"] for e in summary["per_episode"] if not e["survived"]]
-            results[label]["no_push"] = {"env_kwargs": calm, **{key: summary[key] for key in _NO_PUSH_KEYS}, "fell": fell}
+            results[label]["no_push"] = run_without_pushes(controller, seeds, env_kwargs, env_id)
+    if args.push_curve:
+        for label, impulse in _push_curve(controllers, env_id, env_kwargs, args, out, measured).items():
+            results[label]["push_impulse_90"] = impulse
     _write_results(results, out)
 
-    table = format_table(results)
+    table = format_table(results) + _bars_section(results)
     (out / "table.md").write_text(
         f"{env_id}: {args.episodes} deterministic episodes, seeds {seeds[0]}..{seeds[-1]}, env kwargs {env_kwargs or 'default'}\n"
         f"{_measured_line(measured)}\n\n" + table + "\n"
@@ -488,8 +519,6 @@ def evaluate(args: EvalArgs) -> Path:
             reference = next((results[k] for k in results if k.split(" ")[0] in BASELINES), None)
             history = json.loads(log.read_text())["evaluations"]
             plot_learning_curve(history, out / "learning_curve.png", env_id, reference)
-    if args.push_curve:
-        _push_curve(controllers, env_id, env_kwargs, args, out, measured)
     if args.randomize:
         (out / "robots.md").write_text(f"{_measured_line(measured)}\n\n" + robots_table(results) + "\n")
     print(f"results written to {out}/")

@@ -221,3 +221,16 @@ def test_the_push_task_is_also_evaluated_without_pushes(tmp_path):
         assert calm["survival_rate"] == 1.0 and calm["fell"] == [] and calm["motion"]["com_excursion"] < result["motion"]["com_excursion"]
     assert "How it moves without pushes" in (out / "table.md").read_text()
     assert (out / "motion.png").stat().st_size > 10_000
+
+
+def test_a_motion_table_column_can_be_an_estimate_with_its_interval():
+    """An ``Estimate`` column (the IQM across seeds, say) writes each measure as its point with the interval's ends."""
+    from train.motion import Estimate, motion_table
+
+    def summary(value: float) -> dict:
+        return {**{key: value for key in KEYS}, "normal_force_unit": "m g"}
+
+    table = motion_table({"seed 0": summary(2.0), "IQM [95% CI]": Estimate(summary(2.0), summary(1.0), summary(3.0))})
+    assert table.splitlines()[0] == "| measure | seed 0 | IQM [95% CI] |"
+    assert "| torso tilt RMS [deg] | 2.00 | 2.00 [1.00, 3.00] |" in table
+    assert "| peak normal force, mean / max [m g] | 2.00 / 2.00 | 2.00 / 2.00 [1.00 / 1.00, 3.00 / 3.00] |" in table

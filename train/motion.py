@@ -36,6 +36,7 @@ largest; ``flights_per_episode`` their mean and ``flights_per_10s`` all flights 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -43,7 +44,7 @@ import numpy as np
 from leg_env.physics.params import PARAM_NAMES, LegParams
 from leg_env.tasks.base import Obs
 
-__all__ = ["Motion", "KEYS", "PER_EPISODE", "pool", "pool_records", "both_survived", "motion_table", "motion_sections"]
+__all__ = ["Motion", "KEYS", "PER_EPISODE", "pool", "pool_records", "both_survived", "Estimate", "motion_table", "motion_sections"]
 
 PER_EPISODE = ("tilt_rms", "action_rate", "saturated_share", "actuator_power", "peak_normal_force", "flights", "com_excursion")
 """The measures of one episode (module docstring), in ``Motion.per_episode()``."""
@@ -213,15 +214,33 @@ _ROWS = (
 )
 
 
-def motion_table(columns: dict[str, dict], extra: Sequence[tuple[str, Sequence[str]]] = ()) -> str:
-    """A Markdown table of the measures (``pool``'s summaries), one column per name of ``columns``; ``extra`` rows
-    ``(label, cells)`` come first."""
+@dataclass(frozen=True)
+class Estimate:
+    """A column of ``motion_table`` that estimates the measures with an interval (the IQM of several policies' and its
+    confidence interval, say): three dicts of ``KEYS``, the point estimates and the interval's ends."""
+
+    point: dict
+    low: dict
+    high: dict
+
+
+def _column_cell(cell, column: dict | Estimate) -> str:
+    """A row's cell of one column: the measure, or an estimate with its interval in brackets."""
+    if isinstance(column, Estimate):
+        return f"{cell(column.point)} [{cell(column.low)}, {cell(column.high)}]"
+    return cell(column)
+
+
+def motion_table(columns: dict[str, dict | Estimate], extra: Sequence[tuple[str, Sequence[str]]] = ()) -> str:
+    """A Markdown table of the measures (``pool``'s summaries, or ``Estimate``s of them), one column per name of
+    ``columns``; ``extra`` rows ``(label, cells)`` come first."""
     names = list(columns)
-    units = {columns[n].get("normal_force_unit", "m g") for n in names}
+    summaries = [c.point if isinstance(c, Estimate) else c for c in columns.values()]
+    units = {summary.get("normal_force_unit", "m g") for summary in summaries}
     unit = units.pop() if len(units) == 1 else "m g, or N"
     lines = ["| measure | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
     lines += [f"| {label} | " + " | ".join(cells) + " |" for label, cells in extra]
-    lines += [f"| {label.format(unit=unit)} | " + " | ".join(cell(columns[n]) for n in names) + " |" for label, cell in _ROWS]
+    lines += [f"| {label.format(unit=unit)} | " + " | ".join(_column_cell(cell, columns[n]) for n in names) + " |" for label, cell in _ROWS]
     return "\n".join(lines)
 
 

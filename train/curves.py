@@ -23,11 +23,21 @@ The results page, ``<out>/README.md`` (headed by the machine, the versions and t
   stratified-bootstrap confidence intervals, against environment steps (``curves_steps.png``) and
   against wall-clock time (``curves_time.png``; the seeds' median time at each evaluation), every seed's
   curve drawn faintly beside it;
-- every seed's final held-out scores, their IQM with its interval, and the baseline's;
+- every seed's final held-out scores, their IQM with its interval, and the controllers';
 - the shipped seed, named by ``--shipped-seed`` before training (it is written on the page before any
-  seed trains) and its rank among the seeds, so that a shipped policy is never picked after the fact.
+  seed trains) and its rank among the seeds, so that a shipped policy is never picked after the fact;
+- how each seed moves on the held-out episodes (``train.motion``: torso tilt, action rate, saturated share,
+  actuator power, peak normal force, flights, COM excursion), the IQM across seeds with its interval and the
+  controllers beside them (``motion.png`` draws them), and on the push task the same with no push at all;
+- the task's acceptance bars (``train.bars``) for each seed, passed or failed with the number measured, and how
+  many seeds meet every bar (``train.learning_page`` writes these two sections).
 
-``scores.json`` holds every number of the page.
+The controllers on the held-out episodes are ``--baseline`` and those the task's bars compare with (the gated
+controller and the LQR on the balance task, the hopper on the hop task, the stepping controller on the push task),
+each seed beside each of them also on the episodes both survive. ``scores.json`` holds every number of the page:
+per seed in ``final.per_seed`` (the scores, ``motion``, ``both_survived``, ``no_push`` on the push task, ``bars``),
+the motion measures' IQM in ``final.motion_iqm``, and each controller in ``controllers`` (``baseline`` repeats
+``--baseline``'s).
 """
 
 from __future__ import annotations
@@ -93,7 +103,8 @@ class CurvesArgs:
     episodes: int = 100
     """Held-out episodes per seed for the final scores (seeds 10000 + i)."""
     baseline: str | None = None
-    """A model-based controller evaluated on the same held-out episodes ('lqr', 'hopper', 'gated', 'stepping')."""
+    """A model-based controller evaluated on the same held-out episodes ('lqr', 'hopper', 'gated', 'stepping'); the
+    controllers the task's bars compare with run there too."""
     runs: Path | None = None
     """Folder of the seeds' run folders (None: runs/curves/<task name>, with -randomized when the evaluation
     draws randomised robots)."""
@@ -280,19 +291,79 @@ def eval_env_kwargs(args: CurvesArgs) -> dict:
     return dict(parse_override(item) for item in args.eval_env_kwargs)
 
 
-def _held_out(policy, args: CurvesArgs, env_kwargs: dict) -> dict:
-    """A policy's scores on the held-out episodes (``train.evaluate.run_episodes``); on the push task also the
-    push curve's 90% impulse (``train.episodes.push_survival``, every push of an episode at one magnitude)."""
-    from train.evaluate import PUSH_FORCES, run_episodes
+def _held_out(policy, args: CurvesArgs, env_kwargs: dict, push_curve: bool = True) -> dict:
+    """A policy's evaluation on the held-out episodes, as ``train.evaluate`` makes it for one controller:
+    ``train.evaluate.run_episodes``' summary (the motion measures among them) with the env's id and arguments and
+    the control period ``dt``. On the push task also the same seeds with no push (``no_push``,
+    ``train.evaluate.run_without_pushes``) and, with ``push_curve``, the push curve's 90% impulse
+    (``train.episodes.push_survival``, every push of an episode at one magnitude)."""
+    from train.evaluate import PUSH_FORCES, run_episodes, run_without_pushes
     from train.episodes import push_survival
     from train.task_metrics import is_push_task, largest_survived_impulse
 
     seeds = [TEST_SEED + i for i in range(args.episodes)]
-    summary, _ = run_episodes(policy, seeds, env_kwargs, env_id=args.env_id)
+    summary, series = run_episodes(policy, seeds, env_kwargs, record=0, env_id=args.env_id)
+    result = {"env_id": args.env_id, "env_kwargs": env_kwargs, "dt": series["dt"], **summary}
     if is_push_task(args.env_id):
-        curve = push_survival(policy, PUSH_FORCES, args.episodes, TEST_SEED, env_kwargs, args.env_id)
-        summary["push_impulse_90"] = largest_survived_impulse(curve)
-    return {k: summary[k] for k in KEYS if k in summary}
+        result["no_push"] = run_without_pushes(policy, seeds, env_kwargs, args.env_id)
+        if push_curve:
+            curve = push_survival(policy, PUSH_FORCES, args.episodes, TEST_SEED, env_kwargs, args.env_id)
+            result["push_impulse_90"] = largest_survived_impulse(curve)
+    return result
+
+
+def _kept(result: dict) -> dict:
+    """What ``scores.json`` keeps of a held-out evaluation: the page's scores (``KEYS``), the motion measures and, on
+    the push task, the episodes with no push."""
+    kept = {**{k: result[k] for k in KEYS if k in result}, "motion": result["motion"]}
+    if "no_push" in result:
+        kept["no_push"] = result["no_push"]
+    return kept
+
+
+def _without_seeds(pooled: dict) -> dict:
+    """A ``train.motion.both_survived`` entry without its list of seeds (its ``episodes`` count kept)."""
+    return {k: v for k, v in pooled.items() if k != "seeds"}
+
+
+def _controllers(args: CurvesArgs) -> list[str]:
+    """The controllers run on the held-out episodes: ``--baseline``, then those the task's bars compare with
+    (``train.bars``), each once."""
+    from train.bars import bar_controllers
+    from train.policy_loading import BASELINES
+
+    named = [args.baseline.lower() if args.baseline.lower() in BASELINES else args.baseline] if args.baseline else []
+    return list(dict.fromkeys(named + list(bar_controllers(args.env_id, eval_env_kwargs(args)))))
+
+
+def _beside_controllers(seed: int, result: dict, controllers: dict[str, dict], kept: dict[str, dict], env_id: str) -> dict:
+    """A seed's kept scores, with its motion measures on the episodes it and each controller both survive
+    (``both_survived``, by controller) and its bars (``bars``, ``train.bars.check_bars``); each controller's measures
+    on those episodes go into ``kept[name]["both_survived"][str(seed)]``."""
+    from train.bars import check_bars
+    from train.motion import both_survived
+
+    label = f"PPO seed {seed}"
+    results = {label: result, **{name: dict(r) for name, r in controllers.items()}}  # copies: both_survived adds to them
+    both_survived(results, label, result["dt"])
+    for name in controllers:
+        kept[name].setdefault("both_survived", {})[str(seed)] = _without_seeds(results[name]["both_survived"][label])
+    mine = {name: _without_seeds(pooled) for name, pooled in result.get("both_survived", {}).items()}
+    scores = {**_kept(result), **({"both_survived": mine} if mine else {})}
+    scores["bars"] = [check.as_dict() for check in check_bars(results, env_id)]
+    return scores
+
+
+def _motion_iqm(motions: list[dict]) -> dict:
+    """Each motion measure's IQM across seeds with its interval, ``{measure: (iqm, low, high)}`` (nan where a seed's
+    measure is nan)."""
+    from train.motion import KEYS as MOTION_KEYS
+
+    estimates = {}
+    for key in MOTION_KEYS[1:]:  # not the episodes' count
+        values = np.array([m[key] for m in motions], dtype=np.float64)
+        estimates[key] = iqm_interval(values) if np.all(np.isfinite(values)) else (float("nan"),) * 3
+    return estimates
 
 
 def _curves(histories: dict[int, list[dict]]) -> dict:
@@ -345,6 +416,13 @@ _COLUMNS = {  # a held-out score's column: its heading and how its value is writ
 }
 
 
+def _plot_motion(final: dict, controllers: dict[str, dict], path: Path) -> None:
+    """How each seed moves beside the controllers (``train.plots.plot_motion``: a bar per seed and controller)."""
+    from train.plots import plot_motion
+
+    plot_motion({f"seed {seed}": scores for seed, scores in final["per_seed"].items()} | controllers, path)
+
+
 def _fmt(v: float, metric: str) -> str:
     return _COLUMNS[metric][1](v) if metric in _COLUMNS else f"{v:.3g}"
 
@@ -390,8 +468,24 @@ def _precision_title(final: dict) -> str:
     return ", bfloat16 update" if set(final.get("precision", {}).values()) == {"bfloat16"} else ""
 
 
-def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: dict | None, command: str) -> str:
-    name = args.env_id.split("/")[-1]
+def _controllers_sentence(controllers: dict[str, dict]) -> str:
+    """The end of the page's sentence on the final scores: which controllers ran the same episodes."""
+    if not controllers:
+        return "."
+    names = ", ".join(f"`{name}`" for name in controllers)
+    return f"; {names} (model-based controller{'s' if len(controllers) > 1 else ''}) on the same episodes."
+
+
+def _seed_label(args: CurvesArgs, seed: int) -> str:
+    """A seed's name in the page's tables, the seed named before training marked."""
+    return f"PPO seed {seed}" + ((" (shipped)" if args.shipped else " (named)") if seed == args.shipped_seed else "")
+
+
+def _page(args: CurvesArgs, header: str, curves: dict, final: dict, controllers: dict[str, dict], command: str) -> str:
+    """The results page from the sweep's numbers: ``controllers`` holds each controller's kept scores (the
+    baseline first)."""
+    from train.learning_page import bars_section, motion_section
+
     seeds = curves["seeds"]
     lines = [
         f"# Learning curves: {_task(args)}{_precision_title(final)}",
@@ -429,24 +523,26 @@ def _page(args: CurvesArgs, header: str, curves: dict, final: dict, baseline: di
         f"Final scores: each seed's selected policy"
         + (f" (its best in-training evaluation at {args.select_after:,} steps or more)" if args.select_after else "")
         + f" on {args.episodes} held-out episodes (seeds {TEST_SEED}..{TEST_SEED + args.episodes - 1}, "
-        f"never used in training or selection){_on(args)}" + (f"; `{args.baseline}` (model-based controller) on the same episodes." if baseline else "."),
+        f"never used in training or selection){_on(args)}" + _controllers_sentence(controllers),
         "",
         "| policy | rank | " + " | ".join(_COLUMNS[k][0] for k in keys) + " |",
         "|---|---:|" + "---:|" * len(keys),
     ]
     for s in seeds:
         row = final["per_seed"][str(s)]
-        label = f"PPO seed {s}" + ((" (shipped)" if args.shipped else " (named)") if s == args.shipped_seed else "")
-        lines.append(f"| {label} | {final['rank'][str(s)]} | " + " | ".join(_fmt(row[k], k) for k in keys) + " |")
+        lines.append(f"| {_seed_label(args, s)} | {final['rank'][str(s)]} | " + " | ".join(_fmt(row[k], k) for k in keys) + " |")
     for metric in final["iqm"]:
         iqm, low, high = final["iqm"][metric]
         cells = ["" if k != metric else f"{_fmt(iqm, metric)} [{_fmt(low, metric)}, {_fmt(high, metric)}]" for k in keys]  # under its own column
         lines.append(f"| PPO, IQM of {len(seeds)} seeds [95% CI]: {_COLUMNS[metric][0]} | | " + " | ".join(cells) + " |")
-    if baseline:
-        lines.append(f"| {args.baseline} (controller) | | " + " | ".join(_fmt(baseline.get(k, float("nan")), k) for k in keys) + " |")
+    for name, scores in controllers.items():
+        lines.append(f"| {name} (controller) | | " + " | ".join(_fmt(scores[k], k) if k in scores else "-" for k in keys) + " |")
     by = "the push curve's 90% impulse, then held-out survival, then return" if "push_impulse_90" in keys else "held-out survival, then return"
     lines += ["", f"Rank: by {by}, among the {len(seeds)} seeds (1 = best). The drift is over the episodes "
               "that ran their 10 s (- if none did). Every number is in `scores.json`.", ""]
+    labels = {str(s): _seed_label(args, s) for s in seeds}
+    lines += motion_section(final, controllers, labels)
+    lines += bars_section(final, labels, args.env_id, eval_env_kwargs(args))
     return "\n".join(lines)
 
 
@@ -467,7 +563,7 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
     plan = {"env_id": args.env_id, "seeds": seeds, "shipped_seed": args.shipped_seed, "hyperparams": display_path(args.hyperparams),
             "params": list(args.params), "command": command}
     (args.out / "plan.json").write_text(json.dumps(plan, indent=2) + "\n")  # the shipped seed, on record before training
-    histories, final = {}, {"per_seed": {}}
+    histories, evaluations, final = {}, {}, {"per_seed": {}}
     if args.jobs > 1 and len(seeds) > 1:  # train in parallel processes; the loop below then finds every seed finished
         _train_in_processes(args, seeds)
     for seed in seeds:
@@ -478,20 +574,32 @@ def sweep(args: CurvesArgs, command: str | None = None) -> Path:
         config = yaml.safe_load((folder / "config.yaml").read_text())
         final.setdefault("precision", {})[str(seed)] = config.get("update_precision", "float32")
         policy = load_policy(folder)
-        final["per_seed"][str(seed)] = _held_out(policy, args, policy.env_kwargs)
+        evaluations[seed] = _held_out(policy, args, policy.env_kwargs)
+    kwargs = eval_env_kwargs(args)
+    names = _controllers(args)
+    baseline_name = names[0] if args.baseline else None  # the push curve is the baseline's only
+    controllers = {name: _held_out(load_policy(name, kwargs, env_id=args.env_id), args, kwargs, push_curve=name == baseline_name)
+                   for name in names}  # fmt: skip
+    kept = {name: _kept(result) for name, result in controllers.items()}
+    for seed in seeds:
+        final["per_seed"][str(seed)] = _beside_controllers(seed, evaluations[seed], controllers, kept, args.env_id)
     order = sorted(seeds, key=lambda s: _rank_key(final["per_seed"][str(s)]))
     final["rank"] = {str(s): order.index(s) + 1 for s in seeds}
     summarised = (*METRICS, "push_impulse_90") if "push_impulse_90" in final["per_seed"][str(seeds[0])] else METRICS
     final["iqm"] = {m: iqm_interval([final["per_seed"][str(s)][m] for s in seeds]) for m in summarised}
-    kwargs = eval_env_kwargs(args)
-    baseline = _held_out(load_policy(args.baseline, kwargs, env_id=args.env_id), args, kwargs) if args.baseline else None
+    final["motion_iqm"] = {"all": _motion_iqm([final["per_seed"][str(s)]["motion"] for s in seeds])}
+    if "no_push" in final["per_seed"][str(seeds[0])]:
+        final["motion_iqm"]["no_push"] = _motion_iqm([final["per_seed"][str(s)]["no_push"]["motion"] for s in seeds])
     curves = _curves(histories)
     title = f"{_task(args)}: plain PPO, {len(seeds)} seeds{_precision_title(final)}"
     _plot(curves, args.out / "curves_steps.png", "timesteps", "environment steps", title)
     _plot(curves, args.out / "curves_time.png", "time_s", "wall-clock [min] (median over seeds)", title)
-    scores = {**plan, "machine": header, "date": time.strftime("%Y-%m-%d"), "curves": curves, "final": final, "baseline": baseline}
+    _plot_motion(final, kept, args.out / "motion.png")
+    baseline = kept[baseline_name] if baseline_name else None
+    scores = {**plan, "machine": header, "date": time.strftime("%Y-%m-%d"), "curves": curves, "final": final, "baseline": baseline,
+              "controllers": kept}  # fmt: skip
     (args.out / "scores.json").write_text(json.dumps(scores, indent=2) + "\n")
-    (args.out / "README.md").write_text(_page(args, header, curves, final, baseline, command))
+    (args.out / "README.md").write_text(_page(args, header, curves, final, kept, command))
     print(f"results written to {args.out}/ (the shipped seed {args.shipped_seed} ranks {final['rank'][str(args.shipped_seed)]} of {len(seeds)})")
     return args.out
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from train.bars import BALANCE_BARS
 from train.curves import CurvesArgs, iqm_interval, main
 
 TINY = ["n_envs:8", "n_steps:32", "batch_size:128", "n_epochs:1"]
@@ -74,10 +75,20 @@ def test_a_sweep_of_five_seeds_on_a_tiny_budget(tmp_path):
     ranks = sorted(final["rank"].values())
     assert ranks == [1, 2, 3, 4, 5]
     assert scores["baseline"]["survival_rate"] >= 0.0 and "mean_return" in scores["baseline"]
+    # the balance task's bars compare with the gated controller too: it ran the same episodes beside the baseline
+    assert list(scores["controllers"]) == ["lqr", "gated"] and scores["baseline"] == scores["controllers"]["lqr"]
+    for s in range(5):
+        seed = final["per_seed"][str(s)]
+        assert seed["motion"]["episodes"] == 3 and set(seed["both_survived"]) == {"lqr", "gated"}
+        assert [check["description"] for check in seed["bars"]] == [bar.description for bar in BALANCE_BARS]
+        assert scores["controllers"]["gated"]["both_survived"][str(s)]["episodes"] == seed["both_survived"]["gated"]["episodes"]
+    assert set(final["motion_iqm"]["all"]) >= {"tilt_rms", "action_rate", "actuator_power"}
     page = (out / "README.md").read_text()
     assert "PPO seed 2 (shipped)" in page and "IQM" in page and "lqr (controller)" in page and "Machine:" in page
+    assert "How each seed's selected policy moves" in page and "| survival >= 98% |" in page and " of 5 seeds meet every bar.**" in page
+    assert (out / "motion.png").stat().st_size > 1000
     assert "Resumed" not in page  # every seed trained in one go
-    assert page.count("| PPO seed ") == 5
+    assert sum(line.startswith("| PPO seed ") for line in page.splitlines()) == 5  # the final scores' rows
     for png in ("curves_steps.png", "curves_time.png"):
         assert (out / png).stat().st_size > 1000
     # a rerun finds every seed finished and trains none again
@@ -123,6 +134,14 @@ def test_a_push_sweep_scores_the_push_curve_on_its_evaluation_env(tmp_path):
     page = (out / "README.md").read_text()
     assert "90% survival up to [N s]" in page and "push_force=[45.0, 45.0]" in page and "stepping (controller)" in page
     assert "Rank: by the push curve's 90% impulse" in page
+    # each seed also ran the same episodes with no push; the bars pushed at 5 N s need an evaluation env at 50 N
+    for seed in (0, 1):
+        scores_of_seed = final["per_seed"][str(seed)]
+        assert scores_of_seed["no_push"]["env_kwargs"] == {"push_force": [0.0, 0.0]} and "motion" in scores_of_seed["no_push"]
+        checks = {check["description"]: check for check in scores_of_seed["bars"]}
+        assert checks["push impulse survived 90% of the time >= 6.00 N s"]["measured"] == scores_of_seed["push_impulse_90"]
+        assert checks["pushed at 5 N s: action rate <= 0.1"]["passed"] is None
+    assert "With no push at all" in page and "**0 of 2 seeds meet every bar.**" in page
 
 
 def test_seeds_trained_in_parallel_processes_learn_what_one_process_learns(tmp_path):
@@ -260,3 +279,76 @@ def test_the_page_says_which_seeds_were_resumed():
     assert _resumed({"0": 0, "1": 0}) == []
     line = _resumed({"0": 1, "1": 0, "2": 3})[0]
     assert "seed 0 once, seed 2 3 times." in line and "seed 1" not in line
+
+
+def _motion(**values) -> dict:
+    """A motion summary (train.motion.pool's keys), some numbers given."""
+    from train.motion import KEYS as MOTION_KEYS
+
+    return {**{key: 1.0 for key in MOTION_KEYS}, "episodes": 100, "normal_force_unit": "m g", **values}
+
+
+def _synthetic_push_scores() -> tuple[CurvesArgs, dict, dict, dict]:
+    """The page's numbers for two push seeds and the stepping controller, made up: seed 0 meets every bar, seed 1
+    chatters when nothing pushes it."""
+    from train.bars import PUSH_BARS
+
+    args = CurvesArgs(env_id="leg_env/PlanarLegPush-v2", seeds=2, baseline="stepping", episodes=100, eval_freq=100,
+                      eval_env_kwargs=["push_force:[50.0, 50.0]"], runs=Path("runs"), out=Path("page"))  # fmt: skip
+    curves = {"timesteps": [100], "time_s": [60.0], "seeds": [0, 1],
+              **{m: {"per_seed": [[1.0], [1.0]], "iqm": [1.0], "low": [1.0], "high": [1.0]} for m in ("survival_rate", "mean_return")}}  # fmt: skip
+    calm = {"survival_rate": 1.0, "mean_return": 990.0, "motion": _motion(tilt_rms=0.5, action_rate=0.004)}
+    chatter = {"survival_rate": 1.0, "mean_return": 900.0, "motion": _motion(tilt_rms=4.0, action_rate=0.3, flights_per_episode=12.0)}
+    passed = [{"description": bar.description, "measured": bar.bound if bar.at_least else 0.5 * bar.bound, "threshold": bar.bound, "passed": True}
+              for bar in PUSH_BARS]  # fmt: skip
+    passed[0] = {**passed[0], "measured": 7.0, "threshold": 6.0}
+    failed = [dict(check) for check in passed]
+    failed[3] = {**failed[3], "measured": 0.3, "passed": False}  # with no push: action rate
+    per_seed = {
+        "0": {"push_impulse_90": 7.0, "survival_rate": 1.0, "mean_return": 600.0, "mean_length": 1000.0,
+              "motion": _motion(tilt_rms=2.0), "no_push": calm, "bars": passed},
+        "1": {"push_impulse_90": 6.5, "survival_rate": 0.97, "mean_return": 580.0, "mean_length": 990.0,
+              "motion": _motion(tilt_rms=3.0), "no_push": chatter, "bars": failed},
+    }  # fmt: skip
+    final = {"per_seed": per_seed, "rank": {"0": 1, "1": 2}, "iqm": {"survival_rate": (0.985, 0.97, 1.0)},
+             "motion_iqm": {case: {key: (2.5, 2.0, 3.0) for key in _motion() if key not in ("episodes", "normal_force_unit")}
+                            for case in ("all", "no_push")}}  # fmt: skip
+    controllers = {"stepping": {"push_impulse_90": 4.5, "survival_rate": 0.84, "mean_return": 651.0, "mean_length": 861.0,
+                                "motion": _motion(tilt_rms=5.0), "no_push": calm}}  # fmt: skip
+    return args, curves, final, controllers
+
+
+def test_the_page_shows_how_each_seed_moves_and_which_bars_it_meets():
+    """From the numbers of scores.json alone: the motion table (a column per seed, the IQM with its interval, the
+    controller), the one with no push, and the bars per seed with how many seeds meet every one."""
+    from train.curves import _page
+
+    args, curves, final, controllers = _synthetic_push_scores()
+    page = _page(args, "a machine", curves, final, controllers, "python -m train.curves")
+    motion = page.split("How each seed's selected policy moves")[1].split("With no push at all")[0]
+    assert "| measure | PPO seed 0 (shipped) | PPO seed 1 | PPO, IQM of 2 seeds [95% CI] | stepping (controller) |" in motion
+    assert "| torso tilt RMS [deg] | 2.00 | 3.00 | 2.50 [2.00, 3.00] | 5.00 |" in motion
+    assert "![how each seed moves](motion.png)" in motion
+    calm = page.split("With no push at all")[1].split("Bars (`train.bars`)")[0]
+    assert "| survival rate | 100% | 100% |  | 100% |" in calm
+    assert "| action rate (mean abs change per step) | 0.004 | 0.3 | 2.5 [2, 3] | 0.004 |" in calm
+    bars = page.split("Bars (`train.bars`)")[1]
+    assert "| bar | PPO seed 0 (shipped) | PPO seed 1 |" in bars
+    assert "| push impulse survived 90% of the time >= 6.00 N s | pass: 7.00 N s | pass: 7.00 N s |" in bars
+    assert "| with no push: survival >= 100% | pass: 100% | pass: 100% |" in bars
+    assert "| with no push: action rate <= 0.01 | pass: 0.005 | **fail**: 0.3 |" in bars
+    assert "| pushed at 5 N s: actuator power <= 2x stepping's (episodes both survive) | pass: 1.00 W (bar 2.00 W) |" in bars
+    assert "| **every bar** | **yes** | no |" in bars and "**1 of 2 seeds meet every bar.**" in bars
+    assert "| stepping (controller) | | 4.50 | 84% | 651.0 | 861 |" in page
+
+
+def test_a_page_without_motion_measures_or_bars_has_neither_section():
+    """A task without bars (the pinned foot) has no bars section; scores from before the motion measures no motion one."""
+    from train.curves import _page
+
+    args, curves, final, controllers = _synthetic_push_scores()
+    for scores in final["per_seed"].values():
+        del scores["motion"], scores["no_push"], scores["bars"]
+    del final["motion_iqm"]
+    page = _page(args, "a machine", curves, final, {}, "python -m train.curves")
+    assert "How each seed" not in page and "Bars" not in page and "(controller)" not in page

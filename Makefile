@@ -1,12 +1,12 @@
 # Two commands do all set-up on a fresh machine with Python >= 3.10:
-#   make train   -> venv, install, train plain PPO from scratch on the push task (PlanarLegPush-v1), evaluate it
+#   make train   -> venv, install, train plain PPO from scratch on the push task (PlanarLegPush-v2), evaluate it
 #                   against the stepping controller and the LQR on the push curve, write the policy and its pictures
 #   make test    -> venv, install with test extras, run the test suite; then a second venv with
 #                   Ray RLlib (and the Gymnasium it pins) runs the suite minus SB3, plus tests/rllib/
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
-RUN    ?= runs/ppo_push_v1
+RUN    ?= runs/ppo_push_v2
 TORCH_THREADS ?= 2
 RLLIB_VENV ?= .venv-rllib
 RLLIB_BIN  := $(RLLIB_VENV)/bin
@@ -54,7 +54,7 @@ $(VENV)/.core: $(CORE_SOURCES) | $(BIN)/python
 	touch $@
 
 train: $(VENV)/.installed-train $(VENV)/.core
-	$(BIN)/python -m train.ppo --env-id leg_env/PlanarLegPush-v1 --torch-threads $(TORCH_THREADS) --eval-freq 3000000 --eval-episodes 32 --eval-env-kwargs 'push_force:[50.0, 50.0]' --out $(RUN)
+	$(BIN)/python -m train.ppo --env-id leg_env/PlanarLegPush-v2 --torch-threads $(TORCH_THREADS) --eval-freq 3000000 --eval-episodes 32 --eval-env-kwargs 'push_force:[50.0, 50.0]' --out $(RUN)
 	$(BIN)/python -m train.evaluate $(RUN) --baseline stepping lqr --episodes 100 --push-curve --gif
 
 test: $(VENV)/.installed-test $(VENV)/.core $(RLLIB_VENV)/.installed

@@ -37,11 +37,11 @@ CONTACTS = ("pinned", "unilateral")
 CASES = {  # name: (env id, keyword arguments)
     "stance pinned": (leg_env.ENV_ID, {"contact": "pinned"}),
     "stance unilateral": (leg_env.ENV_ID, {"contact": "unilateral"}),
-    "push": ("leg_env/PlanarLegPush-v1", {}),
+    "push": ("leg_env/PlanarLegPush-v2", {}),
     "hop": ("leg_env/PlanarLegHop-v3", {}),
     "stance pinned randomised": (leg_env.ENV_ID, {"contact": "pinned", "randomize": True}),
     "stance unilateral randomised": (leg_env.ENV_ID, {"contact": "unilateral", "randomize": True}),
-    "push randomised": ("leg_env/PlanarLegPush-v1", {"randomize": True}),
+    "push randomised": ("leg_env/PlanarLegPush-v2", {"randomize": True}),
     "hop randomised": ("leg_env/PlanarLegHop-v3", {"randomize": True}),
     "hop command schedule": ("leg_env/PlanarLegHop-v3", {"command_period": 0.5}),  # the training setting
     "hop training charges": ("leg_env/PlanarLegHop-v3", {"drift_near_weight": 390.0, "drift_near_cap": 1.0, "limit_weight": 400.0}),

@@ -107,16 +107,18 @@ class LQRController(BatchedController):
 
     Args:
         params: physical parameters (``LegParams``, a dict of fields, or None for defaults).
-        config: task settings (``StanceConfig``, a dict, or None for defaults); the reward weights
-            set the default cost, ``dt`` the discretisation, ``torque_limit`` the action scale.
-        Q: optional (6, 6) state weight on ``x``; default: the reward's drift term plus ``joint_weight``.
-        R: optional (2, 2) weight on ``u = tau - tau_eq`` [1/(N m)^2]; default: the reward's control
-            cost times ``r_scale``.
+        config: task settings (``StanceConfig``, a dict, or None for defaults): ``dt`` the discretisation,
+            ``torque_limit`` the action scale, ``nominal_knee`` the equilibrium.
+        Q: optional (6, 6) state weight on ``x``; default: the balance task's drift term (``StanceConfig``'s
+            default weights, whatever the task's are: the controller is one design, the same on every task that
+            reweights its reward) plus ``joint_weight``.
+        R: optional (2, 2) weight on ``u = tau - tau_eq`` [1/(N m)^2]; default: the balance task's default
+            control cost times ``r_scale``.
         joint_weight: weight added on the diagonal of the default ``Q`` [1/rad^2, s^2/rad^2].
         r_scale: factor on the reward's control cost in the default ``R``.
 
     It keeps no state between calls; ``predict`` is the batched base's (``policies.base``), on one observation
-    (12,) or a batch (N, 12) (pinned), (18,) / (N, 18) on the unilateral ground, (19,) / (N, 19) on ``PlanarLegPush-v1``.
+    (12,) or a batch (N, 12) (pinned), (18,) / (N, 18) on the unilateral ground, (19,) / (N, 19) on ``PlanarLegPush-v2``.
 
     Attributes:
         K: (2, 6) gain, ``u = -K x``.
@@ -125,7 +127,7 @@ class LQRController(BatchedController):
     """
 
     widths = (12, 18, 19, 14, 20, 21)  # the balance pinned and unilateral, the push; each with observe_action
-    task = "the balance and push tasks: 12 entries pinned, 18 on the unilateral ground, 19 on PlanarLegPush-v1; 2 more with observe_action"
+    task = "the balance and push tasks: 12 entries pinned, 18 on the unilateral ground, 19 on PlanarLegPush-v2; 2 more with observe_action"
     dtype = np.float64
 
     def __init__(
@@ -147,16 +149,17 @@ class LQRController(BatchedController):
 
         self.A, self.B = linearize(self.params, self.x_eq, self.tau_eq)
         self.Ad, self.Bd = discretize(self.A, self.B, c.dt)
+        design = StanceConfig()  # the cost's weights: the balance task's defaults
         if Q is None:
             C = base_jacobian(self.params, self.x_eq)
             W = np.diag(
-                [c.drift_position_weight] * 2
-                + [c.drift_angle_weight]
-                + [c.drift_velocity_weight] * 3
+                [design.drift_position_weight] * 2
+                + [design.drift_angle_weight]
+                + [design.drift_velocity_weight] * 3
             )
             Q = C.T @ W @ C + joint_weight * np.eye(6)
         if R is None:
-            R = np.diag(r_scale * c.ctrl_cost_weight / self.torque_limit**2)
+            R = np.diag(r_scale * design.ctrl_cost_weight / self.torque_limit**2)
         self.Q = np.asarray(Q, dtype=np.float64)
         self.R = np.asarray(R, dtype=np.float64)
         if self.Q.shape != (6, 6) or self.R.shape != (2, 2):
@@ -183,7 +186,7 @@ class LQRController(BatchedController):
     def act(self, batch: np.ndarray) -> np.ndarray:
         """Actions ``(N, 2)`` float32 in [-1, 1] for observations ``batch`` ``(N, 12)``, ``(N, 18)`` or ``(N, 19)``.
 
-        On the unilateral ground (18 entries: ``PlanarLegBalance-v0``; 19 on ``PlanarLegPush-v1``) the same entries 2-4 and 7-9 are read; the gain is the stance model's whatever the
+        On the unilateral ground (18 entries: ``PlanarLegBalance-v0``; 19 on ``PlanarLegPush-v2``) the same entries 2-4 and 7-9 are read; the gain is the stance model's whatever the
         contact mode. ``predict`` (``policies.base.BatchedController``) takes one observation or a batch.
         """
         return np.clip(self.torque(batch) / self.torque_limit, -1.0, 1.0).astype(np.float32)

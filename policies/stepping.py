@@ -1,4 +1,4 @@
-"""A model-based push-recovery controller for ``leg_env/PlanarLegPush-v1``: the LQR, and a quick hop for large pushes.
+"""A model-based push-recovery controller for ``leg_env/PlanarLegPush-v2``: the LQR, and a quick hop for large pushes.
 
 With the foot planted, the only way to stop a push is the torso: the stance LQR (``policies.lqr``) turns it to
 tilt the ground force, and from about 25 N over 0.1 s the torso reaches its 1 rad limit or the knee folds
@@ -104,7 +104,7 @@ class SteppingController(BatchedController):
         self.mass = p.m_b + p.m1 + p.m2
         self.weight = self.mass * p.g
 
-    widths, task = (18, 19, 20, 21), "the unilateral balance tasks: 18 entries, 19 on PlanarLegPush-v1, 2 more with observe_action (read: the first 18)"
+    widths, task = (18, 19, 20, 21), "the unilateral balance tasks: 18 entries, 19 on PlanarLegPush-v2, 2 more with observe_action (read: the first 18)"
 
     def _allocate(self, n: int) -> None:
         self.hopping, self.push_estimate = np.zeros(n, dtype=bool), np.zeros(n)

@@ -22,7 +22,7 @@ CASES = [
     ("leg_env/PlanarLegStance-v0", False),
     ("leg_env/PlanarLegBalance-v0", False),
     ("leg_env/PlanarLegBalance-v0", True),
-    ("leg_env/PlanarLegPush-v1", False),
+    ("leg_env/PlanarLegPush-v2", False),
     ("leg_env/PlanarLegHop-v3", False),
     ("leg_env/PlanarLegHop-v3", True),
 ]

@@ -42,7 +42,7 @@ def single_env_episodes(make_policy, env_id: str, seeds, env_kwargs=None):
     [
         ("leg_env/PlanarLegHop-v3", lambda env: HopperController(), {}),
         ("leg_env/PlanarLegStance-v0", lambda env: LQRController(env.unwrapped.params, env.unwrapped.config), {"reset_noise_scale": 0.3}),
-        ("leg_env/PlanarLegPush-v1", lambda env: SteppingController(env.unwrapped.params, env.unwrapped.config), {"push_force": [50.0, 50.0]}),
+        ("leg_env/PlanarLegPush-v2", lambda env: SteppingController(env.unwrapped.params, env.unwrapped.config), {"push_force": [50.0, 50.0]}),
     ],
     ids=["hopper", "lqr-pinned", "stepping-pushed"],
 )
@@ -115,7 +115,7 @@ def test_evaluate_the_push_curve_and_the_training_evaluation_agree_on_the_same_e
     evaluation's (seeds seed + i) and the push curve's survival at one force."""
     from train.callbacks import evaluate_now  # SB3's callbacks: not in the RLlib venv (the Makefile's SB3_TESTS)
 
-    env_id, kwargs = "leg_env/PlanarLegPush-v1", {"push_force": [50.0, 50.0]}
+    env_id, kwargs = "leg_env/PlanarLegPush-v2", {"push_force": [50.0, 50.0]}
     env = gym.make(env_id)
     stepping = SteppingController(env.unwrapped.params, env.unwrapped.config)
     seeds = list(range(20_000, 20_006))
@@ -156,7 +156,7 @@ def test_an_evaluation_names_how_each_episode_ended():
     ended (survivors: "none"), the summary counts them, and the table shows the counts."""
     from train.evaluate import format_table
 
-    env_id, kwargs = "leg_env/PlanarLegPush-v1", {"push_force": [50.0, 50.0]}
+    env_id, kwargs = "leg_env/PlanarLegPush-v2", {"push_force": [50.0, 50.0]}
     env = gym.make(env_id, **kwargs)
     stepping = SteppingController(env.unwrapped.params, env.unwrapped.config)
     seeds = list(range(10_000, 10_008))

@@ -790,8 +790,9 @@ def field_rule(array, field, value, task, obs_cols, modes, takes_obs):
               "substeps": lambda v: 1 <= v <= 4096, "motor_speed": lambda v: v > 0}.get(field)
         if ok is not None:
             return (A if ok(value) else R), ("settings",)
-        if field == "unilateral" and takes_obs:  # the ground, which sets obs's width (the valid rows observe no action)
-            return (A if _obs_dim(task, bool(value)) == obs_cols else R), ("obs", "settings")
+        if field == "unilateral" and takes_obs:  # the ground, which sets obs's width (with the valid row's last action, if observed)
+            action = obs_cols in (_obs_dim(task, True, True), _obs_dim(task, False, True))
+            return (A if _obs_dim(task, bool(value), action) == obs_cols else R), ("obs", "settings")
         if field == "observe_action" and takes_obs:  # two more columns
             return (A if _obs_dim(task, task != 0 or obs_cols >= 18, bool(value)) == obs_cols else R), ("obs", "settings")
     if array == "state" and field in ("mode", "prev_mode") and modes:

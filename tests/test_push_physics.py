@@ -1,4 +1,4 @@
-"""A horizontal force on the torso's COM (the push of ``leg_env/PlanarLegPush-v1``) in the dynamics.
+"""A horizontal force on the torso's COM (the push of ``leg_env/PlanarLegPush-v2``) in the dynamics.
 
 ``M qdd + h = S^T tau + Jc^T lam + Q`` with ``Q = J_b^T (F, 0) = (F, 0, 0, 0, 0)`` (the base point is the
 torso's COM). Checked against:

@@ -255,7 +255,7 @@ def test_bad_reset_params_raise_and_change_nothing(params, match):
 
 
 def test_pickled_randomised_env_continues_identically():
-    env = gym.make("leg_env/PlanarLegPush-v1", randomize=True).unwrapped
+    env = gym.make("leg_env/PlanarLegPush-v2", randomize=True).unwrapped
     env.reset(seed=3)
     clone = pickle.loads(pickle.dumps(env))
     for a in random_actions(60, 1, seed=4)[:, 0]:

@@ -99,7 +99,7 @@ def test_a_push_shows_as_an_arrow_at_the_torso():
     pushes from, and not before or after it."""
     from leg_env.render import PUSH, _Camera
 
-    env = gym.make("leg_env/PlanarLegPush-v1", render_mode="rgb_array", push_force=(100.0, 100.0), first_push=(0.05, 0.05))
+    env = gym.make("leg_env/PlanarLegPush-v2", render_mode="rgb_array", push_force=(100.0, 100.0), first_push=(0.05, 0.05))
     env.reset(seed=1)
     assert count(env.render(), PUSH) == 0
     for _ in range(10):  # the push starts 0.05 s in and lasts 10 steps of 0.01 s

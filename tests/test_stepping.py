@@ -1,4 +1,4 @@
-"""The push-recovery controller of ``leg_env/PlanarLegPush-v1`` (``policies.stepping``): its push observer against
+"""The push-recovery controller of ``leg_env/PlanarLegPush-v2`` (``policies.stepping``): its push observer against
 the force the task applied, its gate, its per-robot state in a batch, its loading by name, and that it survives
 pushes the LQR falls from."""
 
@@ -17,7 +17,7 @@ from policies.stepping import SteppingController
 from train.evaluate import BASELINES, load_policy
 from train.episodes import push_survival
 
-ENV_ID = "leg_env/PlanarLegPush-v1"
+ENV_ID = "leg_env/PlanarLegPush-v2"
 
 
 def _robot():
@@ -170,7 +170,7 @@ def test_controllers_do_not_read_the_push_tasks_com_entry(make):
     controllers = [make(params, config) if make is SteppingController else make(params) for _ in range(2)]
     envs = gym.make_vec(ENV_ID, num_envs=8, push_force=(45.0, 45.0))
     obs, _ = envs.reset(seed=3)
-    assert obs.shape == (8, 19)
+    assert obs.shape == (8, 21)
     hops = 0
     for _ in range(300):
         blind = obs.copy()

@@ -20,7 +20,7 @@ from train.episodes import push_survival
 from train.task_metrics import HopTracker, largest_survived_impulse
 
 ROOT = Path(__file__).resolve().parents[1]
-TASK_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v1", "leg_env/PlanarLegHop-v3")
+TASK_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
 TINY = ["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]
 
 
@@ -145,7 +145,7 @@ def test_hop_tracker_splits_the_apex_errors_by_command():
 
 
 def test_push_survival_uses_the_same_seeds_and_fixed_forces():
-    lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v1")
+    lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v2")
     rows = push_survival(lqr, [0.0, 200.0], episodes=4, seed=10_000)
     assert [r["force"] for r in rows] == [0.0, 200.0]
     assert rows[0]["survival_rate"] == 1.0  # no push: the LQR balances
@@ -157,7 +157,7 @@ def test_push_survival_uses_the_same_seeds_and_fixed_forces():
 
 
 def test_push_curve_needs_the_push_task(tmp_path):
-    with pytest.raises(ValueError, match="PlanarLegPush-v1"):
+    with pytest.raises(ValueError, match="PlanarLegPush-v2"):
         evaluate(EvalArgs(policy="lqr", env_id="leg_env/PlanarLegBalance-v0", episodes=1, push_curve=True, out=tmp_path, plot=False))
 
 
@@ -219,9 +219,9 @@ def test_residual_env_applies_the_controller_plus_the_scaled_correction():
     from train.residual import ResidualVecEnv, residual_action
 
     np.testing.assert_array_equal(residual_action(np.array([0.5, -0.9]), np.array([3.0, -0.5]), 0.3), np.float32([0.8, -1.0]))
-    lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v1")
-    wrapped = ResidualVecEnv(make_sb3_vec_env(3, seed=7, env_id="leg_env/PlanarLegPush-v1"), lqr, 0.5)
-    plain = make_sb3_vec_env(3, seed=7, env_id="leg_env/PlanarLegPush-v1")
+    lqr = load_policy("lqr", env_id="leg_env/PlanarLegPush-v2")
+    wrapped = ResidualVecEnv(make_sb3_vec_env(3, seed=7, env_id="leg_env/PlanarLegPush-v2"), lqr, 0.5)
+    plain = make_sb3_vec_env(3, seed=7, env_id="leg_env/PlanarLegPush-v2")
     obs_w, obs_p = wrapped.reset(), plain.reset()
     rng = np.random.default_rng(0)
     for _ in range(30):

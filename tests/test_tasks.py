@@ -16,9 +16,10 @@ import leg_env
 from leg_env import physics as dyn
 from leg_env.tasks import REGISTRY
 
-NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v1", "leg_env/PlanarLegHop-v3")
+NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
 REMOVED = {  # removed id: the current id of its task, which Gymnasium's error names ("" where the name has none)
-    "leg_env/PlanarLegPush-v0": "leg_env/PlanarLegPush-v1",
+    "leg_env/PlanarLegPush-v0": "leg_env/PlanarLegPush-v2",
+    "leg_env/PlanarLegPush-v1": "leg_env/PlanarLegPush-v2",
     "leg_env/PlanarLegHop-v0": "leg_env/PlanarLegHop-v3",
     "leg_env/PlanarLegHop-v1": "leg_env/PlanarLegHop-v3",
     "leg_env/PlanarLegHop-v2": "leg_env/PlanarLegHop-v3",
@@ -34,7 +35,7 @@ FAST_PUSHES = dict(first_push=(0.05, 0.15), push_interval=(0.1, 0.2), push_force
 KWARGS = {
     "leg_env/PlanarLegStance-v0": dict(reset_noise_scale=0.05, ctrl_cost_weight=0.02),
     "leg_env/PlanarLegBalance-v0": dict(ctrl_cost_weight=0.02, params={"m_b": 9.0}),
-    "leg_env/PlanarLegPush-v1": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
+    "leg_env/PlanarLegPush-v2": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
     "leg_env/PlanarLegHop-v3": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
 }
 
@@ -177,7 +178,7 @@ def test_native_batch_equals_sync_vector_env_bit_for_bit(env_id, mode):
         if "push_force" in step_ours[4]:
             pushed += int(np.sum(step_ours[4]["push_force"] != 0.0))
     assert ended >= 4
-    if env_id == "leg_env/PlanarLegPush-v1":
+    if env_id == "leg_env/PlanarLegPush-v2":
         assert pushed >= 10
 
 
@@ -248,7 +249,7 @@ def test_push_schedule_follows_the_config_and_is_not_observed():
     """The schedule drawn at reset (the task's state columns): first push at 0.8-1.2 s, then every 2-3 s,
     0.1 s long, 20-150 N of either sign; the env applies exactly that force on those steps, and nothing
     of it is in the observation."""
-    env = gym.make("leg_env/PlanarLegPush-v1").unwrapped
+    env = gym.make("leg_env/PlanarLegPush-v2").unwrapped
     signs = []
     for seed in range(40):
         env.reset(seed=seed)
@@ -258,7 +259,7 @@ def test_push_schedule_follows_the_config_and_is_not_observed():
         assert np.all((np.abs(forces) >= 20.0) & (np.abs(forces) <= 150.0))
         signs += np.sign(forces).tolist()
     assert 0.3 < np.mean(np.array(signs) > 0) < 0.7
-    env = gym.make("leg_env/PlanarLegPush-v1", reset_noise_scale=0.0).unwrapped  # stands still until pushed
+    env = gym.make("leg_env/PlanarLegPush-v2", reset_noise_scale=0.0).unwrapped  # stands still until pushed
     env.reset(seed=3)
     first, force = int(env._state["push_start"][0, 0]), env._state["push_force"][0, 0]
     hold = (env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32)
@@ -266,13 +267,13 @@ def test_push_schedule_follows_the_config_and_is_not_observed():
     for _ in range(first + 10):
         obs, _, term, _, info = env.step(hold)
         seen.append(info["push_force"])
-        assert obs.shape == (19,)
+        assert obs.shape == (21,)
     assert seen[:first] == [0.0] * first and seen[first:] == [force] * 10
 
 
 def test_push_moves_the_robot_as_the_momentum_balance_says():
     """In the env: per step, m (v_com(end) - v_com(start)) = dt (contact_force + (push, 0) - (0, m g)) + impulse."""
-    env = gym.make("leg_env/PlanarLegPush-v1", **FAST_PUSHES).unwrapped
+    env = gym.make("leg_env/PlanarLegPush-v2", **FAST_PUSHES).unwrapped
     env.reset(seed=1)
     p = env.params
     m = p.total_mass
@@ -305,7 +306,7 @@ def _v_com(q, qd, p):
 
 
 def test_push_energy_balance_over_an_episode():
-    env = gym.make("leg_env/PlanarLegPush-v1", **FAST_PUSHES).unwrapped
+    env = gym.make("leg_env/PlanarLegPush-v2", **FAST_PUSHES).unwrapped
     _, info = env.reset(seed=2)
     e0 = info["energy"]
     booked = 0.0
@@ -673,7 +674,7 @@ def test_hop_limit_charge_is_the_squared_depth_inside_the_ranges_margins_and_cha
 
 
 def test_push_reward_charges_the_com_leaving_the_start():
-    env = gym.make("leg_env/PlanarLegPush-v1", com_weight=3.0, reset_noise_scale=0.0).unwrapped
+    env = gym.make("leg_env/PlanarLegPush-v2", com_weight=3.0, reset_noise_scale=0.0).unwrapped
     env.reset(seed=0)
     q = env.nominal.q.copy()
     q[0] += 0.2  # the base (and COM) 0.2 m forward of the start, the foot with it
@@ -693,10 +694,10 @@ def test_push_observes_the_com_from_its_start_and_charges_it():
 
     assert OBS_COM_DRIFT == 18
     kw = dict(FAST_PUSHES, reset_noise_scale=0.05)
-    env = gym.make("leg_env/PlanarLegPush-v1", **kw)
-    quiet = gym.make("leg_env/PlanarLegPush-v1", **dict(kw, push_force=(0.0, 0.0)))
+    env = gym.make("leg_env/PlanarLegPush-v2", **kw)
+    quiet = gym.make("leg_env/PlanarLegPush-v2", **dict(kw, push_force=(0.0, 0.0)))
     stance = gym.make("leg_env/PlanarLegStance-v0", contact="unilateral", reset_noise_scale=0.05)
-    assert env.observation_space.shape == (19,)
+    assert env.observation_space.shape == (21,)
     assert env.observation_space.low[18] == -np.inf and env.observation_space.high[18] == np.inf
     acts = actions(STEPS, 1, seed=3)
     for seed in (0, 7):
@@ -716,7 +717,7 @@ def test_push_observes_the_com_from_its_start_and_charges_it():
             if t1 or tr1 or tq:
                 break
         assert moved > 0.01  # the pushes moved it
-    vec = gym.make_vec("leg_env/PlanarLegPush-v1", num_envs=3, vectorization_mode="vector_entry_point", **kw)
+    vec = gym.make_vec("leg_env/PlanarLegPush-v2", num_envs=3, vectorization_mode="vector_entry_point", **kw)
     obs, info = vec.reset(seed=2)
     x0 = info["com_position"][:, 0].copy()
     assert np.all(obs[:, OBS_COM_DRIFT] == 0.0)
@@ -726,7 +727,7 @@ def test_push_observes_the_com_from_its_start_and_charges_it():
         assert np.array_equal(obs[:, OBS_COM_DRIFT], (info["com_position"][:, 0] - x0).astype(np.float32))
 
 
-PUSH, HOP = "leg_env/PlanarLegPush-v1", "leg_env/PlanarLegHop-v3"
+PUSH, HOP = "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3"
 BAD_CONFIGS = [
     (PUSH, {"push_force": (50.0, 20.0)}, ValueError, "push_force"),
     (PUSH, {"push_force": (-1.0, 20.0)}, ValueError, "push_force"),

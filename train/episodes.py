@@ -165,7 +165,7 @@ HOP_EVAL_KEYS = ("hops_per_episode", "mean_abs_apex_error", "mean_apex_error", "
 
 
 def push_survival(controller, forces, episodes: int, seed: int, env_kwargs: dict | None = None,
-                  env_id: str = "leg_env/PlanarLegPush-v1") -> list[dict]:
+                  env_id: str = "leg_env/PlanarLegPush-v2") -> list[dict]:
     """Survival rate of ``controller`` on the push task ``env_id`` with every push of magnitude ``F``, for each ``F``.
 
     ``episodes`` episodes per magnitude, episode ``i`` seeded ``seed + i`` (the same seeds, so the same

@@ -555,7 +555,7 @@ def _push_curve(controllers: dict, env_id: str, env_kwargs: dict, args: EvalArgs
     from train.task_metrics import is_push_task, largest_survived_impulse
 
     if not is_push_task(env_id):
-        raise ValueError(f"--push-curve needs the push task (leg_env/PlanarLegPush-v1), not {env_id}")
+        raise ValueError(f"--push-curve needs the push task (leg_env/PlanarLegPush-v2), not {env_id}")
     curves = {label: push_survival(c, PUSH_FORCES, args.episodes, args.seed, env_kwargs, env_id) for label, c in controllers.items()}
     best = {label: largest_survived_impulse(rows) for label, rows in curves.items()}
     (out / "push_curve.json").write_text(json.dumps({"seeds": [args.seed, args.seed + args.episodes - 1], "curves": curves, "impulse_90": best}, indent=2) + "\n")

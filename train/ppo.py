@@ -1,7 +1,7 @@
 """Train PPO on any leg-env task (default ``leg_env/PlanarLegStance-v0``) with Stable-Baselines3.
 
     python -m train.ppo --out runs/ppo_stance              # the default configuration
-    python -m train.ppo --env-id leg_env/PlanarLegPush-v1 --out runs/push
+    python -m train.ppo --env-id leg_env/PlanarLegPush-v2 --out runs/push
     python -m train.ppo --out runs/try --params learning_rate:1.0e-3 n_envs:64
 
 The env is natively batched and reaches SB3 through ``leg_env.sb3``'s VecEnv adapter, wrapped in

@@ -11,7 +11,7 @@ metrics; these add what a task's own question needs:
   flights of at least ``LONG_FLIGHT`` (50 ms) per episode. ``apex_error_by_command`` splits the signed apex
   errors by the command of the hop into ``COMMAND_BANDS`` bands of equal width over the task's
   ``command_range``: where in the range a policy hops short or high.
-* **Push** (``train.episodes.push_survival``): episodes of ``PlanarLegPush-v1`` with every push of one magnitude (the
+* **Push** (``train.episodes.push_survival``): episodes of ``PlanarLegPush-v2`` with every push of one magnitude (the
   range ``push_force`` set to ``(F, F)``; signs and times as the task draws them), run as one batch per
   magnitude (``train.episodes.run_batch``); survival is reaching the time limit.
 """
@@ -139,7 +139,7 @@ class HopTracker:
 
 
 def is_push_task(env_id: str) -> bool:
-    """Whether ``env_id`` is the push-recovery task (``PlanarLegPush-v1``), or a task of the push module."""
+    """Whether ``env_id`` is the push-recovery task (``PlanarLegPush-v2``), or a task of the push module."""
     from leg_env.tasks import REGISTRY
 
     return REGISTRY.get(env_id, (None, {}))[0] == "push"

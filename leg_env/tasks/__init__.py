@@ -15,7 +15,7 @@ REGISTRY = {
     # id: (task module, keyword arguments of the id)
     "leg_env/PlanarLegStance-v0": ("stance", {}),
     "leg_env/PlanarLegBalance-v0": ("stance", {"contact": "unilateral", "reset_noise_scale": 0.05}),
-    "leg_env/PlanarLegPush-v1": ("push", {}),
+    "leg_env/PlanarLegPush-v2": ("push", {}),
     "leg_env/PlanarLegHop-v3": ("hop", {}),
 }
 """Every id, one per task: ``(task module, kwargs)``. A change to a task's dynamics or reward takes a new version

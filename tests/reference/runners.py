@@ -51,7 +51,9 @@ SUCCESSORS = {
     # successor's dynamics, starts and ends are the recorded id's, and its observation is the recorded one with
     # entries appended after it, so the recorded columns are compared.
     "leg_env/PlanarLegStance-v1": ("leg_env/PlanarLegBalance-v0", ()),  # renamed: the same task
-    "leg_env/PlanarLegPush-v0": ("leg_env/PlanarLegPush-v1", ()),  # the COM's x from its start appended (entry 18)
+    # the COM's x from its start and the last action appended (entries 18-20); the tilt, the torque squared and the
+    # action's change charged more
+    "leg_env/PlanarLegPush-v0": ("leg_env/PlanarLegPush-v2", ("reward", "info/reward_drift", "info/reward_ctrl")),
     # the height term and the alive bonus paid while hopping; the COM's x, the ground time and the last apex appended
     "leg_env/PlanarLegHop-v0": ("leg_env/PlanarLegHop-v3", ("reward", "info/reward_height", "info/reward_alive")),
 }

@@ -44,11 +44,11 @@ def test_a_sweep_on_randomised_robots_has_its_own_folders_and_title():
     """Evaluated on randomised robots, a sweep is not the task's nominal one: its default folders and its title say so."""
     from train.curves import _task
 
-    args = CurvesArgs(env_id="leg_env/PlanarLegPush-v1", eval_env_kwargs=["push_force:[34.0, 34.0]", "randomize:true"])
-    assert args.out.name == "PlanarLegPush-v1-randomized" and args.runs.name == "PlanarLegPush-v1-randomized"
-    assert _task(args) == "leg_env/PlanarLegPush-v1, randomised robots"
-    nominal = CurvesArgs(env_id="leg_env/PlanarLegPush-v1", eval_env_kwargs=["push_force:[34.0, 34.0]"])
-    assert nominal.out.name == "PlanarLegPush-v1" and _task(nominal) == "leg_env/PlanarLegPush-v1"
+    args = CurvesArgs(env_id="leg_env/PlanarLegPush-v2", eval_env_kwargs=["push_force:[34.0, 34.0]", "randomize:true"])
+    assert args.out.name == "PlanarLegPush-v2-randomized" and args.runs.name == "PlanarLegPush-v2-randomized"
+    assert _task(args) == "leg_env/PlanarLegPush-v2, randomised robots"
+    nominal = CurvesArgs(env_id="leg_env/PlanarLegPush-v2", eval_env_kwargs=["push_force:[34.0, 34.0]"])
+    assert nominal.out.name == "PlanarLegPush-v2" and _task(nominal) == "leg_env/PlanarLegPush-v2"
 
 
 def test_a_sweep_of_five_seeds_on_a_tiny_budget(tmp_path):
@@ -107,7 +107,7 @@ def test_a_push_sweep_scores_the_push_curve_on_its_evaluation_env(tmp_path):
     from train.task_metrics import largest_survived_impulse
 
     runs, out = tmp_path / "runs", tmp_path / "page"
-    env_id = "leg_env/PlanarLegPush-v1"
+    env_id = "leg_env/PlanarLegPush-v2"
     argv = ["--env-id", env_id, "--seeds", "2", "--shipped-seed", "1", "--total-timesteps", "256",
             "--eval-freq", "256", "--eval-episodes", "2", "--episodes", "2", "--baseline", "stepping",
             "--eval-env-kwargs", "push_force:[45.0, 45.0]", "--runs", str(runs), "--out", str(out), "--params", *TINY]

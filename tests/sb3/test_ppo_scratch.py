@@ -1,4 +1,4 @@
-"""The shipped plain-PPO policies (``policies/ppo_balance``, ``ppo_push_v1``, ``ppo_push_randomized``, ``ppo_hop_v3``):
+"""The shipped plain-PPO policies (``policies/ppo_balance``, ``ppo_push_v2``, ``ppo_push_randomized``, ``ppo_hop_v3``):
 a network alone, and their cards' episodes as they score them."""
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ from train.residual import ResidualPolicy
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = {  # policy folder: the task it was trained and is evaluated on
     "ppo_balance": "leg_env/PlanarLegBalance-v0",
-    "ppo_push_v1": "leg_env/PlanarLegPush-v1",
-    "ppo_push_randomized": "leg_env/PlanarLegPush-v1",
+    "ppo_push_v2": "leg_env/PlanarLegPush-v2",
+    "ppo_push_randomized": "leg_env/PlanarLegPush-v2",
     "ppo_hop_v3": "leg_env/PlanarLegHop-v3",
 }
 EVAL_KWARGS = {  # the evaluation env of a policy selected on other than the task as registered (its table.md's)
-    "ppo_push_v1": {"push_force": [50.0, 50.0]},  # selected at 50 N pushes; scored on the push curve
+    "ppo_push_v2": {"push_force": [50.0, 50.0]},  # selected at 50 N pushes; scored on the push curve
     "ppo_push_randomized": {"push_force": [34.0, 34.0], "randomize": True},  # randomised robots, 34 N pushes
 }
 CARD = {"ppo_push_randomized": "eval_robots"}  # a card's held-out evaluation folder, when not eval/
@@ -57,7 +57,7 @@ def test_shipped_scratch_policy_reproduces_its_card_on_held_out_seeds(name):
     assert sum(e["return"] for e in mine) == pytest.approx(sum(e["return"] for e in recorded), rel=0.1)
 
 
-@pytest.mark.parametrize("name", ["ppo_push_v1", "ppo_push_randomized"])
+@pytest.mark.parametrize("name", ["ppo_push_v2", "ppo_push_randomized"])
 def test_shipped_push_policy_reproduces_its_push_curve_at_its_90_percent_impulse(name):
     """A push policy's card: the push curve's survival at its 90% impulse and at the next magnitude, replayed on the
     same 100 held-out episodes (every push of an episode at that magnitude; for ``ppo_push_randomized`` each
@@ -89,31 +89,43 @@ def test_randomized_push_policy_meets_its_bar_on_held_out_robots():
     seeds = [e["seed"] for e in card["per_episode"]]
     assert seeds == list(range(10_000, 10_100))
     kwargs = EVAL_KWARGS["ppo_push_randomized"]
-    summary, _ = run_episodes(load_policy(folder), seeds, kwargs, env_id="leg_env/PlanarLegPush-v1")
+    summary, _ = run_episodes(load_policy(folder), seeds, kwargs, env_id="leg_env/PlanarLegPush-v2")
     assert summary["survival_rate"] >= 0.9
     differ = sum(mine != theirs for mine, theirs in zip((e["survived"] for e in summary["per_episode"]), (e["survived"] for e in card["per_episode"])))
     assert differ <= CPU_EPISODES, differ
-    stepping, _ = run_episodes(load_policy("stepping", kwargs, env_id="leg_env/PlanarLegPush-v1"), seeds, kwargs, env_id="leg_env/PlanarLegPush-v1")
+    stepping, _ = run_episodes(load_policy("stepping", kwargs, env_id="leg_env/PlanarLegPush-v2"), seeds, kwargs, env_id="leg_env/PlanarLegPush-v2")
     assert stepping["survival_rate"] < summary["survival_rate"] - 0.3
 
 
 def test_randomized_push_policy_is_the_randomised_entry_of_its_hyperparameter_file():
-    """``ppo_push_randomized`` was trained as ppo.yml's ``PlanarLegPush-v1`` entry with ``randomize: true`` in its
-    training env (and the entry's initial action noise of then, ``log_std_init: -1.0``);
-    ``train/hyperparams/ppo_randomized.yml`` holds that configuration, and resolves to the card's run exactly."""
+    """``ppo_push_randomized`` was trained as ppo.yml's ``PlanarLegPush-v2`` entry with ``randomize: true`` in its
+    training env; ``train/hyperparams/ppo_randomized.yml`` holds that configuration, and resolves to the card's run
+    exactly."""
     from train.hyperparameters import load_hyperparams
     from train.ppo import TrainArgs
 
-    env_id = "leg_env/PlanarLegPush-v1"
+    env_id = "leg_env/PlanarLegPush-v2"
     nominal = load_hyperparams(ROOT / "train" / "hyperparams" / "ppo.yml", env_id)
     randomized = load_hyperparams(ROOT / "train" / "hyperparams" / "ppo_randomized.yml", env_id)
     assert randomized["env_kwargs"] == {**nominal["env_kwargs"], "randomize": True}
-    assert randomized["policy_kwargs"] == {**nominal["policy_kwargs"], "log_std_init": -1.0}
+    assert randomized["policy_kwargs"] == nominal["policy_kwargs"]
     same = [k for k in nominal if k not in ("env_kwargs", "policy_kwargs")]
     assert {k: randomized[k] for k in same} == {k: nominal[k] for k in same} and set(randomized) == set(nominal)
-    args = TrainArgs(out=Path("unused"), env_id=env_id, hyperparams=ROOT / "train" / "hyperparams" / "ppo_randomized.yml", seed=6,
+    args = TrainArgs(out=Path("unused"), env_id=env_id, hyperparams=ROOT / "train" / "hyperparams" / "ppo_randomized.yml", seed=16,
                      eval_freq=3_000_000, eval_episodes=32, eval_env_kwargs=["push_force:[34.0, 34.0]", "randomize:true"])
     assert_resolves_to_shipped(args, "ppo_push_randomized")
+
+
+def test_shipped_push_policy_is_its_configuration():
+    """``policies/ppo_push_v2`` was trained by the ``PlanarLegPush-v2`` entry of ``train/hyperparams/ppo.yml`` as it is
+    now, which holds no schedule: its card's command resolves to the shipped run's configuration, key for key."""
+    from train.hyperparameters import load_hyperparams
+    from train.ppo import TrainArgs
+
+    assert "callback" not in load_hyperparams(ROOT / "train" / "hyperparams" / "ppo.yml", "leg_env/PlanarLegPush-v2")
+    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegPush-v2", seed=11, eval_freq=3_000_000, eval_episodes=32,
+                     eval_env_kwargs=["push_force:[50.0, 50.0]"])
+    assert_resolves_to_shipped(args, "ppo_push_v2")
 
 
 def test_shipped_balance_policy_is_its_configuration():

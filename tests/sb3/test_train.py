@@ -130,7 +130,7 @@ def test_evaluate_env_kwargs_replace_the_runs_own(tmp_path):
     randomised robots evaluated on the nominal one, say); a malformed item is a ValueError naming the field."""
     from train.cli import parse_args
 
-    args = parse_args(EvalArgs, ["lqr", "--env-id", "leg_env/PlanarLegPush-v1", "--env-kwargs", "push_force:[34.0, 34.0]", "reset_noise_scale:0.0",
+    args = parse_args(EvalArgs, ["lqr", "--env-id", "leg_env/PlanarLegPush-v2", "--env-kwargs", "push_force:[34.0, 34.0]", "reset_noise_scale:0.0",
                                  "--episodes", "2", "--no-plot", "--out", str(tmp_path / "eval")], positional=("policy",))
     out = evaluate(args)
     lqr = json.loads((out / "lqr.json").read_text())

@@ -27,7 +27,7 @@ def _hold(env) -> np.ndarray:
     return np.clip(u.nominal.tau / np.asarray(u.config.torque_limit), -1.0, 1.0)
 
 
-OFF = dict(action_rate_weight=0.0, power_weight=0.0, observe_action=False)
+OFF = dict(action_rate_weight=0.0, action_change_weight=0.0, power_weight=0.0, observe_action=False)
 EFFORT = {  # each id's effort settings (action_rate_weight, power_weight, observe_action), as its docstring gives them
     "leg_env/PlanarLegStance-v0": (0.0, 0.0, False),
     "leg_env/PlanarLegBalance-v0": (0.0, 0.0, False),
@@ -67,12 +67,12 @@ def test_with_the_settings_off_nothing_is_charged_or_observed_and_the_torque_is_
 
 @pytest.mark.parametrize("env_id", IDS)
 def test_the_action_rate_and_power_charges_are_their_formulas_and_the_last_action_is_observed(env_id):
-    """``reward_action_rate = -w_r |a - a_last|^2`` (clipped actions; after a reset ``a_last`` holds the nominal
+    """``reward_action_rate = -(w_r |a - a_last|^2 + w_c |a - a_last|_1)`` (clipped actions; after a reset ``a_last`` holds the nominal
     posture), ``reward_power = -w_p sum_j max(0, tau_j dq_j) / dt`` with ``tau`` the torques held over the step and
     ``dq`` the joints' change read from the state; the observation ends with the last action, and is the plain one
     before it, bit for bit."""
-    w_rate, w_power = 0.7, 0.013
-    env = gym.make(env_id, action_rate_weight=w_rate, power_weight=w_power, observe_action=True)
+    w_rate, w_change, w_power = 0.7, 0.3, 0.013
+    env = gym.make(env_id, action_rate_weight=w_rate, action_change_weight=w_change, power_weight=w_power, observe_action=True)
     plain = gym.make(env_id, observe_action=False)
     u = env.unwrapped
     dt = u.dt
@@ -92,8 +92,8 @@ def test_the_action_rate_and_power_charges_are_their_formulas_and_the_last_actio
             np.testing.assert_array_equal(obs[-2:], clipped.astype(np.float32))
             if info["numerical_failure"]:
                 break
-            rate = np.sum((clipped - last) ** 2)
-            assert info["reward_action_rate"] == pytest.approx(-w_rate * rate, rel=1e-12, abs=1e-15)
+            rate, change = np.sum((clipped - last) ** 2), np.sum(np.abs(clipped - last))
+            assert info["reward_action_rate"] == pytest.approx(-(w_rate * rate + w_change * change), rel=1e-12, abs=1e-15)
             work = np.asarray(info["torque"]) * (u.state[0][3:5] - q_before[3:5])
             assert info["reward_power"] == pytest.approx(-w_power * np.maximum(work, 0.0).sum() / dt, rel=1e-12, abs=1e-15)
             for key in u.task.reward_keys:  # every other term is the plain task's
@@ -111,7 +111,7 @@ def test_the_action_rate_and_power_charges_are_their_formulas_and_the_last_actio
 
 @pytest.mark.parametrize("env_id", IDS)
 def test_a_batch_observes_and_charges_each_row_as_its_single_env(env_id):
-    kwargs = dict(action_rate_weight=0.4, power_weight=0.02, observe_action=True, motor_speed=12.0)
+    kwargs = dict(action_rate_weight=0.4, action_change_weight=0.1, power_weight=0.02, observe_action=True, motor_speed=12.0)
     n = 4
     envs = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
     singles = [gym.make(env_id, **kwargs) for _ in range(n)]
@@ -215,6 +215,7 @@ def test_the_controllers_read_an_observation_that_ends_with_the_last_action_as_t
         ({"motor_speed": float("nan")}, ValueError, "motor_speed"),
         ({"motor_speed": "fast"}, TypeError, "motor_speed"),
         ({"action_rate_weight": -0.1}, ValueError, "action_rate_weight"),
+        ({"action_change_weight": float("nan")}, ValueError, "action_change_weight"),
         ({"power_weight": float("inf")}, ValueError, "power_weight"),
         ({"observe_action": 1}, TypeError, "observe_action"),
     ],

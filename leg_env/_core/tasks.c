@@ -163,7 +163,7 @@ static void set_last_action(const env_batch *b, Py_ssize_t i, double a0, double 
 }
 
 /* The effort terms of robot i's step under the clipped action a, after the balance task's five: the action's change
- * from the last one, -w_action_rate |a - a_last|^2, and the positive mechanical power of the hip and the knee,
+ * from the last one, -(w_action_rate |a - a_last|^2 + w_action_change |a - a_last|_1), and the positive mechanical power of the hip and the knee,
  * -w_power sum_j max(0, tau_j (q_j - q_j,before)) / dt (each torque held over the step, so tau_j dq_j is the joint's
  * work exactly); then a is the last action. */
 static void effort_terms(const env_batch *b, Py_ssize_t i, double a0, double a1, double *terms)
@@ -173,7 +173,7 @@ static void effort_terms(const env_batch *b, Py_ssize_t i, double a0, double a1,
     const env_out *o = out_row(b, i);
     const double d0 = a0 - s->last_action[0], d1 = a1 - s->last_action[1];
     const double work_hip = o->torque[0] * (s->q[3] - s->prev_q[3]), work_knee = o->torque[1] * (s->q[4] - s->prev_q[4]);
-    terms[5] = -c->w_action_rate * (d0 * d0 + d1 * d1);
+    terms[5] = -(c->w_action_rate * (d0 * d0 + d1 * d1) + c->w_action_change * (fabs(d0) + fabs(d1)));
     terms[6] = -c->w_power * (leg_fmax(0.0, work_hip) + leg_fmax(0.0, work_knee)) / c->dt;
     set_last_action(b, i, a0, a1);
 }

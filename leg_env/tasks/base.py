@@ -159,6 +159,7 @@ FIELD_RANGES = {
     "friction_weight": (0.0, _BIG, False, False, ""),
     "ctrl_cost_weight": (0.0, _BIG, False, False, ""),
     "action_rate_weight": (0.0, _BIG, False, False, ""),
+    "action_change_weight": (0.0, _BIG, False, False, ""),
     "power_weight": (0.0, _BIG, False, False, "per W"),
     "motor_speed": (0.0, _INF, True, False, "rad/s"),
     "mu": (0.0, _BIG, False, False, ""),
@@ -205,6 +206,7 @@ class StanceConfig:
     friction_weight: float = 10.0  # per unit of max(0, |lam_x| - mu lam_y) / weight
     ctrl_cost_weight: float = 0.01  # per unit of |action|^2
     action_rate_weight: float = 0.0  # per unit of |action - last action|^2 (both clipped to [-1, 1])
+    action_change_weight: float = 0.0  # per unit of |action - last action|_1: the entries' absolute changes, summed
     power_weight: float = 0.0  # per W of the hip's and the knee's positive mechanical power
     mu: float | None = None  # friction coefficient; None: DEFAULT_MU of the contact model (0.8 pinned, 0.5 unilateral)
     # termination
@@ -288,6 +290,7 @@ class StanceConfig:
         row["w_position"], row["w_angle"], row["w_velocity"] = self.drift_position_weight, self.drift_angle_weight, self.drift_velocity_weight
         row["w_unilateral"], row["w_friction"], row["w_ctrl"] = self.unilateral_weight, self.friction_weight, self.ctrl_cost_weight
         row["w_action_rate"], row["w_power"], row["motor_speed"] = self.action_rate_weight, self.power_weight, self.motor_speed
+        row["w_action_change"] = self.action_change_weight
         row["observe_action"] = self.observe_action
         row["min_base_height"], row["max_torso_angle"] = self.min_base_height, self.max_torso_angle
         row["hip_range"], row["knee_range"] = self.hip_range, self.knee_range

@@ -49,7 +49,7 @@ the COM's apex above ``y_stand`` [m] (entry 21, ``Obs.last_apex``; 0 before the 
   training setting, ``limit_weight`` 0 in the registered task, which warns of the range's end before the episode
   ends there.
 - ``reward_action_rate``, ``reward_power``: the action's change and the joints' positive mechanical power, as in
-  ``PlanarLegStance`` (``action_rate_weight``, ``power_weight``; 0 in the registered task). The options
+  ``PlanarLegStance`` (``action_rate_weight``, ``action_change_weight``, ``power_weight``; 0 in the registered task). The options
   ``observe_action`` (the last action as entries 22-23) and ``motor_speed`` (the motor model) are the balance
   task's too.
 

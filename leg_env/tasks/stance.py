@@ -107,8 +107,11 @@ reset, the action that holds the nominal posture (its torques over the torque li
 - ``reward_friction = -friction_weight max(0, |lam_x| - mu lam_y) / (m g)``: the force must lie in
   the friction cone.
 - ``reward_ctrl = -ctrl_cost_weight |a|^2`` with ``a`` the clipped action.
-- ``reward_action_rate = -action_rate_weight |a - a_last|^2``: the action's change from the last step's (both
-  clipped; after a reset ``a_last`` is the action that holds the nominal posture). 0 by default.
+- ``reward_action_rate = -(action_rate_weight |a - a_last|^2 + action_change_weight |a - a_last|_1)``: the
+  action's change from the last step's (both clipped; after a reset ``a_last`` is the action that holds the nominal
+  posture), squared, and in absolute value summed over the two entries. The squared charge stops swings across the
+  range and hardly notices a jitter of a few hundredths; the absolute one charges a jitter in proportion to what
+  ``train.motion`` measures as the action rate (the mean absolute change per step). Both 0 by default.
 - ``reward_power = -power_weight (max(0, tau_hip dq1) + max(0, tau_knee dq2)) / dt`` [per W]: the hip's and the
   knee's positive mechanical power over the step, ``tau`` the torques held over it (``info["torque"]``) and ``dq``
   the joint angles' change, so that each product is the joint's work exactly; negative work (braking) is not paid

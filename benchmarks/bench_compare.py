@@ -37,7 +37,7 @@ N = 4096
 ROWS = {
     # row: (kind, id, make_vec keyword arguments)
     "single, pinned": ("single", "leg_env/PlanarLegStance-v0", {}),
-    "single, unilateral": ("single", "leg_env/PlanarLegBalance-v0", {}),
+    "single, unilateral": ("single", "leg_env/PlanarLegBalance-v1", {}),
     "make_vec 4096, pinned": ("vector", "leg_env/PlanarLegStance-v0", {}),
     "make_vec 4096, pinned, randomize=True": ("vector", "leg_env/PlanarLegStance-v0", {"randomize": True}),
     "make_vec 4096, hop": ("vector", "leg_env/PlanarLegHop-v3", {}),

@@ -29,7 +29,7 @@ Rows:
     touchdowns included; ratio to the pinned batch), and both models balancing: the stance LQR's action
     plus uniform noise of +-``BALANCE_NOISE``, only ``step`` timed, after ``BALANCE_WARMUP`` steps (ratio of
     unilateral to pinned).
-(e) every other registered task (``leg_env.tasks.REGISTRY``: ``PlanarLegBalance-v0``, ``PlanarLegPush-v2``,
+(e) every other registered task (``leg_env.tasks.REGISTRY``: ``PlanarLegBalance-v1``, ``PlanarLegPush-v2``,
     ``PlanarLegHop-v3``)
     through ``gym.make_vec`` at N = 4096, under random actions and balancing, each as a share of the
     unilateral stance batch's rate under the same actions (the target: at least 90%).

@@ -1,7 +1,7 @@
 """Training throughput of the shipped from-scratch PPO configurations, and where the time goes.
 
     .venv/bin/python benchmarks/bench_train.py            # every configuration (a few minutes)
-    .venv/bin/python benchmarks/bench_train.py --env-id leg_env/PlanarLegBalance-v0 --rollouts 20
+    .venv/bin/python benchmarks/bench_train.py --env-id leg_env/PlanarLegBalance-v1 --rollouts 20
 
 For each configuration of ``train/hyperparams/ppo.yml`` that trains a unilateral task from scratch (``CONFIGS``),
 PPO is built exactly as ``python -m train.ppo`` builds it (``train.chunked_ppo.ChunkedPPO``, the same
@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-CONFIGS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegHop-v3")
+CONFIGS = ("leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v3")
 """The from-scratch configurations of ``train/hyperparams/ppo.yml`` on the unilateral ground."""
 TARGET = 100_000.0  # env-steps/s end to end, at least on the balance and hop configurations
 SEED = 0

@@ -47,7 +47,8 @@ CASES = {  # name: (env id, keyword arguments)
     "hop training charges": ("leg_env/PlanarLegHop-v3", {"drift_near_weight": 390.0, "drift_near_cap": 1.0, "limit_weight": 400.0}),
     # the effort settings: the motor model, the power and action-rate charges, the last action observed
     "hop effort": ("leg_env/PlanarLegHop-v3", {"motor_speed": 8.0, "power_weight": 0.01, "action_rate_weight": 0.5, "observe_action": True}),
-    "stance unilateral effort": (leg_env.ENV_ID, {"contact": "unilateral", "motor_speed": 8.0, "power_weight": 0.01, "observe_action": True}),
+    "stance unilateral effort": (leg_env.ENV_ID, {"contact": "unilateral", "motor_speed": 8.0, "power_weight": 0.01, "action_change_weight": 0.2,
+                                                  "observe_action": True}),
 }
 ACTIONS = ("random", "bang_bang")
 TORQUE_LIMIT = 500.0  # ten times the default 50 N m

@@ -1,4 +1,4 @@
-"""A gated recovery controller for ``leg_env/PlanarLegBalance-v0``: a short backward hop from bad starts, then the LQR.
+"""A gated recovery controller for ``leg_env/PlanarLegBalance-v1``: a short backward hop from bad starts, then the LQR.
 
 On the unilateral ground the stance LQR (``policies.lqr``) falls from every start whose capture point is far
 behind the foot: with the foot planted, the torso swings to its 1 rad limit. One small backward hop moves the

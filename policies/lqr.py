@@ -184,9 +184,10 @@ class LQRController(BatchedController):
         return self.tau_eq - Kx
 
     def act(self, batch: np.ndarray) -> np.ndarray:
-        """Actions ``(N, 2)`` float32 in [-1, 1] for observations ``batch`` ``(N, 12)``, ``(N, 18)`` or ``(N, 19)``.
+        """Actions ``(N, 2)`` float32 in [-1, 1] for observations ``batch`` ``(N, 12)`` or longer.
 
-        On the unilateral ground (18 entries: ``PlanarLegBalance-v0``; 19 on ``PlanarLegPush-v2``) the same entries 2-4 and 7-9 are read; the gain is the stance model's whatever the
+        On the unilateral ground (18 entries, 20 on ``PlanarLegBalance-v1`` and 21 on ``PlanarLegPush-v2``, which end
+        with the last action) the same entries 2-4 and 7-9 are read; the gain is the stance model's whatever the
         contact mode. ``predict`` (``policies.base.BatchedController``) takes one observation or a batch.
         """
         return np.clip(self.torque(batch) / self.torque_limit, -1.0, 1.0).astype(np.float32)

@@ -13,7 +13,7 @@ import pytest
 from train import bars as b
 from train.bars import BOTH_SURVIVED, NO_PUSH, bar_controllers, bars_for, bars_table, check_bars, meets_every_bar, task_name
 
-BALANCE, HOP, PUSH = "leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegHop-v3", "leg_env/PlanarLegPush-v2"
+BALANCE, HOP, PUSH = "leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v3", "leg_env/PlanarLegPush-v2"
 
 
 def motion(**values) -> dict:

@@ -20,8 +20,8 @@ from leg_env.physics.integrate import stance_step
 from leg_env.envs.single import robot_of_row
 CASES = [
     ("leg_env/PlanarLegStance-v0", False),
-    ("leg_env/PlanarLegBalance-v0", False),
-    ("leg_env/PlanarLegBalance-v0", True),
+    ("leg_env/PlanarLegBalance-v1", False),
+    ("leg_env/PlanarLegBalance-v1", True),
     ("leg_env/PlanarLegPush-v2", False),
     ("leg_env/PlanarLegHop-v3", False),
     ("leg_env/PlanarLegHop-v3", True),

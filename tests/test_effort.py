@@ -10,7 +10,7 @@ import pytest
 import leg_env
 from leg_env.physics.dynamics import com_position  # noqa: F401  (the physics, imported as the envs do)
 
-IDS = ("leg_env/PlanarLegStance-v0", "leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
+IDS = ("leg_env/PlanarLegStance-v0", "leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
 STEPS = 150
 
 
@@ -28,11 +28,11 @@ def _hold(env) -> np.ndarray:
 
 
 OFF = dict(action_rate_weight=0.0, action_change_weight=0.0, power_weight=0.0, observe_action=False)
-EFFORT = {  # each id's effort settings (action_rate_weight, power_weight, observe_action), as its docstring gives them
-    "leg_env/PlanarLegStance-v0": (0.0, 0.0, False),
-    "leg_env/PlanarLegBalance-v0": (0.0, 0.0, False),
-    "leg_env/PlanarLegPush-v2": (0.2, 0.0, True),
-    "leg_env/PlanarLegHop-v3": (0.0, 0.0, False),
+EFFORT = {  # each id's effort settings (action_rate_weight, action_change_weight, power_weight, observe_action), as its docstring gives them
+    "leg_env/PlanarLegStance-v0": (0.0, 0.0, 0.0, False),
+    "leg_env/PlanarLegBalance-v1": (0.0, 0.2, 0.0, True),
+    "leg_env/PlanarLegPush-v2": (0.2, 0.0, 0.0, True),
+    "leg_env/PlanarLegHop-v3": (0.0, 0.0, 0.0, False),
 }
 
 
@@ -42,7 +42,7 @@ def test_each_id_charges_and_observes_what_its_docstring_says(env_id):
     env = gym.make(env_id)
     obs, _ = env.reset(seed=1)
     u = env.unwrapped
-    assert (u.config.action_rate_weight, u.config.power_weight, u.config.observe_action) == EFFORT[env_id]
+    assert (u.config.action_rate_weight, u.config.action_change_weight, u.config.power_weight, u.config.observe_action) == EFFORT[env_id]
     assert u.config.motor_speed == np.inf
     plain = gym.make(env_id, observe_action=False)
     assert obs.shape[0] == plain.observation_space.shape[0] + 2 * u.config.observe_action
@@ -141,8 +141,8 @@ def test_the_motor_model_scales_the_torque_by_the_joint_speed_at_the_steps_start
     direction at the step's start (braking: the whole torque); against the formula, and against the ideal-source task
     driven by those torques as actions (the same trajectory)."""
     w0 = 9.0
-    motor = gym.make("leg_env/PlanarLegBalance-v0", motor_speed=w0, reset_noise_scale=0.05)
-    ideal = gym.make("leg_env/PlanarLegBalance-v0", reset_noise_scale=0.05)
+    motor = gym.make("leg_env/PlanarLegBalance-v1", motor_speed=w0, reset_noise_scale=0.05)
+    ideal = gym.make("leg_env/PlanarLegBalance-v1", reset_noise_scale=0.05)
     limit = np.asarray(motor.unwrapped.config.torque_limit)
     scaled = braking = 0
     for seed in range(3):
@@ -166,7 +166,7 @@ def test_the_motor_model_scales_the_torque_by_the_joint_speed_at_the_steps_start
     assert scaled > 50 and braking > 50
 
 
-@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegHop-v3"])
+@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v3"])
 def test_the_applied_torque_books_the_energy_with_the_motor_model(env_id):
     """The torques of ``info["torque"]`` are those the physics applied: their work ``sum tau_j dq_j`` over the steps,
     with the push's and less the slip's and impacts' dissipation, is the change of the energy computed from the state
@@ -191,7 +191,7 @@ def test_the_controllers_read_an_observation_that_ends_with_the_last_action_as_t
     from policies.lqr import LQRController
     from policies.stepping import SteppingController
 
-    for env_id, make in (("leg_env/PlanarLegBalance-v0", LQRController), ("leg_env/PlanarLegPush-v2", SteppingController),
+    for env_id, make in (("leg_env/PlanarLegBalance-v1", LQRController), ("leg_env/PlanarLegPush-v2", SteppingController),
                          ("leg_env/PlanarLegHop-v3", HopperController)):  # fmt: skip
         env = gym.make(env_id, observe_action=True)
         obs, _ = env.reset(seed=2)
@@ -227,10 +227,10 @@ def test_bad_effort_settings_are_refused_by_name(kwargs, error, field):
 
 
 def test_set_config_refuses_to_change_the_observations_width():
-    env = gym.make("leg_env/PlanarLegBalance-v0").unwrapped
+    env = gym.make("leg_env/PlanarLegBalance-v1").unwrapped
     env.reset(seed=0)
     with pytest.raises(ValueError, match="observation's shape"):
-        env.set_config(observe_action=True)
+        env.set_config(observe_action=False)
     env.set_config(action_rate_weight=0.5, power_weight=0.01, motor_speed=20.0)  # weights and the motor may change
     _, _, _, _, info = env.step(np.array([1.0, -1.0], dtype=np.float32))
     assert info["reward_action_rate"] < 0.0 and leg_env.ENV_IDS
@@ -266,3 +266,34 @@ def test_on_the_push_task_standing_smoothly_earns_more_than_the_same_stance_with
             gaps[name].append((returns[0] - returns[1]) / steps)
     assert min(gaps["task"]) > 0.02, gaps
     assert max(gaps["off"]) < 0.5 * min(gaps["task"]), gaps
+
+
+def test_on_the_balance_task_a_jitter_of_a_few_hundredths_costs_in_proportion_to_the_action_rate():
+    """The balance task charges the action's change in absolute value, so that a stance that jitters earns less than
+    the same stance held still: the LQR, and the LQR with a dither of +-0.02 on both torques, its sign flipped every
+    step (an action rate of 0.04), stand through the same episodes, and the still one earns more on each by at least
+    0.014 a step (the charge is 0.2 x 0.08 = 0.016); the squared charge alone (0.2 per unit), at the same weight,
+    tells them apart by less than a tenth of that."""
+    from policies.lqr import LQRController
+
+    gaps = {}
+    for name, extra in (("task", {}), ("squared", dict(action_change_weight=0.0, action_rate_weight=0.2))):
+        env = gym.make("leg_env/PlanarLegBalance-v1", reset_noise_scale=0.01, **extra)
+        u = env.unwrapped
+        gaps[name] = []
+        for seed in (0, 1, 2):
+            returns = []
+            for dither in (0.0, 0.02):
+                controller = LQRController(u.params)
+                obs, _ = env.reset(seed=seed)
+                total = 0.0
+                for t in range(300):
+                    a, _ = controller.predict(obs, deterministic=True)
+                    a = np.clip(a + dither * (-1.0) ** t, -1.0, 1.0).astype(np.float32)
+                    obs, reward, terminated, _, _ = env.step(a)
+                    total += reward
+                    assert not terminated, f"{name} seed {seed} dither {dither} fell at step {t}"
+                returns.append(total)
+            gaps[name].append((returns[0] - returns[1]) / 300)
+    assert min(gaps["task"]) > 0.014, gaps
+    assert max(gaps["squared"]) < 0.1 * min(gaps["task"]), gaps

@@ -10,7 +10,7 @@ from leg_env import ENDINGS
 TASKS = [
     ("leg_env/PlanarLegStance-v0", {"reset_noise_scale": 0.3}),
     ("leg_env/PlanarLegStance-v0", {"terminate_on_contact_loss": True, "contact_loss_threshold": 10.0, "reset_noise_scale": 0.6}),
-    ("leg_env/PlanarLegBalance-v0", {"reset_noise_scale": 0.2}),
+    ("leg_env/PlanarLegBalance-v1", {"reset_noise_scale": 0.2}),
     ("leg_env/PlanarLegPush-v2", {"push_force": [40.0, 80.0]}),
     ("leg_env/PlanarLegHop-v3", {}),
 ]

@@ -86,12 +86,12 @@ def test_the_policy_gets_episode_start_and_one_reset_and_watchers_the_running_ro
         def step(self, envs, obs, actions, info, active):
             seen.append(("step", active.copy()))
 
-    envs = make_batch("leg_env/PlanarLegBalance-v0", 3)
+    envs = make_batch("leg_env/PlanarLegBalance-v1", 3)
     batch = run_batch(policy_predict(policy), envs, seeds, [Watch()])
     envs.close()
     assert policy.resets == 1
     assert policy.starts[0].tolist() == [True, True, True]
-    assert seen[0] == ("start", (3, 18))
+    assert seen[0] == ("start", (3, 20))
     steps = [active for kind, active in seen[1:]]
     assert len(steps) == batch.lengths.max() == len(policy.starts)
     for i in range(3):  # a row is active for exactly its episode's steps, then never again
@@ -146,8 +146,8 @@ def test_the_training_evaluation_reports_the_hop_measures_as_train_evaluate_does
     assert {key: periodic[key] for key in HOP_EVAL_KEYS} == {key: summary[key] for key in HOP_EVAL_KEYS}
     np.testing.assert_equal(periodic["apex_error_by_command"], summary["apex_error_by_command"])  # nan in a band without hops
     assert periodic["hops_per_episode"] > 5 and 0.0 < periodic["mean_abs_apex_error"] < 0.1
-    envs = make_batch("leg_env/PlanarLegBalance-v0", 2)
-    assert not set(HOP_EVAL_KEYS) & set(evaluate_now(load_policy("lqr", env_id="leg_env/PlanarLegBalance-v0"), envs, 0))
+    envs = make_batch("leg_env/PlanarLegBalance-v1", 2)
+    assert not set(HOP_EVAL_KEYS) & set(evaluate_now(load_policy("lqr", env_id="leg_env/PlanarLegBalance-v1"), envs, 0))
     envs.close()
 
 

@@ -358,7 +358,7 @@ class Ctx:
         self.rng, self.n = rng, n
         self.env = packed(STANCE, n, bool(n and rng.random() < 0.5), rng)
         if "spec" not in _ENV_ARRAYS:
-            env = gym.make("leg_env/PlanarLegBalance-v0", randomize=True).unwrapped
+            env = gym.make("leg_env/PlanarLegBalance-v1", randomize=True).unwrapped
             _ENV_ARRAYS["spec"] = (env.robots.spec.copy(), env.robots.base.copy(), np.asarray(env.robots.limits, dtype=np.float64).copy())
             env.close()
         self.spec, self.base, self.limits = (x.copy() for x in _ENV_ARRAYS["spec"])
@@ -1156,7 +1156,7 @@ def fuzz_draws(run, rng):
         run.problem(where, "set", "a refused set", "changed a row's generator")
 
     # draw_robots(generators, rows, spec, base, limits, max_draws, robots, rejected) and robot_params(u, spec, base, limits, row):
-    env = gym.make("leg_env/PlanarLegBalance-v0", randomize=True).unwrapped
+    env = gym.make("leg_env/PlanarLegBalance-v1", randomize=True).unwrapped
     spec, base, limits = env.robots.spec.copy(), env.robots.base.copy(), np.asarray(env.robots.limits, dtype=np.float64).copy()
     env.close()
     first_derived = base.dtype.fields["q_nom"][1] // 8  # the drawn fields are the doubles before q_nom

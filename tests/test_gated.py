@@ -1,4 +1,4 @@
-"""The gated recovery controller of ``leg_env/PlanarLegBalance-v0`` (``policies.gated``): its capture-point rule,
+"""The gated recovery controller of ``leg_env/PlanarLegBalance-v1`` (``policies.gated``): its capture-point rule,
 its per-robot state in a batch, its loading by name, and a residual run on it."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from policies.hopper import HopperController
 from policies.lqr import LQRController
 from train.evaluate import load_policy
 
-ENV_ID = "leg_env/PlanarLegBalance-v0"
+ENV_ID = "leg_env/PlanarLegBalance-v1"
 HOP_SEEDS = (10003, 10023, 10025, 10038, 10045, 10062, 10074)  # capture point < -4.5 cm: the LQR falls
 
 
@@ -43,7 +43,7 @@ def _hop_obs(obs, command):
     from leg_env.tasks.base import Obs
 
     hop = np.full(22, np.nan, dtype=np.float32)
-    hop[:18], hop[Obs.command] = obs, command
+    hop[:18], hop[Obs.command] = obs[:18], command  # the balance entries, not the last action after them
     return hop
 
 

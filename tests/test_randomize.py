@@ -21,7 +21,7 @@ from test_vector import SEED, STEPS, assert_same, random_actions
 
 ROOT = Path(__file__).resolve().parents[1]
 TASK_IDS = leg_env.ENV_IDS
-BALANCE = "leg_env/PlanarLegBalance-v0"
+BALANCE = "leg_env/PlanarLegBalance-v1"
 N = 6
 
 

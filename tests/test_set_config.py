@@ -11,7 +11,7 @@ import leg_env  # noqa: F401  (registers the ids)
 from leg_env.tasks.base import Obs
 
 HOP = "leg_env/PlanarLegHop-v3"
-BALANCE = "leg_env/PlanarLegBalance-v0"
+BALANCE = "leg_env/PlanarLegBalance-v1"
 
 
 def vector(env_id: str, n: int = 8, **kwargs):

@@ -144,7 +144,7 @@ def test_batch_equals_single_robots_and_episode_start_restarts_a_row():
     "name, cls, env_id, kwargs",
     [
         ("stepping", SteppingController, ENV_ID, {"com_weight": 2.0}),
-        ("gated", GatedController, "leg_env/PlanarLegBalance-v0", {"alive_bonus": 10.0}),
+        ("gated", GatedController, "leg_env/PlanarLegBalance-v1", {"alive_bonus": 10.0}),
     ],
 )
 def test_recovery_controllers_load_by_name_for_their_task(name, cls, env_id, kwargs):

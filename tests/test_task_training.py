@@ -20,7 +20,7 @@ from train.episodes import push_survival
 from train.task_metrics import HopTracker, largest_survived_impulse
 
 ROOT = Path(__file__).resolve().parents[1]
-TASK_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
+TASK_IDS = ("leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
 TINY = ["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]
 
 
@@ -46,8 +46,8 @@ def test_train_and_evaluate_take_any_task(env_id, tmp_path):
 
 
 def test_lqr_reads_the_unilateral_observation():
-    env = gym.make("leg_env/PlanarLegBalance-v0")
-    lqr = load_policy("lqr", env_id="leg_env/PlanarLegBalance-v0")
+    env = gym.make("leg_env/PlanarLegBalance-v1")
+    lqr = load_policy("lqr", env_id="leg_env/PlanarLegBalance-v1")
     assert isinstance(lqr, LQRController)
     obs, _ = env.reset(seed=3)
     action, _ = lqr.predict(obs)
@@ -158,7 +158,7 @@ def test_push_survival_uses_the_same_seeds_and_fixed_forces():
 
 def test_push_curve_needs_the_push_task(tmp_path):
     with pytest.raises(ValueError, match="PlanarLegPush-v2"):
-        evaluate(EvalArgs(policy="lqr", env_id="leg_env/PlanarLegBalance-v0", episodes=1, push_curve=True, out=tmp_path, plot=False))
+        evaluate(EvalArgs(policy="lqr", env_id="leg_env/PlanarLegBalance-v1", episodes=1, push_curve=True, out=tmp_path, plot=False))
 
 
 def _ppo_on(env_id: str, net_arch=(16, 16)):
@@ -178,16 +178,16 @@ def test_warm_start_copies_a_policy_and_pads_new_inputs(tmp_path):
 
     source = _ppo_on("leg_env/PlanarLegStance-v0")  # 12 observations
     source.save(tmp_path / "model.zip")
-    target = _ppo_on("leg_env/PlanarLegBalance-v0")  # 18
+    target = _ppo_on("leg_env/PlanarLegBalance-v1")  # 18
     copy_policy(target, tmp_path)
     src, dst = source.policy.state_dict(), target.policy.state_dict()
     first = "mlp_extractor.policy_net.0.weight"
     assert torch.equal(dst[first][:, :12], src[first]) and not dst[first][:, 12:].any()
     assert torch.equal(dst["action_net.weight"], src["action_net.weight"])
-    obs = gym.make("leg_env/PlanarLegBalance-v0").reset(seed=2)[0]
+    obs = gym.make("leg_env/PlanarLegBalance-v1").reset(seed=2)[0]
     np.testing.assert_allclose(target.predict(obs, deterministic=True)[0], source.predict(obs[:12], deterministic=True)[0], atol=1e-6)
     with pytest.raises(ValueError, match="shape"):
-        copy_policy(_ppo_on("leg_env/PlanarLegBalance-v0", net_arch=(8, 8)), tmp_path)
+        copy_policy(_ppo_on("leg_env/PlanarLegBalance-v1", net_arch=(8, 8)), tmp_path)
     with pytest.raises(FileNotFoundError, match="model.zip"):
         copy_policy(target, tmp_path / "nowhere")
 
@@ -199,16 +199,16 @@ def test_clone_controller_fits_the_lqr(monkeypatch):
     monkeypatch.setattr(warmstart, "CLONE_ENVS", 32)
     monkeypatch.setattr(warmstart, "CLONE_STEPS", 60)
     monkeypatch.setattr(warmstart, "CLONE_EPOCHS", 1500)  # about the Adam steps of the full-size data's 30 epochs
-    model = _ppo_on("leg_env/PlanarLegBalance-v0", net_arch=(64, 64))
-    lqr = load_policy("lqr", env_id="leg_env/PlanarLegBalance-v0")
-    envs = gym.make_vec("leg_env/PlanarLegBalance-v0", num_envs=64)
+    model = _ppo_on("leg_env/PlanarLegBalance-v1", net_arch=(64, 64))
+    lqr = load_policy("lqr", env_id="leg_env/PlanarLegBalance-v1")
+    envs = gym.make_vec("leg_env/PlanarLegBalance-v1", num_envs=64)
     obs, _ = envs.reset(seed=99)  # states not in the cloning data
 
     def error():
         return float(np.sqrt(np.mean((model.predict(obs, deterministic=True)[0] - lqr.predict(obs)[0]) ** 2)))
 
     before = error()
-    rms = warmstart.clone_controller(model, lqr, "leg_env/PlanarLegBalance-v0", {}, seed=0)
+    rms = warmstart.clone_controller(model, lqr, "leg_env/PlanarLegBalance-v1", {}, seed=0)
     held_out = error()
     assert rms < 0.05 and held_out < 0.15 and held_out < before / 2  # fits its data, and carries over to fresh states
 

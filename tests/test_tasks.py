@@ -16,7 +16,7 @@ import leg_env
 from leg_env import physics as dyn
 from leg_env.tasks import REGISTRY
 
-NEW_IDS = ("leg_env/PlanarLegBalance-v0", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
+NEW_IDS = ("leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
 REMOVED = {  # removed id: the current id of its task, which Gymnasium's error names ("" where the name has none)
     "leg_env/PlanarLegPush-v0": "leg_env/PlanarLegPush-v2",
     "leg_env/PlanarLegPush-v1": "leg_env/PlanarLegPush-v2",
@@ -24,6 +24,7 @@ REMOVED = {  # removed id: the current id of its task, which Gymnasium's error n
     "leg_env/PlanarLegHop-v1": "leg_env/PlanarLegHop-v3",
     "leg_env/PlanarLegHop-v2": "leg_env/PlanarLegHop-v3",
     "leg_env/PlanarLegStance-v1": "",
+    "leg_env/PlanarLegBalance-v0": "leg_env/PlanarLegBalance-v1",
 }
 ALL_IDS = tuple(REGISTRY)
 NUM_ENVS = 4
@@ -34,7 +35,7 @@ MAX_STEPS = 40
 FAST_PUSHES = dict(first_push=(0.05, 0.15), push_interval=(0.1, 0.2), push_force=(40.0, 160.0))
 KWARGS = {
     "leg_env/PlanarLegStance-v0": dict(reset_noise_scale=0.05, ctrl_cost_weight=0.02),
-    "leg_env/PlanarLegBalance-v0": dict(ctrl_cost_weight=0.02, params={"m_b": 9.0}),
+    "leg_env/PlanarLegBalance-v1": dict(ctrl_cost_weight=0.02, params={"m_b": 9.0}),
     "leg_env/PlanarLegPush-v2": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
     "leg_env/PlanarLegHop-v3": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
 }
@@ -52,7 +53,7 @@ def test_every_task_id_is_registered():
 def test_one_id_per_task_none_out_of_date_and_a_removed_id_refused_naming_the_current_one():
     """Each task has one id, and making it draws no warning (Gymnasium calls an id out of date when a higher
     version of its name is registered). A removed version of a task is refused with Gymnasium's error naming the
-    current id; the removed ``PlanarLegStance-v1`` (now ``PlanarLegBalance-v0``) is refused too."""
+    current id; the removed ``PlanarLegStance-v1`` (the balance task's id before it had a name of its own) is refused too."""
     import warnings
 
     from gymnasium.error import DeprecatedEnv, VersionNotFound
@@ -72,16 +73,21 @@ def test_one_id_per_task_none_out_of_date_and_a_removed_id_refused_naming_the_cu
                 gym.make(old)
 
 
-def test_balance_is_stance_on_the_unilateral_ground_with_a_larger_noise():
-    env = gym.make("leg_env/PlanarLegBalance-v0").unwrapped
+BALANCE_V1 = dict(contact="unilateral", reset_noise_scale=0.05, unilateral_weight=2.0, drift_angle_weight=10.0,
+                  ctrl_cost_weight=0.05, action_change_weight=0.2, observe_action=True)
+"""``PlanarLegBalance-v1`` as ``PlanarLegStance-v0``'s arguments, as its docstring gives them."""
+
+
+def test_balance_is_stance_on_the_unilateral_ground_with_a_larger_noise_and_effort_charged():
+    env = gym.make("leg_env/PlanarLegBalance-v1").unwrapped
     assert env.config.contact == "unilateral" and env.config.reset_noise_scale == 0.05 and env.config.mu == 0.5
-    assert env.observation_space.shape == (18,)
-    v0 = gym.make("leg_env/PlanarLegStance-v0", contact="unilateral", reset_noise_scale=0.05)
+    assert env.observation_space.shape == (20,)
+    stance = gym.make("leg_env/PlanarLegStance-v0", **BALANCE_V1)
     a = actions(50, 1)[:, 0]
-    env = gym.make("leg_env/PlanarLegBalance-v0")
-    assert data_equivalence(env.reset(seed=3), v0.reset(seed=3), exact=True)
+    env = gym.make("leg_env/PlanarLegBalance-v1")
+    assert data_equivalence(env.reset(seed=3), stance.reset(seed=3), exact=True)
     for x in a:
-        assert data_equivalence(env.step(x), v0.step(x), exact=True)
+        assert data_equivalence(env.step(x), stance.step(x), exact=True)
 
 
 @pytest.mark.parametrize("env_id", NEW_IDS)
@@ -791,7 +797,7 @@ def test_balance_starts_every_controller_fails_are_recoverable(path):
     task's 95% bar is not capped by the physics): replayed open loop from their seeds, whole episodes."""
     seed = int(path.stem.rsplit("_", 1)[1])
     actions = np.load(path)
-    env = gym.make("leg_env/PlanarLegBalance-v0")
+    env = gym.make("leg_env/PlanarLegBalance-v1")
     env.reset(seed=seed)
     for t, action in enumerate(actions):
         _, _, terminated, truncated, info = env.step(action)

@@ -60,7 +60,7 @@ def as_sync_info(info: dict) -> dict:
 # ------------------------------------------------------------------ registration and spaces
 
 
-# Gymnasium marks every id with a newer version registered (PlanarLegBalance-v0) as out of date: its one notice
+# Gymnasium marks every id with a newer version registered (PlanarLegBalance-v1) as out of date: its one notice
 @pytest.mark.filterwarnings("error", "ignore:.*PlanarLegStance-v0 is out of date:DeprecationWarning")
 def test_make_vec_uses_the_native_class_by_default():
     envs = gym.make_vec(ENV_ID, num_envs=3)
@@ -407,7 +407,7 @@ def test_info_names_each_contact_mode_and_refuses_a_corrupt_one_without_writing_
     from leg_env._core import kernels
     from leg_env.physics.contact import MODE_NAMES
 
-    envs = gym.make_vec("leg_env/PlanarLegBalance-v0", num_envs=4)
+    envs = gym.make_vec("leg_env/PlanarLegBalance-v1", num_envs=4)
     envs.reset(seed=0)
     envs.step(np.zeros((4, 2), dtype=np.float32))
     out, state = envs._out.copy(), envs._state.copy()

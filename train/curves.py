@@ -2,7 +2,7 @@
 summarised as RL results should be (Agarwal et al. 2021, the ``rliable`` package).
 
     python -m train.curves --env-id leg_env/PlanarLegHop-v3 --seeds 5
-    python -m train.curves --env-id leg_env/PlanarLegBalance-v0 --seeds 5 --baseline gated --jobs 2
+    python -m train.curves --env-id leg_env/PlanarLegBalance-v1 --seeds 5 --baseline gated --jobs 2
 
 Seed ``s`` trains ``python -m train.ppo --seed s`` (the task's entry in ``train/hyperparams/ppo.yml``, or in the
 file of ``--hyperparams``, the same for every seed) into ``<runs>/seed_<s>``, evaluated during training on the same fixed episodes

@@ -14,7 +14,9 @@ __all__ = ["REGISTRY", "get"]
 REGISTRY = {
     # id: (task module, keyword arguments of the id)
     "leg_env/PlanarLegStance-v0": ("stance", {}),
-    "leg_env/PlanarLegBalance-v0": ("stance", {"contact": "unilateral", "reset_noise_scale": 0.05}),
+    "leg_env/PlanarLegBalance-v1": ("stance", {"contact": "unilateral", "reset_noise_scale": 0.05, "unilateral_weight": 2.0,
+                                               "drift_angle_weight": 10.0, "ctrl_cost_weight": 0.05,
+                                               "action_change_weight": 0.2, "observe_action": True}),
     "leg_env/PlanarLegPush-v2": ("push", {}),
     "leg_env/PlanarLegHop-v3": ("hop", {}),
 }

@@ -44,9 +44,9 @@ gives each formula), with these weights:
 - ``unilateral_weight = 0.5``: a recovery hop costs its flight time, ``-0.5 flight_time / dt`` per step, but is
   allowed; the base drift is measured from wherever the foot now stands (its contact point), so relocating the foot
   is not charged by it.
-- ``drift_angle_weight = 10`` per rad^2 of torso tilt (the balance task's 1): a torso held 15 degrees off level
+- ``drift_angle_weight = 10`` per rad^2 of torso tilt (``StanceConfig``'s default 1): a torso held 15 degrees off level
   costs 0.68 a step, so the posture that meets a push upright earns more than a lean that waits for it.
-- ``ctrl_cost_weight = 0.05`` per unit of ``|a|^2`` (the balance task's 0.01), the actuator effort: about 0.012 a
+- ``ctrl_cost_weight = 0.05`` per unit of ``|a|^2`` (``StanceConfig``'s default 0.01), the actuator effort: about 0.012 a
   step to hold the nominal posture (the knee at about -0.48), 0.1 for both joints saturated.
 - ``action_rate_weight = 0.2`` per unit of ``|a - a_last|^2``: an action that swings across its range step after
   step (a change of 2 in each entry) costs 1.6 a step, more than the alive bonus, where a smooth recovery's changes

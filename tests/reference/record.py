@@ -19,7 +19,7 @@ It records whatever ``leg_env`` it imports (the ``leg_env/`` next to it). The co
 clean checkout of commit e4e99ffd (the last commit with the numba kernels, the parent of the C port d1d7942), with
 numpy 2.4.6, numba 0.68.1, gymnasium 1.4.0, Python 3.11 (``meta["provenance"]``), in about 10 s on warm kernels.
 Task ids are the recorded commit's. Those no longer registered are replayed by the id that makes their task now
-(``runners.SUCCESSORS``: ``PlanarLegStance-v1`` renamed ``PlanarLegBalance-v0``; ``PlanarLegPush-v0`` and
+(``runners.SUCCESSORS``: ``PlanarLegStance-v1`` renamed ``PlanarLegBalance-v0``, now ``-v1``; ``PlanarLegPush-v0`` and
 ``PlanarLegHop-v0`` by ``-v1`` and ``-v3``, which append observation entries and, for the hop, change its reward:
 the recorded columns and quantities that did not change are compared).
 

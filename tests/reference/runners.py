@@ -50,7 +50,10 @@ SUCCESSORS = {
     # id at the recording: (the id that makes its task now, the recorded quantities its reward changed). A
     # successor's dynamics, starts and ends are the recorded id's, and its observation is the recorded one with
     # entries appended after it, so the recorded columns are compared.
-    "leg_env/PlanarLegStance-v1": ("leg_env/PlanarLegBalance-v0", ()),  # renamed: the same task
+    # renamed PlanarLegBalance-v0, then v1: the last action appended (entries 18-19); flight, the tilt and the torque
+    # squared charged more, and the action's change charged
+    "leg_env/PlanarLegStance-v1": ("leg_env/PlanarLegBalance-v1", ("reward", "info/reward_drift", "info/reward_unilateral",
+                                                                   "info/reward_ctrl")),
     # the COM's x from its start and the last action appended (entries 18-20); the tilt, the torque squared and the
     # action's change charged more
     "leg_env/PlanarLegPush-v0": ("leg_env/PlanarLegPush-v2", ("reward", "info/reward_drift", "info/reward_ctrl")),

@@ -53,7 +53,7 @@ def test_a_sweep_on_randomised_robots_has_its_own_folders_and_title():
 
 def test_a_sweep_of_five_seeds_on_a_tiny_budget(tmp_path):
     runs, out = tmp_path / "runs", tmp_path / "page"
-    argv = ["--env-id", "leg_env/PlanarLegBalance-v0", "--seeds", "5", "--shipped-seed", "2", "--total-timesteps", "512",
+    argv = ["--env-id", "leg_env/PlanarLegBalance-v1", "--seeds", "5", "--shipped-seed", "2", "--total-timesteps", "512",
             "--eval-freq", "256", "--eval-episodes", "2", "--episodes", "3", "--baseline", "lqr",
             "--runs", str(runs), "--out", str(out), "--params", *TINY]
     main(argv)
@@ -145,7 +145,7 @@ def test_a_push_sweep_scores_the_push_curve_on_its_evaluation_env(tmp_path):
 
 
 def test_seeds_trained_in_parallel_processes_learn_what_one_process_learns(tmp_path):
-    base = ["--env-id", "leg_env/PlanarLegBalance-v0", "--total-timesteps", "512", "--eval-freq", "256", "--eval-episodes", "2",
+    base = ["--env-id", "leg_env/PlanarLegBalance-v1", "--total-timesteps", "512", "--eval-freq", "256", "--eval-episodes", "2",
             "--episodes", "2", "--params", *TINY]
     main(base + ["--seeds", "2", "--jobs", "2", "--runs", str(tmp_path / "parallel"), "--out", str(tmp_path / "page_parallel")])
     main(base + ["--seeds", "1", "--first-seed", "1", "--runs", str(tmp_path / "serial"), "--out", str(tmp_path / "page_serial")])
@@ -159,13 +159,13 @@ def test_seeds_trained_in_parallel_processes_learn_what_one_process_learns(tmp_p
     # each seed's folder says how to train it alone, whichever process trained it
     for folder in ("parallel", "serial"):
         line = (tmp_path / folder / "seed_1" / "command.txt").read_text().splitlines()[0]
-        assert line.startswith("python -m train.ppo --env-id leg_env/PlanarLegBalance-v0 --seed 1 --out ") and "--params n_envs:8" in line
+        assert line.startswith("python -m train.ppo --env-id leg_env/PlanarLegBalance-v1 --seed 1 --out ") and "--params n_envs:8" in line
 
 
 def test_a_sweep_passes_its_update_precision_and_selection_to_each_seed_and_can_be_one_not_shipped(tmp_path):
     import yaml
 
-    main(["--env-id", "leg_env/PlanarLegBalance-v0", "--total-timesteps", "256", "--eval-freq", "128", "--eval-episodes", "2",
+    main(["--env-id", "leg_env/PlanarLegBalance-v1", "--total-timesteps", "256", "--eval-freq", "128", "--eval-episodes", "2",
           "--episodes", "2", "--seeds", "1", "--update-precision", "bfloat16", "--tanh", "torch", "--no-shipped", "--select-after", "200",
           "--params", *TINY, "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "page")])  # fmt: skip
     folder = tmp_path / "runs" / "seed_0"
@@ -177,7 +177,7 @@ def test_a_sweep_passes_its_update_precision_and_selection_to_each_seed_and_can_
     assert json.loads((folder / "evaluations.json").read_text())["selected"]["timesteps"] == 256  # not the one at 128
     page = (tmp_path / "page" / "README.md").read_text()
     assert "selected policy (its best in-training evaluation at 200 steps or more) on 2 held-out episodes" in page
-    assert page.startswith("# Learning curves: leg_env/PlanarLegBalance-v0, bfloat16 update\n")
+    assert page.startswith("# Learning curves: leg_env/PlanarLegBalance-v1, bfloat16 update\n")
     assert "PPO's update: the hidden layers in bfloat16 (matrix products in bfloat16, parameters and losses float32)" in page
     assert "The seed to ship, named before training: 0 (not shipped" in page and "| PPO seed 0 (named) |" in page and "(shipped)" not in page
 
@@ -187,11 +187,11 @@ def test_a_sweep_trains_every_seed_on_the_entry_of_its_hyperparameter_file(tmp_p
 
     from train.hyperparameters import DEFAULT_HYPERPARAMS
 
-    entry = yaml.safe_load(DEFAULT_HYPERPARAMS.read_text())["leg_env/PlanarLegBalance-v0"]
+    entry = yaml.safe_load(DEFAULT_HYPERPARAMS.read_text())["leg_env/PlanarLegBalance-v1"]
     entry["gamma"] = 0.97  # the file's own value, which no override sets
     hyperparams = tmp_path / "probe.yml"
-    hyperparams.write_text(yaml.safe_dump({"leg_env/PlanarLegBalance-v0": entry}))
-    main(["--env-id", "leg_env/PlanarLegBalance-v0", "--total-timesteps", "256", "--eval-freq", "128", "--eval-episodes", "2",
+    hyperparams.write_text(yaml.safe_dump({"leg_env/PlanarLegBalance-v1": entry}))
+    main(["--env-id", "leg_env/PlanarLegBalance-v1", "--total-timesteps", "256", "--eval-freq", "128", "--eval-episodes", "2",
           "--episodes", "2", "--seeds", "1", "--hyperparams", str(hyperparams), "--params", *TINY,
           "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "page")])  # fmt: skip
     folder = tmp_path / "runs" / "seed_0"
@@ -245,7 +245,7 @@ def test_stopping_a_parallel_sweep_stops_every_worker_at_a_checkpoint(tmp_path):
     command is killed outright (SIGKILL), each worker notices and stops the same way by itself. Nothing keeps
     training after the command is gone, and the same command resumes."""
     runs = tmp_path / "runs"
-    command = [sys.executable, "-m", "train.curves", "--env-id", "leg_env/PlanarLegBalance-v0", "--seeds", "2", "--jobs", "2",
+    command = [sys.executable, "-m", "train.curves", "--env-id", "leg_env/PlanarLegBalance-v1", "--seeds", "2", "--jobs", "2",
                "--total-timesteps", "100000000", "--eval-freq", "100000000", "--episodes", "2", "--runs", str(runs),
                "--out", str(tmp_path / "page"), "--params", *TINY]
     root = Path(__file__).resolve().parents[2]

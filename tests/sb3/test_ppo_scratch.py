@@ -13,7 +13,7 @@ from train.residual import ResidualPolicy
 
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = {  # policy folder: the task it was trained and is evaluated on
-    "ppo_balance": "leg_env/PlanarLegBalance-v0",
+    "ppo_balance": "leg_env/PlanarLegBalance-v1",
     "ppo_push_v2": "leg_env/PlanarLegPush-v2",
     "ppo_push_randomized": "leg_env/PlanarLegPush-v2",
     "ppo_hop_v3": "leg_env/PlanarLegHop-v3",
@@ -129,12 +129,14 @@ def test_shipped_push_policy_is_its_configuration():
 
 
 def test_shipped_balance_policy_is_its_configuration():
-    """``policies/ppo_balance`` was trained by the ``PlanarLegBalance-v0`` entry of ``train/hyperparams/ppo.yml`` as it
+    """``policies/ppo_balance`` was trained by the ``PlanarLegBalance-v1`` entry of ``train/hyperparams/ppo.yml`` as it
     is now: its card's command resolves to the shipped run's configuration, key for key (steps, epochs, minibatches,
-    curriculum, evaluation)."""
+    no schedule, evaluation)."""
+    from train.hyperparameters import load_hyperparams
     from train.ppo import TrainArgs
 
-    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegBalance-v0", seed=2, eval_freq=3_000_000, eval_episodes=64)
+    assert "callback" not in load_hyperparams(ROOT / "train" / "hyperparams" / "ppo.yml", "leg_env/PlanarLegBalance-v1")
+    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegBalance-v1", seed=2, eval_freq=4_000_000, eval_episodes=32)
     assert_resolves_to_shipped(args, "ppo_balance")
 
 

@@ -655,7 +655,7 @@ def _normalized_pair(**normalize):
     from train.normalize import BatchVecNormalize
 
     def venv():
-        return make_sb3_vec_env(16, seed=3, env_id="leg_env/PlanarLegBalance-v0", per_env_info=False, max_episode_steps=7)
+        return make_sb3_vec_env(16, seed=3, env_id="leg_env/PlanarLegBalance-v1", per_env_info=False, max_episode_steps=7)
 
     return VecNormalize(venv(), **normalize), BatchVecNormalize(venv(), **normalize)
 

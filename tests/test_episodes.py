@@ -180,3 +180,33 @@ def test_an_evaluation_names_how_each_episode_ended():
     assert summary["endings"] == {name: falls.count(name) for name in set(falls)}
     row = next(line for line in format_table({"stepping": summary}).splitlines() if "ended early" in line)
     assert all(f"{name} {count}" in row for name, count in summary["endings"].items())
+
+
+class _Saturated:
+    """Both joints pushed to their bound at every step: the torque is each robot's own limit."""
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        obs = np.asarray(obs)
+        return np.tile([1.0, -1.0], (obs.shape[0], 1)) if obs.ndim == 2 else np.array([1.0, -1.0]), state
+
+
+def test_the_rms_torque_is_what_each_drawn_robot_got():
+    """On randomised robots (each with its own torque limits) and with the motor model, train.evaluate's RMS torque is
+    that of the torques the single env reports (info["torque"]), not the clipped action times the nominal limits."""
+    env_id, kwargs = "leg_env/PlanarLegBalance-v1", {"randomize": True, "motor_speed": 20.0}
+    seeds = list(range(10_000, 10_006))
+    summary, _ = run_episodes(_Saturated(), seeds, kwargs, env_id=env_id)
+    torque_sq, steps, nominal = np.zeros(2), 0, None
+    for seed in seeds:
+        env = gym.make(env_id, **kwargs)
+        obs, _ = env.reset(seed=seed)
+        nominal = np.asarray(env.unwrapped.config.torque_limit, dtype=np.float64)
+        while True:
+            obs, _, terminated, truncated, info = env.step(np.array([1.0, -1.0]))
+            torque_sq += np.asarray(info["torque"], dtype=np.float64) ** 2
+            steps += 1
+            if terminated or truncated:
+                break
+    assert summary["steps"] == steps
+    np.testing.assert_allclose(summary["rms_torque"], np.sqrt(torque_sq / steps), rtol=0, atol=1e-4)
+    assert np.all(np.abs(np.asarray(summary["rms_torque"]) - nominal) > 0.05)

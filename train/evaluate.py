@@ -132,7 +132,7 @@ class EpisodeMetrics:
                 self.series["frames"].append(envs.render()[self.record])
 
     def step(self, envs, obs, actions, info: dict, active: np.ndarray) -> None:
-        tau = np.clip(actions[active], -1.0, 1.0) * self.limit
+        tau = np.asarray(info["torque"], dtype=np.float64)[active]  # what the joints got: each robot's own limits and motor model
         for k, name in enumerate(self.reward_terms):
             self.terms[active, k] += info[f"reward_{name}"][active]
         ended = active & (info["ending"] != 0)  # an episode that was running and ended at this step
@@ -148,7 +148,7 @@ class EpisodeMetrics:
             rec = self.series
             rec["base_drift"].append(float(d[r]))
             rec["torso_angle"].append(float(obs[r, Obs.th_b]))
-            rec["torque"].append(np.clip(actions[r], -1.0, 1.0) * self.limit)
+            rec["torque"].append(np.asarray(info["torque"][r], dtype=np.float64))
             rec["contact_force"].append(np.asarray(info["contact_force"][r], dtype=np.float64))
             rec["mode"].append(str(info["contact_mode"][r]) if "contact_mode" in info else "stick")
             rec["impulse"].append(np.asarray(info["impulse"][r], dtype=np.float64) if "impulse" in info else np.zeros(2))

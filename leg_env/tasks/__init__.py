@@ -18,7 +18,7 @@ REGISTRY = {
                                                "drift_angle_weight": 10.0, "ctrl_cost_weight": 0.05,
                                                "action_change_weight": 0.2, "observe_action": True}),
     "leg_env/PlanarLegPush-v2": ("push", {}),
-    "leg_env/PlanarLegHop-v3": ("hop", {}),
+    "leg_env/PlanarLegHop-v4": ("hop", {}),
 }
 """Every id, one per task: ``(task module, kwargs)``. A change to a task's dynamics or reward takes a new version
 and removes the old one (``CHANGELOG.md`` lists each); Gymnasium answers an older version of a name with an

@@ -154,19 +154,23 @@ class HopConfig(StanceConfig):
     """
 
     contact: str = "unilateral"
+    ctrl_cost_weight: float = 0.5  # per unit of |action|^2
+    action_change_weight: float = 1.0  # per unit of |action - last action|_1
+    power_weight: float = 0.006  # per W of the hip's and the knee's positive mechanical power
+    observe_action: bool = True  # the last action (clipped) as the observation's last two entries
     command_range: tuple = (0.05, 0.15)  # commanded COM rise at the apex above standing [m]
     height_weight: float = 2.0
     height_scale: float = 0.05  # [m] of apex height error at which the height term is 1/e of its peak
     height_scale_fine: float = 0.01  # [m] > 0: the height kernel is the sum of the height_scale one and this one
-    drift_com_weight: float = 10.0  # per m^2 of COM x from the start
+    drift_com_weight: float = 30.0  # per m^2 of COM x from the start
     drift_near_weight: float = 0.0  # per m^2 of COM x from the start: a second drift charge, capped by drift_near_cap
     drift_near_cap: float = float("inf")  # the most drift_near_weight's charge takes a step (inf: no cap, quadratic)
     limit_weight: float = 0.0  # per rad^2 of the hip and the knee inside the last limit_margin of their ranges
     limit_margin: float = 0.05  # [rad] from each end of hip_range and knee_range
-    tilt_weight: float = 1.0  # per rad^2
+    tilt_weight: float = 10.0  # per rad^2
     impact_weight: float = 0.5  # per (m/s)^2 of |P| / m
     slip_weight: float = 1.0  # per m/s of mean slip speed
-    min_flight: float = 0.05  # [s] a flight at least this long is a hop
+    min_flight: float = 0.15  # [s] a flight at least this long is a hop
     max_ground_time: float = 1.0  # [s] the alive bonus and the height term stop after this long without a hop
     command_period: float = float("inf")  # [s] a new command from command_range every this long, up to COMMANDS_AHEAD times an episode (inf: one per episode)
 

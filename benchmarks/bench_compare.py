@@ -40,7 +40,7 @@ ROWS = {
     "single, unilateral": ("single", "leg_env/PlanarLegBalance-v1", {}),
     "make_vec 4096, pinned": ("vector", "leg_env/PlanarLegStance-v0", {}),
     "make_vec 4096, pinned, randomize=True": ("vector", "leg_env/PlanarLegStance-v0", {"randomize": True}),
-    "make_vec 4096, hop": ("vector", "leg_env/PlanarLegHop-v3", {}),
+    "make_vec 4096, hop": ("vector", "leg_env/PlanarLegHop-v4", {}),
 }
 REFERENCES = {"Hopper-v5 env.step": ("single", "Hopper-v5", {}), "SyncVectorEnv(Hopper-v5, 8)": ("sync", "Hopper-v5", {})}
 

@@ -30,7 +30,7 @@ Rows:
     plus uniform noise of +-``BALANCE_NOISE``, only ``step`` timed, after ``BALANCE_WARMUP`` steps (ratio of
     unilateral to pinned).
 (e) every other registered task (``leg_env.tasks.REGISTRY``: ``PlanarLegBalance-v1``, ``PlanarLegPush-v2``,
-    ``PlanarLegHop-v3``)
+    ``PlanarLegHop-v4``)
     through ``gym.make_vec`` at N = 4096, under random actions and balancing, each as a share of the
     unilateral stance batch's rate under the same actions (the target: at least 90%).
 With ``--ppo``: SB3 PPO (``MlpPolicy``, SB3's default hyperparameters, 16,384-step rollouts) for

@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-CONFIGS = ("leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v3")
+CONFIGS = ("leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v4")
 """The from-scratch configurations of ``train/hyperparams/ppo.yml`` on the unilateral ground."""
 TARGET = 100_000.0  # env-steps/s end to end, at least on the balance and hop configurations
 SEED = 0

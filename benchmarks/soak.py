@@ -38,15 +38,15 @@ CASES = {  # name: (env id, keyword arguments)
     "stance pinned": (leg_env.ENV_ID, {"contact": "pinned"}),
     "stance unilateral": (leg_env.ENV_ID, {"contact": "unilateral"}),
     "push": ("leg_env/PlanarLegPush-v2", {}),
-    "hop": ("leg_env/PlanarLegHop-v3", {}),
+    "hop": ("leg_env/PlanarLegHop-v4", {}),
     "stance pinned randomised": (leg_env.ENV_ID, {"contact": "pinned", "randomize": True}),
     "stance unilateral randomised": (leg_env.ENV_ID, {"contact": "unilateral", "randomize": True}),
     "push randomised": ("leg_env/PlanarLegPush-v2", {"randomize": True}),
-    "hop randomised": ("leg_env/PlanarLegHop-v3", {"randomize": True}),
-    "hop command schedule": ("leg_env/PlanarLegHop-v3", {"command_period": 0.5}),  # the training setting
-    "hop training charges": ("leg_env/PlanarLegHop-v3", {"drift_near_weight": 390.0, "drift_near_cap": 1.0, "limit_weight": 400.0}),
+    "hop randomised": ("leg_env/PlanarLegHop-v4", {"randomize": True}),
+    "hop command schedule": ("leg_env/PlanarLegHop-v4", {"command_period": 0.5}),  # the training setting
+    "hop training charges": ("leg_env/PlanarLegHop-v4", {"drift_near_weight": 390.0, "drift_near_cap": 1.0, "limit_weight": 400.0}),
     # the effort settings: the motor model, the power and action-rate charges, the last action observed
-    "hop effort": ("leg_env/PlanarLegHop-v3", {"motor_speed": 8.0, "power_weight": 0.01, "action_rate_weight": 0.5, "observe_action": True}),
+    "hop effort": ("leg_env/PlanarLegHop-v4", {"motor_speed": 8.0, "power_weight": 0.01, "action_rate_weight": 0.5, "observe_action": True}),
     "stance unilateral effort": (leg_env.ENV_ID, {"contact": "unilateral", "motor_speed": 8.0, "power_weight": 0.01, "action_change_weight": 0.2,
                                                   "observe_action": True}),
 }

@@ -3,7 +3,7 @@
 Importing the package registers every task id of ``leg_env.tasks.REGISTRY`` (``gymnasium.make`` and
 ``gymnasium.make_vec``), one per task: ``leg_env/PlanarLegStance-v0`` (balance on a pinned foot, the lesson's
 model), ``leg_env/PlanarLegBalance-v1`` (balance on the unilateral ground), ``leg_env/PlanarLegPush-v2``
-(recover from pushes) and ``leg_env/PlanarLegHop-v3`` (hop to a commanded height). Every id's entry points are
+(recover from pushes) and ``leg_env/PlanarLegHop-v4`` (hop to a commanded height). Every id's entry points are
 the generic ``leg_env.envs.LegEnv`` and ``LegVectorEnv`` with its task.
 
 The package's rooms: ``leg_env.physics`` (the robot's model and time stepping, no Gymnasium), ``leg_env.tasks``

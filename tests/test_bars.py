@@ -13,7 +13,7 @@ import pytest
 from train import bars as b
 from train.bars import BOTH_SURVIVED, NO_PUSH, bar_controllers, bars_for, bars_table, check_bars, meets_every_bar, task_name
 
-BALANCE, HOP, PUSH = "leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v3", "leg_env/PlanarLegPush-v2"
+BALANCE, HOP, PUSH = "leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v4", "leg_env/PlanarLegPush-v2"
 
 
 def motion(**values) -> dict:
@@ -63,7 +63,7 @@ EVERY_BAR = [(env_id, kwargs, k) for env_id, kwargs in CASES for k in range(len(
 
 
 def test_a_task_is_found_by_its_name_in_any_version():
-    assert task_name("leg_env/PlanarLegPush-v22") == "PlanarLegPush" and task_name("PlanarLegHop-v3") == "PlanarLegHop"
+    assert task_name("leg_env/PlanarLegPush-v22") == "PlanarLegPush" and task_name("PlanarLegHop-v4") == "PlanarLegHop"
     assert bars_for("leg_env/PlanarLegBalance-v1") == bars_for(BALANCE) == b.BALANCE_BARS
     assert bars_for("leg_env/PlanarLegHop-v4") == b.HOP_BARS and bars_for("leg_env/PlanarLegPush-v2") == b.PUSH_BARS
     assert bars_for(PUSH, {"randomize": True}) == b.RANDOMIZED_PUSH_BARS and bars_for(HOP, {"randomize": True}) == b.HOP_BARS

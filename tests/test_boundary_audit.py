@@ -17,7 +17,7 @@ import leg_env
 from leg_env._core import kernels
 from leg_env.physics import LegParams, static_equilibrium, step_inplace
 
-HOP, PUSH, STANCE = "leg_env/PlanarLegHop-v3", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegStance-v0"
+HOP, PUSH, STANCE = "leg_env/PlanarLegHop-v4", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegStance-v0"
 
 
 def test_the_hop_refuses_a_robot_without_gravity():

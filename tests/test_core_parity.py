@@ -23,8 +23,8 @@ CASES = [
     ("leg_env/PlanarLegBalance-v1", False),
     ("leg_env/PlanarLegBalance-v1", True),
     ("leg_env/PlanarLegPush-v2", False),
-    ("leg_env/PlanarLegHop-v3", False),
-    ("leg_env/PlanarLegHop-v3", True),
+    ("leg_env/PlanarLegHop-v4", False),
+    ("leg_env/PlanarLegHop-v4", True),
 ]
 STEPS = 150
 

@@ -10,7 +10,7 @@ import pytest
 import leg_env
 from leg_env.physics.dynamics import com_position  # noqa: F401  (the physics, imported as the envs do)
 
-IDS = ("leg_env/PlanarLegStance-v0", "leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
+IDS = ("leg_env/PlanarLegStance-v0", "leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v4")
 STEPS = 150
 
 
@@ -32,7 +32,7 @@ EFFORT = {  # each id's effort settings (action_rate_weight, action_change_weigh
     "leg_env/PlanarLegStance-v0": (0.0, 0.0, 0.0, False),
     "leg_env/PlanarLegBalance-v1": (0.0, 0.2, 0.0, True),
     "leg_env/PlanarLegPush-v2": (0.2, 0.0, 0.0, True),
-    "leg_env/PlanarLegHop-v3": (0.0, 0.0, 0.0, False),
+    "leg_env/PlanarLegHop-v4": (0.0, 1.0, 0.006, True),
 }
 
 
@@ -166,7 +166,7 @@ def test_the_motor_model_scales_the_torque_by_the_joint_speed_at_the_steps_start
     assert scaled > 50 and braking > 50
 
 
-@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v3"])
+@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v4"])
 def test_the_applied_torque_books_the_energy_with_the_motor_model(env_id):
     """The torques of ``info["torque"]`` are those the physics applied: their work ``sum tau_j dq_j`` over the steps,
     with the push's and less the slip's and impacts' dissipation, is the change of the energy computed from the state
@@ -192,7 +192,7 @@ def test_the_controllers_read_an_observation_that_ends_with_the_last_action_as_t
     from policies.stepping import SteppingController
 
     for env_id, make in (("leg_env/PlanarLegBalance-v1", LQRController), ("leg_env/PlanarLegPush-v2", SteppingController),
-                         ("leg_env/PlanarLegHop-v3", HopperController)):  # fmt: skip
+                         ("leg_env/PlanarLegHop-v4", HopperController)):  # fmt: skip
         env = gym.make(env_id, observe_action=True)
         obs, _ = env.reset(seed=2)
         u = env.unwrapped

@@ -12,7 +12,7 @@ TASKS = [
     ("leg_env/PlanarLegStance-v0", {"terminate_on_contact_loss": True, "contact_loss_threshold": 10.0, "reset_noise_scale": 0.6}),
     ("leg_env/PlanarLegBalance-v1", {"reset_noise_scale": 0.2}),
     ("leg_env/PlanarLegPush-v2", {"push_force": [40.0, 80.0]}),
-    ("leg_env/PlanarLegHop-v3", {}),
+    ("leg_env/PlanarLegHop-v4", {}),
 ]
 
 
@@ -72,14 +72,14 @@ def test_a_single_env_reports_the_ending_of_its_vector_row():
     seeds, steps = [3, 4, 5], 200
     rng = np.random.default_rng(1)
     actions = rng.uniform(-1, 1, (steps, len(seeds), 2))
-    envs = gym.make_vec("leg_env/PlanarLegHop-v3", num_envs=len(seeds), vectorization_mode="vector_entry_point")
+    envs = gym.make_vec("leg_env/PlanarLegHop-v4", num_envs=len(seeds), vectorization_mode="vector_entry_point")
     envs.reset(seed=seeds)
     vector_endings = []
     for t in range(steps):
         vector_endings.append(envs.step(actions[t])[4]["ending"].copy())
     vector_endings = np.array(vector_endings)
     for k, seed in enumerate(seeds):
-        env = gym.make("leg_env/PlanarLegHop-v3")
+        env = gym.make("leg_env/PlanarLegHop-v4")
         env.reset(seed=seed)
         for t in range(steps):
             _, _, terminated, truncated, info = env.step(actions[t, k])

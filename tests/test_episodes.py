@@ -40,7 +40,7 @@ def single_env_episodes(make_policy, env_id: str, seeds, env_kwargs=None):
 @pytest.mark.parametrize(
     "env_id, make_policy, env_kwargs",
     [
-        ("leg_env/PlanarLegHop-v3", lambda env: HopperController(), {}),
+        ("leg_env/PlanarLegHop-v4", lambda env: HopperController(), {}),
         ("leg_env/PlanarLegStance-v0", lambda env: LQRController(env.unwrapped.params, env.unwrapped.config), {"reset_noise_scale": 0.3}),
         ("leg_env/PlanarLegPush-v2", lambda env: SteppingController(env.unwrapped.params, env.unwrapped.config), {"push_force": [50.0, 50.0]}),
     ],
@@ -136,10 +136,10 @@ def test_the_training_evaluation_reports_the_hop_measures_as_train_evaluate_does
     seeds; on another task it adds none."""
     from train.callbacks import HOP_EVAL_KEYS, evaluate_now
 
-    hopper = load_policy("hopper", env_id="leg_env/PlanarLegHop-v3")
+    hopper = load_policy("hopper", env_id="leg_env/PlanarLegHop-v4")
     seeds = list(range(20_000, 20_004))
-    summary, _ = run_episodes(hopper, seeds, env_id="leg_env/PlanarLegHop-v3")
-    envs = make_batch("leg_env/PlanarLegHop-v3", len(seeds))
+    summary, _ = run_episodes(hopper, seeds, env_id="leg_env/PlanarLegHop-v4")
+    envs = make_batch("leg_env/PlanarLegHop-v4", len(seeds))
     periodic = evaluate_now(hopper, envs, seeds[0])
     envs.close()
     assert periodic["returns"] == [e["return"] for e in summary["per_episode"]]

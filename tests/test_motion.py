@@ -17,7 +17,7 @@ from train.episodes import evaluate_now, make_batch, policy_predict, run_batch
 from train.evaluate import EvalArgs, evaluate, load_policy, run_episodes
 from train.motion import KEYS, PER_EPISODE, Motion
 
-PINNED, BALANCE, HOP, PUSH = "leg_env/PlanarLegStance-v0", "leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v3", "leg_env/PlanarLegPush-v2"
+PINNED, BALANCE, HOP, PUSH = "leg_env/PlanarLegStance-v0", "leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegHop-v4", "leg_env/PlanarLegPush-v2"
 
 
 class Scripted:

@@ -121,7 +121,7 @@ def test_a_push_shows_as_an_arrow_at_the_torso():
     assert info["push_force"] == 0.0 and count(env.render(), PUSH) == 0
 
 
-@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegStance-v0", "leg_env/PlanarLegHop-v3"])
+@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegStance-v0", "leg_env/PlanarLegHop-v4"])
 def test_a_randomised_batch_draws_each_robot_with_its_own_parameters(env_id):
     """Every sub-env's frame is its own robot (its link lengths, its friction cone) at its own state, the frame
     the single env draws for that robot; with drawn lengths the nominal robot's frame differs."""

@@ -45,14 +45,14 @@ def test_both_trainers_take_the_shared_arguments_as_the_same_options(cls):
 
 
 def test_the_old_env_option_of_train_rllib_names_the_new_one(capsys):
-    for argv in (["--env", "leg_env/PlanarLegHop-v3"], ["--env=leg_env/PlanarLegHop-v3"], ["--env"]):
+    for argv in (["--env", "leg_env/PlanarLegHop-v4"], ["--env=leg_env/PlanarLegHop-v4"], ["--env"]):
         with pytest.raises(SystemExit) as stop:
             parse_args(RLlibArgs, argv, prog="python -m train.rllib")
         assert stop.value.code == 2 and "--env was renamed --env-id" in capsys.readouterr().err
-    assert parse_args(RLlibArgs, ["--env-id", "leg_env/PlanarLegHop-v3"]).env_id == "leg_env/PlanarLegHop-v3"
+    assert parse_args(RLlibArgs, ["--env-id", "leg_env/PlanarLegHop-v4"]).env_id == "leg_env/PlanarLegHop-v4"
     assert "--env " not in parser_for(RLlibArgs).format_help()  # not advertised
     with pytest.raises(TypeError, match="'env'"):
-        RLlibArgs(env="leg_env/PlanarLegHop-v3")
+        RLlibArgs(env="leg_env/PlanarLegHop-v4")
 
 
 @pytest.mark.parametrize("cls", TRAINERS, ids=lambda cls: cls.__name__)

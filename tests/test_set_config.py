@@ -10,7 +10,7 @@ import pytest
 import leg_env  # noqa: F401  (registers the ids)
 from leg_env.tasks.base import Obs
 
-HOP = "leg_env/PlanarLegHop-v3"
+HOP = "leg_env/PlanarLegHop-v4"
 BALANCE = "leg_env/PlanarLegBalance-v1"
 
 

@@ -20,7 +20,7 @@ from train.episodes import push_survival
 from train.task_metrics import HopTracker, largest_survived_impulse
 
 ROOT = Path(__file__).resolve().parents[1]
-TASK_IDS = ("leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
+TASK_IDS = ("leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v4")
 TINY = ["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1"]
 
 
@@ -58,9 +58,9 @@ def test_lqr_reads_the_unilateral_observation():
 
 
 def test_hopper_is_loaded_for_the_hop_task_and_is_batched():
-    hopper = load_policy("hopper", env_id="leg_env/PlanarLegHop-v3")
+    hopper = load_policy("hopper", env_id="leg_env/PlanarLegHop-v4")
     assert isinstance(hopper, HopperController)
-    envs = gym.make_vec("leg_env/PlanarLegHop-v3", num_envs=3)
+    envs = gym.make_vec("leg_env/PlanarLegHop-v4", num_envs=3)
     obs, _ = envs.reset(seed=5)
     batch, _ = hopper.predict(obs)
     singles = []
@@ -76,7 +76,7 @@ def test_hopper_is_loaded_for_the_hop_task_and_is_batched():
 def test_hop_tracker_apex_is_the_ballistic_apex():
     """A robot thrown upwards with zero torques: the tracker's apex is the same at every instant of the
     flight and lies above the highest sampled COM height by at most g dt^2 / 8."""
-    envs = gym.make_vec("leg_env/PlanarLegHop-v3", num_envs=1)
+    envs = gym.make_vec("leg_env/PlanarLegHop-v4", num_envs=1)
     envs.reset(seed=0)
     q, _, _ = envs.state
     q = q[0].copy()
@@ -103,7 +103,7 @@ def test_hop_tracker_apex_is_the_ballistic_apex():
 
 def test_hop_tracker_counts_hops_and_errors_of_the_hopper():
     hopper = HopperController()
-    summary, series = run_episodes(hopper, [10_000], record=0, env_id="leg_env/PlanarLegHop-v3")
+    summary, series = run_episodes(hopper, [10_000], record=0, env_id="leg_env/PlanarLegHop-v4")
     assert {"hops", "mean_abs_apex_error", "rms_apex_error", "mean_hop_period", "mean_landing_impulse"} <= set(summary)
     hop = series["hop"]
     assert len(hop["com_height"]) == summary["per_episode"][0]["length"]
@@ -119,7 +119,7 @@ def test_hop_tracker_splits_the_apex_errors_by_command():
     from train.task_metrics import COMMAND_BANDS
 
     hopper = HopperController()
-    summary, _ = run_episodes(hopper, list(range(10_000, 10_012)), env_id="leg_env/PlanarLegHop-v3")
+    summary, _ = run_episodes(hopper, list(range(10_000, 10_012)), env_id="leg_env/PlanarLegHop-v4")
     bands = summary["apex_error_by_command"]
     assert len(bands) == COMMAND_BANDS
     np.testing.assert_allclose([b["low"] for b in bands] + [bands[-1]["high"]], np.linspace(0.05, 0.15, COMMAND_BANDS + 1))
@@ -235,12 +235,12 @@ def test_residual_env_applies_the_controller_plus_the_scaled_correction():
 def test_residual_run_reloads_as_the_sum(tmp_path):
     from train.residual import ResidualPolicy
 
-    out = train(TrainArgs(out=tmp_path / "run", env_id="leg_env/PlanarLegHop-v3", residual="hopper", residual_scale=0.2,
+    out = train(TrainArgs(out=tmp_path / "run", env_id="leg_env/PlanarLegHop-v4", residual="hopper", residual_scale=0.2,
                           params=list(TINY), total_timesteps=128, eval_freq=128, eval_episodes=2, checkpoint_freq=0,
                           progress_bar=False, verbose=0))  # fmt: skip
     policy = load_policy(out)
     assert isinstance(policy, ResidualPolicy) and policy.scale == 0.2
-    obs = gym.make("leg_env/PlanarLegHop-v3").reset(seed=4)[0]
+    obs = gym.make("leg_env/PlanarLegHop-v4").reset(seed=4)[0]
     hopper = HopperController()
     expected = np.clip(hopper.predict(obs)[0] + 0.2 * np.clip(policy.network.predict(obs)[0], -1, 1), -1, 1)
     policy.reset()

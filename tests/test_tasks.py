@@ -16,13 +16,14 @@ import leg_env
 from leg_env import physics as dyn
 from leg_env.tasks import REGISTRY
 
-NEW_IDS = ("leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3")
+NEW_IDS = ("leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v4")
 REMOVED = {  # removed id: the current id of its task, which Gymnasium's error names ("" where the name has none)
     "leg_env/PlanarLegPush-v0": "leg_env/PlanarLegPush-v2",
     "leg_env/PlanarLegPush-v1": "leg_env/PlanarLegPush-v2",
-    "leg_env/PlanarLegHop-v0": "leg_env/PlanarLegHop-v3",
-    "leg_env/PlanarLegHop-v1": "leg_env/PlanarLegHop-v3",
-    "leg_env/PlanarLegHop-v2": "leg_env/PlanarLegHop-v3",
+    "leg_env/PlanarLegHop-v0": "leg_env/PlanarLegHop-v4",
+    "leg_env/PlanarLegHop-v1": "leg_env/PlanarLegHop-v4",
+    "leg_env/PlanarLegHop-v2": "leg_env/PlanarLegHop-v4",
+    "leg_env/PlanarLegHop-v3": "leg_env/PlanarLegHop-v4",
     "leg_env/PlanarLegStance-v1": "",
     "leg_env/PlanarLegBalance-v0": "leg_env/PlanarLegBalance-v1",
 }
@@ -37,7 +38,7 @@ KWARGS = {
     "leg_env/PlanarLegStance-v0": dict(reset_noise_scale=0.05, ctrl_cost_weight=0.02),
     "leg_env/PlanarLegBalance-v1": dict(ctrl_cost_weight=0.02, params={"m_b": 9.0}),
     "leg_env/PlanarLegPush-v2": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
-    "leg_env/PlanarLegHop-v3": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
+    "leg_env/PlanarLegHop-v4": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
 }
 
 
@@ -326,13 +327,14 @@ def test_push_energy_balance_over_an_episode():
 
 
 def test_hop_reward_peaks_at_the_commanded_apex_on_scripted_hops():
-    """Ballistic hops (the robot thrown straight up, its posture held) whose COM apex is ``rise`` above standing: from
+    """Ballistic hops (the robot thrown straight up, its posture held; flights longer than ``min_flight``) whose COM
+    apex is ``rise`` above standing: from
     the step that lands the hop, observation entry 21 is ``rise`` and the height term is its weight times
     ``exp(-(e / height_scale)^2) + exp(-(e / height_scale_fine)^2)``, ``e = rise - command``: largest at the
     command, where it is twice the weight. Before the landing nothing is paid."""
     from leg_env.tasks.base import Obs
 
-    env = gym.make("leg_env/PlanarLegHop-v3", reset_noise_scale=0.0).unwrapped
+    env = gym.make("leg_env/PlanarLegHop-v4", reset_noise_scale=0.0).unwrapped
     obs, info = env.reset(seed=4)
     command = env._state["command"][0]
     assert info["command"] == command
@@ -340,7 +342,7 @@ def test_hop_reward_peaks_at_the_commanded_apex_on_scripted_hops():
     cfg, p = env.config, env.params
     hold = (env.nominal.tau / np.asarray(cfg.torque_limit)).astype(np.float32)
     lift = 0.005  # the foot 5 mm above the ground
-    rises = np.r_[np.linspace(0.02, 0.25, 47), command]
+    rises = np.r_[np.linspace(0.04, 0.25, 43), command]  # flights of 0.17 s or more: hops (min_flight 0.15 s)
     rewards = []
     for rise in rises:
         q = env.nominal.q.copy()
@@ -390,25 +392,29 @@ def test_hop_pays_the_last_landed_hops_apex_at_every_step_while_hopping():
     """The hop's reward and observation, modelled step by step from the contact modes, flight times, the COM and the
     state, over random torques with knee kicks, standing, a throw, and the model-based hopper (``_probe_action``).
 
-    The motion is the unilateral balance's (``PlanarLegStance-v0`` on the unilateral ground, the same posture noise:
-    the hop draws its command after it): the same first 18 observation entries, ends, alive bonus and control
-    charge. Entry 19 is the COM's x from its start; entry 20 the ground time, since the end of the last flight of at
+    The motion is the unilateral balance's (``PlanarLegStance-v0`` on the unilateral ground with the hop's effort
+    settings, the same posture noise: the hop draws its command after it): the same first 18 observation entries and
+    the same last action after the hop's own (entries 22-23), ends, alive bonus, control, action-change and power
+    charges. Entry 19 is the COM's x from its start; entry 20 the ground time, since the end of the last flight of at
     least ``min_flight`` (or the start); entry 21 the apex rise above standing of the last hop the robot landed (0
     before the first). The height term is its weight times the sum of the two Gaussian kernels (5 cm, 1 cm) of that
     hop's apex error (the apex of its arc, ``y + y'^2 / 2g`` in flight), paid while the ground time is at most
     ``max_ground_time``, and never on a step that falls; flights shorter than a hop change nothing. The alive
-    bonus stops with it. The other terms are their formulas: ``-10 dx^2``, ``-th_b^2``, ``-0.5 (|P| / m)^2``,
+    bonus stops with it. The other terms are their formulas: ``-30 dx^2``, ``-10 th_b^2``, ``-0.5 (|P| / m)^2``,
     ``-slip_distance / dt``; ``reward_limit`` is 0."""
     from leg_env.tasks.base import Obs
     from policies.hopper import HopperController
 
-    registered = gym.make("leg_env/PlanarLegHop-v3")
+    registered = gym.make("leg_env/PlanarLegHop-v4")
     cfg = registered.unwrapped.config
-    assert cfg.max_ground_time == 1.0 and cfg.min_flight == 0.05 and cfg.height_scale_fine == 0.01
-    assert registered.observation_space.shape == (22,)
-    # a ground time of 0.3 s at most, shorter than the hopper's stance: the term stops and starts again within an episode
-    hop = gym.make("leg_env/PlanarLegHop-v3", reset_noise_scale=0.002, max_ground_time=0.3).unwrapped
-    stance = gym.make("leg_env/PlanarLegStance-v0", contact="unilateral", reset_noise_scale=0.002).unwrapped
+    assert cfg.max_ground_time == 1.0 and cfg.min_flight == 0.15 and cfg.height_scale_fine == 0.01
+    assert (cfg.drift_com_weight, cfg.tilt_weight, cfg.impact_weight, cfg.slip_weight) == (30.0, 10.0, 0.5, 1.0)
+    assert registered.observation_space.shape == (24,)
+    # a ground time of 0.3 s at most, shorter than the hopper's stance: the term stops and starts again within an
+    # episode; commands of 10 cm or more, whose hops by the hopper fly longer than min_flight (0.15 s)
+    hop = gym.make("leg_env/PlanarLegHop-v4", reset_noise_scale=0.002, max_ground_time=0.3, command_range=(0.10, 0.15)).unwrapped
+    effort = {k: getattr(cfg, k) for k in ("ctrl_cost_weight", "action_rate_weight", "action_change_weight", "power_weight", "observe_action")}
+    stance = gym.make("leg_env/PlanarLegStance-v0", contact="unilateral", reset_noise_scale=0.002, **effort).unwrapped
     hold = (hop.nominal.tau / np.asarray(hop.config.torque_limit)).astype(np.float32)
     cfg, p = hop.config, hop.params
     m = p.total_mass
@@ -422,12 +428,12 @@ def test_hop_pays_the_last_landed_hops_apex_at_every_step_while_hopping():
         hopper.reset()
         x0 = i3["com_position"][0]
         run, ground, arc, held, arc_rise, rise = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-        assert np.array_equal(o0, o3[:18]) and o3[Obs.last_apex] == 0.0 and o3[Obs.com_drift] == 0.0 and o3[Obs.ground_time] == 0.0
+        assert np.array_equal(o0[:18], o3[:18]) and np.array_equal(o0[18:], o3[22:]) and o3[Obs.last_apex] == 0.0 and o3[Obs.com_drift] == 0.0 and o3[Obs.ground_time] == 0.0
         for k, a in enumerate(actions(300, 1, seed=seed)[:, 0]):
             a = _probe_action(seed, k, a, o3, hopper, hold, thrown)
             o0, _, t0, _, i0 = stance.step(a)
             o3, r3, t3, _, i3 = hop.step(a)
-            assert np.array_equal(o0, o3[:18]) and t0 == t3
+            assert np.array_equal(o0[:18], o3[:18]) and np.array_equal(o0[18:], o3[22:]) and t0 == t3
             flight = i3["contact_mode"] == "flight"
             landed = not flight and run > 0.0
             length = run + i3["flight_time"]
@@ -448,7 +454,7 @@ def test_hop_pays_the_last_landed_hops_apex_at_every_step_while_hopping():
             expected = 0.0 if t3 or ground > cfg.max_ground_time else cfg.height_weight * held
             assert i3["reward_height"] == pytest.approx(expected, rel=1e-9, abs=1e-12), (seed, k)
             assert i3["reward_alive"] == (i0["reward_alive"] if ground <= cfg.max_ground_time else 0.0)
-            assert i3["reward_ctrl"] == i0["reward_ctrl"] and i3["reward_limit"] == 0.0
+            assert all(i3[key] == i0[key] for key in ("reward_ctrl", "reward_action_rate", "reward_power")) and i3["reward_limit"] == 0.0
             th_b = hop.state[0][2]
             P = np.asarray(i3["impulse"])
             assert i3["reward_drift"] == pytest.approx(-cfg.drift_com_weight * dx * dx, rel=1e-9, abs=1e-15)
@@ -474,9 +480,9 @@ def test_hop_command_schedule_changes_the_command_every_period_and_judges_each_h
     from leg_env.tasks.hop import COMMANDS_AHEAD, command_steps
     from policies.hopper import HopperController
 
-    assert gym.make("leg_env/PlanarLegHop-v3").unwrapped.config.command_period == float("inf")
-    plain = gym.make("leg_env/PlanarLegHop-v3").unwrapped
-    env = gym.make("leg_env/PlanarLegHop-v3", command_period=0.5).unwrapped
+    assert gym.make("leg_env/PlanarLegHop-v4").unwrapped.config.command_period == float("inf")
+    plain = gym.make("leg_env/PlanarLegHop-v4").unwrapped
+    env = gym.make("leg_env/PlanarLegHop-v4", command_period=0.5).unwrapped
     cfg, period = env.config, command_steps(env.config)
     assert period == 50 and command_steps(plain.config) == 0
     y_stand = dyn.com_position(env.nominal.q, env.params)[1]
@@ -520,11 +526,11 @@ def test_hop_command_schedule_changes_the_command_every_period_and_judges_each_h
     assert changes >= 2 * COMMANDS_AHEAD and hops >= 10
     for bad in (0.0, -1.0, 0.001, float("nan")):
         with pytest.raises(ValueError, match="command_period"):
-            gym.make("leg_env/PlanarLegHop-v3", command_period=bad)
+            gym.make("leg_env/PlanarLegHop-v4", command_period=bad)
 
 
-def test_hop_v3_prefers_hopping_to_the_command_to_bouncing():
-    """On the same episodes the model-based hopper (hops to the command) earns v3's height term several times over
+def test_hop_prefers_hopping_to_the_command_to_bouncing():
+    """On the same episodes the model-based hopper (hops to the command) earns the height term several times over
     what a fixed bounce of low hops earns: the bounce's flights, however many, are paid no more than its apex."""
     results = {}
     for name in ("hopper", "bounce"):
@@ -555,7 +561,7 @@ def test_hop_with_min_flight_zero_pays_each_landed_flight_from_its_landing():
     from leg_env.tasks.base import Obs
     from policies.hopper import HopperController
 
-    env = gym.make("leg_env/PlanarLegHop-v3", min_flight=0.0).unwrapped
+    env = gym.make("leg_env/PlanarLegHop-v4", min_flight=0.0).unwrapped
     hopper = HopperController(env.params, env.config)
     obs, _ = env.reset(seed=3)
     hopper.reset()
@@ -576,7 +582,7 @@ def test_hop_with_min_flight_zero_pays_each_landed_flight_from_its_landing():
 def test_hop_pays_nothing_for_standing_and_the_alive_bonus_for_a_second():
     """Holding the nominal posture (no hop) earns no height term, and the alive bonus only for the first second on
     the ground (``max_ground_time``)."""
-    env = gym.make("leg_env/PlanarLegHop-v3", reset_noise_scale=0.0, command_range=(0.0, 0.0)).unwrapped
+    env = gym.make("leg_env/PlanarLegHop-v4", reset_noise_scale=0.0, command_range=(0.0, 0.0)).unwrapped
     env.reset(seed=0)
     hold = (env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32)
     steps = [env.step(hold) for _ in range(150)]
@@ -586,7 +592,7 @@ def test_hop_pays_nothing_for_standing_and_the_alive_bonus_for_a_second():
 
 
 def test_hop_landing_impulse_is_charged():
-    env = gym.make("leg_env/PlanarLegHop-v3", reset_noise_scale=0.0).unwrapped
+    env = gym.make("leg_env/PlanarLegHop-v4", reset_noise_scale=0.0).unwrapped
     q = env.nominal.q.copy()
     q[1] += 0.001
     qd = np.zeros(5)
@@ -605,11 +611,11 @@ def test_hop_near_drift_charge_is_capped_and_changes_nothing_else():
     term, ``dx`` the COM's x from its start (read from the quadratic charge of the same episode, ``-w_0 dx^2``): about
     ``-w dx^2`` near the start, never below ``-c``; with ``c`` infinite, ``-w dx^2``. The motion, the observation and
     every other term are those of the registered task."""
-    quadratic = gym.make("leg_env/PlanarLegHop-v3").unwrapped
+    quadratic = gym.make("leg_env/PlanarLegHop-v4").unwrapped
     assert quadratic.config.drift_near_weight == 0.0 and quadratic.config.drift_near_cap == float("inf")
     w0, w, cap = quadratic.config.drift_com_weight, 390.0, 1.0
-    capped = gym.make("leg_env/PlanarLegHop-v3", drift_near_weight=w, drift_near_cap=cap).unwrapped
-    uncapped = gym.make("leg_env/PlanarLegHop-v3", drift_near_weight=w).unwrapped
+    capped = gym.make("leg_env/PlanarLegHop-v4", drift_near_weight=w, drift_near_cap=cap).unwrapped
+    uncapped = gym.make("leg_env/PlanarLegHop-v4", drift_near_weight=w).unwrapped
     q, qd = quadratic.nominal.q.copy(), np.zeros(5)
     q[1] += 0.001
     qd[0], qd[1] = 1.5, 1.0  # thrown up and forward: the COM leaves its start far enough to saturate the charge
@@ -639,7 +645,7 @@ def test_hop_near_drift_charge_is_capped_and_changes_nothing_else():
     assert far > 0 and near > 0
     for field, value in (("drift_near_cap", 0.0), ("drift_near_weight", -1.0)):
         with pytest.raises(ValueError, match=field):
-            gym.make("leg_env/PlanarLegHop-v3", **{field: value})
+            gym.make("leg_env/PlanarLegHop-v4", **{field: value})
 
 
 def test_hop_limit_charge_is_the_squared_depth_inside_the_ranges_margins_and_changes_nothing_else():
@@ -647,10 +653,10 @@ def test_hop_limit_charge_is_the_squared_depth_inside_the_ranges_margins_and_cha
     inside the last ``limit_margin`` of their ranges (0 elsewhere), from the state after the step; registered, it is
     0. The motion, the observation and every other term are those of the registered task. Random torques with knee
     kicks, which take the knee to both ends of its range."""
-    plain = gym.make("leg_env/PlanarLegHop-v3").unwrapped
+    plain = gym.make("leg_env/PlanarLegHop-v4").unwrapped
     assert plain.config.limit_weight == 0.0
     w, margin = 400.0, 0.2
-    charged = gym.make("leg_env/PlanarLegHop-v3", limit_weight=w, limit_margin=margin).unwrapped
+    charged = gym.make("leg_env/PlanarLegHop-v4", limit_weight=w, limit_margin=margin).unwrapped
     cfg = plain.config
     inside, outside = set(), 0
     for seed in range(6):
@@ -676,7 +682,50 @@ def test_hop_limit_charge_is_the_squared_depth_inside_the_ranges_margins_and_cha
                 break
     assert {(4, False), (4, True)} <= inside and outside > 0  # the knee in both margins, and steps in neither
     with pytest.raises(ValueError, match="limit_margin"):
-        gym.make("leg_env/PlanarLegHop-v3", limit_margin=-0.1)
+        gym.make("leg_env/PlanarLegHop-v4", limit_margin=-0.1)
+
+
+def test_hop_force_charge_is_the_steps_mean_normal_force_beyond_its_limit_and_changes_nothing_else():
+    """With ``force_weight = w`` the term ``reward_force`` is ``-w max(0, lam_y / (m g) - force_limit)``, ``lam_y`` the
+    step's mean normal force, here from the whole robot's vertical momentum: ``m (y_com'(t + dt) - y_com'(t)) =
+    (lam_y - m g) dt + P_y``, with ``P_y`` the step's impact impulses (``info["impulse"]``). Registered, it is 0.
+    The motion, the observation and every other term are those of the registered task. The model-based hopper."""
+    from policies.hopper import HopperController
+
+    plain = gym.make("leg_env/PlanarLegHop-v4").unwrapped
+    assert plain.config.force_weight == 0.0
+    w, limit = 3.0, 1.2
+    charged = gym.make("leg_env/PlanarLegHop-v4", force_weight=w, force_limit=limit).unwrapped
+    p, dt = plain.params, plain.dt
+    m = p.total_mass
+    hopper = HopperController(p, plain.config)
+    charged_steps = free_steps = 0
+    for seed in range(3):
+        o0, i0 = plain.reset(seed=seed)
+        charged.reset(seed=seed)
+        hopper.reset()
+        vy = i0["com_velocity"][1]
+        for _ in range(300):
+            a = hopper.predict(o0)[0].astype(np.float32)
+            o0, r0, t0, _, i0 = plain.step(a)
+            o1, r1, t1, _, i1 = charged.step(a)
+            assert np.array_equal(o0, o1) and t0 == t1 and i0["reward_force"] == 0.0
+            assert all(i0[key] == i1[key] for key in i0 if key.startswith("reward_") and key != "reward_force")
+            lam_y = (m * (i0["com_velocity"][1] - vy) - i0["impulse"][1]) / dt + m * p.g
+            vy = i0["com_velocity"][1]
+            assert lam_y == pytest.approx(i0["normal_force"], rel=1e-6, abs=1e-6 * m * p.g)
+            excess = max(0.0, lam_y / (m * p.g) - limit)
+            assert i1["reward_force"] == pytest.approx(-w * excess, abs=1e-5 * w)  # lam_y to 1e-6 of itself, ~2 m g
+            assert i1["reward_force"] == pytest.approx(-w * max(0.0, i0["normal_force"] / (m * p.g) - limit), rel=1e-12, abs=1e-15)
+            assert r1 == pytest.approx(r0 + i1["reward_force"], rel=1e-12, abs=1e-12)
+            charged_steps += excess > 0.01
+            free_steps += i0["normal_force"] > 0.0 and excess == 0.0
+            if t0:
+                break
+    assert charged_steps > 10 and free_steps > 10
+    for field, value in (("force_weight", -1.0), ("force_limit", -0.5), ("force_weight", float("nan"))):
+        with pytest.raises(ValueError, match=field):
+            gym.make("leg_env/PlanarLegHop-v4", **{field: value})
 
 
 def test_push_reward_charges_the_com_leaving_the_start():
@@ -733,7 +782,7 @@ def test_push_observes_the_com_from_its_start_and_charges_it():
         assert np.array_equal(obs[:, OBS_COM_DRIFT], (info["com_position"][:, 0] - x0).astype(np.float32))
 
 
-PUSH, HOP = "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v3"
+PUSH, HOP = "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v4"
 BAD_CONFIGS = [
     (PUSH, {"push_force": (50.0, 20.0)}, ValueError, "push_force"),
     (PUSH, {"push_force": (-1.0, 20.0)}, ValueError, "push_force"),

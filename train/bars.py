@@ -5,7 +5,7 @@ A bar is one number of a policy's held-out evaluation (100 episodes) and its thr
 policy first, each with its ``env_id`` and ``env_kwargs``, the motion measures (``motion``, ``train.motion``),
 ``both_survived`` and, on the push task, ``no_push``; ``push_impulse_90`` where the push curve was measured.
 
-The task is read from the env id's name with its version stripped (``leg_env/PlanarLegHop-v3``: ``PlanarLegHop``),
+The task is read from the env id's name with its version stripped (``leg_env/PlanarLegHop-v4``: ``PlanarLegHop``),
 so every version of a task has the same bars:
 
 - **balance** (``PlanarLegBalance``; controllers gated and LQR): survival >= 98%; mean return >= the gated

@@ -1,7 +1,7 @@
 """Learning curves over training seeds: a task's PPO configuration trained from scratch with several seeds,
 summarised as RL results should be (Agarwal et al. 2021, the ``rliable`` package).
 
-    python -m train.curves --env-id leg_env/PlanarLegHop-v3 --seeds 5
+    python -m train.curves --env-id leg_env/PlanarLegHop-v4 --seeds 5
     python -m train.curves --env-id leg_env/PlanarLegBalance-v1 --seeds 5 --baseline gated --jobs 2
 
 Seed ``s`` trains ``python -m train.ppo --seed s`` (the task's entry in ``train/hyperparams/ppo.yml``, or in the
@@ -75,7 +75,7 @@ task: ``train.task_metrics.HopTracker``)."""
 class CurvesArgs:
     """Train a task's PPO configuration with several seeds and write its learning curves and scores."""
 
-    env_id: str = "leg_env/PlanarLegHop-v3"
+    env_id: str = "leg_env/PlanarLegHop-v4"
     """The task: its entry in the hyperparameter file is trained, the same for every seed."""
     seeds: int = 5
     """Number of training seeds (first_seed, first_seed + 1, ...)."""

@@ -1,4 +1,5 @@
-r"""``leg_env/PlanarLegHop-v3``: hop in place to a commanded apex height, on the unilateral ground.
+r"""``leg_env/PlanarLegHop-v4``: hop in place to a commanded apex height, on the unilateral ground, with effort and
+smoothness charged.
 
 ## Description
 The robot and the exact unilateral ground of ``PlanarLegStance`` (``contact="unilateral"``, the only
@@ -6,21 +7,26 @@ model here: a pinned foot cannot hop). Each episode draws a command ``dh*``, uni
 ``command_range`` (5 to 15 cm): the rise of the whole-body centre of mass at the apex of each hop above
 its standing height ``y_stand`` (the COM height of the nominal posture, 0.784 m at the default
 parameters). The command is in the observation. There is no equilibrium to linearise about: the task is
-a periodic hybrid orbit (stance, lift-off, flight, touchdown).
+a periodic hybrid orbit (stance, lift-off, flight, touchdown). The reward pays the hops' apex and charges, beside
+the outcome, how the robot gets there: the actuators' effort, the action's change from step to step, the torso's
+tilt and the COM's excursion at every step, so that a smooth, upright, economical gait earns more than chatter that
+reaches the same apex.
 
 ## Observation Space
-``Box((22,), float32)``: the 18 entries of ``PlanarLegStance`` on the unilateral ground (base relative to the
+``Box((24,), float32)``: the 18 entries of ``PlanarLegStance`` on the unilateral ground (base relative to the
 ground point under the foot, angles, velocities, mean contact force, foot height and velocity, contact flag, slip
 direction, impact impulse), then what the reward depends on and nothing else observes: ``dh*`` [m] (entry 18,
 ``Obs.command``); the COM's horizontal distance from where it started, ``x_com - x_com,0`` [m] (entry 19,
 ``Obs.com_drift``); the ground time [s] (entry 20, ``Obs.ground_time``): the time since the last hop (a flight of
-at least ``min_flight`` = 50 ms) ended, or since the start (a touchdown that lifts off again within the same
-control step does not end a flight); and the apex rise of the last hop the robot landed,
-the COM's apex above ``y_stand`` [m] (entry 21, ``Obs.last_apex``; 0 before the first hop).
+at least ``min_flight`` = 150 ms) ended, or since the start (a touchdown that lifts off again within the same
+control step does not end a flight); the apex rise of the last hop the robot landed, the COM's apex above
+``y_stand`` [m] (entry 21, ``Obs.last_apex``; 0 before the first hop); and the last action (entries 22-23, clipped;
+after a reset the action that holds the nominal posture), the one the action's change is charged from
+(``observe_action``).
 
 ## Rewards
 ``reward = reward_alive + reward_height + reward_drift + reward_tilt + reward_impact + reward_slip
-+ reward_ctrl + reward_limit + reward_action_rate + reward_power``, each in ``info``:
++ reward_ctrl + reward_limit + reward_action_rate + reward_power + reward_force``, each in ``info``:
 
 - ``reward_alive = alive_bonus`` (1) on a healthy step while the ground time is at most ``max_ground_time``
   (1 s): the robot must keep hopping.
@@ -32,26 +38,40 @@ the COM's apex above ``y_stand`` [m] (entry 21, ``Obs.last_apex``; 0 before the 
   the term depends not on how much of the time the robot spends in the air or how often it hops, only on how
   close its hops come to the command. The apex is the ballistic one of the flight's vertical energy
   ``E_v = m y_com'^2 / 2 + m g y_com``, constant in flight: ``y_com + y_com'^2 / 2g`` at lift-off, with no apex
-  event to locate.
-- ``reward_drift = -drift_com_weight (x_com - x_com,0)^2`` (10 per m^2): the COM stays over its start. A
-  second charge for training, ``-c (1 - exp(-drift_near_weight (x_com - x_com,0)^2 / c))`` with
-  ``c = drift_near_cap``, adds a strong pull near the start that never takes more than ``c`` a step (a strong
-  quadratic charge outgrows the alive bonus once the COM is a few cm away, and then a fall pays more than staying
-  up), while the quadratic term keeps the pull back from afar; ``drift_near_weight`` is 0 in the registered
-  task (with ``c`` infinite the second charge is quadratic too).
-- ``reward_tilt = -tilt_weight th_b^2`` (1 per rad^2).
+  event to locate. A hop is a flight of at least ``min_flight`` = 150 ms: shorter flights (the lift-offs of a
+  bounce in place, a stumble) are paid nothing. A flight of 150 ms rises 2.8 cm from lift-off to apex, so a hop to
+  the lowest commands (5 cm) lifts off with the COM at most 2.2 cm above standing, its leg not yet straight.
+- ``reward_drift = -drift_com_weight (x_com - x_com,0)^2`` (30 per m^2) at every step: the COM stays over its
+  start during the episode, not only at its end (5 cm off costs 0.075 a step). A second charge for training,
+  ``-c (1 - exp(-drift_near_weight (x_com - x_com,0)^2 / c))`` with ``c = drift_near_cap``, adds a strong pull near
+  the start that never takes more than ``c`` a step; ``drift_near_weight`` is 0 in the registered task (with ``c``
+  infinite the second charge is quadratic too).
+- ``reward_tilt = -tilt_weight th_b^2`` (10 per rad^2): the torso upright. A lean of 8 degrees costs 0.19 a step,
+  one of 36 degrees (v3's PPO gait) 4, as much as a hop on the command earns.
 - ``reward_impact = -impact_weight (|P| / m)^2`` (0.5 per (m/s)^2): ``P`` the step's impact impulses on
   the foot, so hard landings cost the velocity change they impose on the robot.
 - ``reward_slip = -slip_weight slip_distance / dt`` (1 per m/s of mean slip speed).
-- ``reward_ctrl = -ctrl_cost_weight |a|^2`` (0.01).
+- ``reward_ctrl = -ctrl_cost_weight |a|^2`` (0.5): the actuator effort; both joints at their limits cost 1 a step.
 - ``reward_limit = -limit_weight (e_hip^2 + e_knee^2)``, ``e`` how far a joint is inside the last ``limit_margin``
   (0.05 rad) of its range (``hip_range``, ``knee_range``; an episode ends past either end), 0 elsewhere: a
   training setting, ``limit_weight`` 0 in the registered task, which warns of the range's end before the episode
   ends there.
-- ``reward_action_rate``, ``reward_power``: the action's change and the joints' positive mechanical power, as in
-  ``PlanarLegStance`` (``action_rate_weight``, ``action_change_weight``, ``power_weight``; 0 in the registered task). The options
-  ``observe_action`` (the last action as entries 22-23) and ``motor_speed`` (the motor model) are the balance
-  task's too.
+- ``reward_action_rate = -(action_rate_weight |a - a_last|^2 + action_change_weight |a - a_last|_1)`` (0 and 1, as
+  in ``PlanarLegStance``): the action's change in absolute value, summed over the two entries, so that a jitter
+  costs in proportion to the action rate ``train.motion`` measures (the hopper's 0.062 per entry costs 0.12 a
+  step; v3's PPO policy's 0.170, 0.34).
+- ``reward_power = -power_weight (max(0, tau_hip dq1) + max(0, tau_knee dq2)) / dt`` (0.006 per W, as in
+  ``PlanarLegStance``): the joints' positive mechanical power; the hopper's 43 W costs 0.26 a step, v3's PPO
+  policy's 100 W 0.6. Twice this weight (0.012) or more, PPO never finds the hop (``research/hop_probes.md``).
+
+- ``reward_force = -force_weight max(0, lam_y / (m g) - force_limit)``: the step's mean normal force (``info
+  ["normal_force"]``, without a landing's impulse, which ``reward_impact`` charges) beyond ``force_limit`` (1.5)
+  body weights. Over a period of hopping the normal force's mean is the weight, so a hop whose stance is a share
+  ``s`` of its period pushes with a mean of ``m g / s``: the charge prices short, hard stances. A training setting,
+  ``force_weight`` 0 in the registered task.
+
+The options ``motor_speed`` (the motor model) and the squared charge on the action's change are the balance task's
+too (0 and ``inf`` here).
 
 Flight is the task, so it is not charged. **Unilateral violation** here means what it means on the
 unilateral ground of ``PlanarLegStance``: ``info["unilateral_violation"]`` (``lam_y < 0``) and
@@ -91,7 +111,7 @@ loses survival; and the networks' first layer sees the observation's products wi
 (``train.features.CommandGains``), with which the seeds that reach the top commands hop to the command across the
 whole range. The policy kept is the best in-training evaluation from 63M steps on, once every schedule has reached
 its end (``--select-after``). The evaluation is the task as registered.
-On the 100 held-out episodes (``benchmarks/results/learning/PlanarLegHop-v3-rising-discount-floor-gains-early``;
+On the 100 held-out episodes (``benchmarks/results/learning/PlanarLegHop-v4-rising-discount-floor-gains-early``;
 seeds 5-9, seed 5 named as the shipped one before any trained) three seeds of five meet every bar of Solved, with
 apex errors of 0.50-0.63 cm; the survival IQM is 100% [85%, 100%], the return IQM 3,753 [2,490, 4,031]. Seed 5 is
 the shipped ``policies/ppo_hop_v3``: 100% survival, 33.4 hops per episode, an apex error of 0.54 cm and a COM drift
@@ -139,7 +159,7 @@ __all__ = ["HopConfig", "TASK", "REWARD_TERMS", "OBS_DIM"]
 
 MAX_STEPS = 2**31 - 1  # control steps a setting can count (an int32 of the compiled core)
 
-REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl", "limit", "action_rate", "power")
+REWARD_TERMS = ("alive", "height", "drift", "tilt", "impact", "slip", "ctrl", "limit", "action_rate", "power", "force")
 N_TERMS = len(REWARD_TERMS)
 OBS_DIM = layout.OBS["hop_dim"]  # 22: the unilateral ground's 18, the command, the COM's drift, the ground time, the last apex
 _BIG = 1.0e6
@@ -172,6 +192,8 @@ class HopConfig(StanceConfig):
     slip_weight: float = 1.0  # per m/s of mean slip speed
     min_flight: float = 0.15  # [s] a flight at least this long is a hop
     max_ground_time: float = 1.0  # [s] the alive bonus and the height term stop after this long without a hop
+    force_weight: float = 0.0  # per body weight of the step's mean normal force above force_limit
+    force_limit: float = 1.5  # [body weights] the normal force charged above this
     command_period: float = float("inf")  # [s] a new command from command_range every this long, up to COMMANDS_AHEAD times an episode (inf: one per episode)
 
     def __post_init__(self) -> None:
@@ -189,6 +211,8 @@ class HopConfig(StanceConfig):
         object.__setattr__(self, "height_scale_fine", checks.real("HopConfig.height_scale_fine", self.height_scale_fine, 0.0, _BIG, unit="m"))
         object.__setattr__(self, "drift_near_weight", checks.real("HopConfig.drift_near_weight", self.drift_near_weight, 0.0, _BIG))
         object.__setattr__(self, "limit_weight", checks.real("HopConfig.limit_weight", self.limit_weight, 0.0, _BIG))
+        object.__setattr__(self, "force_weight", checks.real("HopConfig.force_weight", self.force_weight, 0.0, _BIG))
+        object.__setattr__(self, "force_limit", checks.real("HopConfig.force_limit", self.force_limit, 0.0, _BIG))
         object.__setattr__(self, "limit_margin", checks.real("HopConfig.limit_margin", self.limit_margin, 0.0, _BIG, unit="rad"))
         object.__setattr__(self, "drift_near_cap", checks.real("HopConfig.drift_near_cap", self.drift_near_cap, 0.0, float("inf"), lo_open=True))
         object.__setattr__(self, "max_ground_time", checks.real("HopConfig.max_ground_time", self.max_ground_time, 0.0, float("inf"), lo_open=True, unit="s"))
@@ -209,6 +233,7 @@ class HopConfig(StanceConfig):
         row["height_scale_fine"] = self.height_scale_fine
         row["w_drift_near"], row["drift_near_cap"] = self.drift_near_weight, self.drift_near_cap
         row["w_limit"], row["limit_margin"] = self.limit_weight, self.limit_margin
+        row["w_force"], row["force_limit"] = self.force_weight, self.force_limit
         row["command_steps"] = command_steps(self)
 
 

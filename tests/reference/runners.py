@@ -57,8 +57,11 @@ SUCCESSORS = {
     # the COM's x from its start and the last action appended (entries 18-20); the tilt, the torque squared and the
     # action's change charged more
     "leg_env/PlanarLegPush-v0": ("leg_env/PlanarLegPush-v2", ("reward", "info/reward_drift", "info/reward_ctrl")),
-    # the height term and the alive bonus paid while hopping; the COM's x, the ground time and the last apex appended
-    "leg_env/PlanarLegHop-v0": ("leg_env/PlanarLegHop-v3", ("reward", "info/reward_height", "info/reward_alive")),
+    # the height term and the alive bonus paid while hopping; the COM's x, the ground time, the last apex and the last
+    # action appended (entries 19-23); the torque squared, the COM's drift and the tilt charged more, the action's change
+    # and positive power charged
+    "leg_env/PlanarLegHop-v0": ("leg_env/PlanarLegHop-v4", ("reward", "info/reward_height", "info/reward_alive", "info/reward_ctrl",
+                                                            "info/reward_drift", "info/reward_tilt")),
 }
 """The recorded ids that are no longer registered, and the id that replays each."""
 RETIRED_POLICIES = {

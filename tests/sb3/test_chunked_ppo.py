@@ -22,7 +22,7 @@ LOGGED = ("train/policy_gradient_loss", "train/value_loss", "train/entropy_loss"
 
 def _one_update(algo, **kwargs):
     """A model of ``algo`` after one rollout of the hop task and one update (everything seeded alike)."""
-    venv = make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v3", per_env_info=False)
+    venv = make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v4", per_env_info=False)
     settings = dict(n_steps=N_STEPS, batch_size=256, n_epochs=3, learning_rate=3e-3, seed=0, device="cpu",
                     policy_kwargs={"net_arch": [32, 32]})
     settings.update(kwargs)
@@ -52,7 +52,7 @@ def test_chunked_update_is_ppo_update(settings, chunk):
     torch.set_num_threads(1)
     reference = _one_update(PPO, **settings)
     chunked = _one_update(ChunkedPPO, update_chunk=chunk, **settings)
-    before = _parameters(PPO("MlpPolicy", make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v3"), seed=0,
+    before = _parameters(PPO("MlpPolicy", make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v4"), seed=0,
                              device="cpu", policy_kwargs=settings.get("policy_kwargs", {"net_arch": [32, 32]})))
     after_ref, after = _parameters(reference), _parameters(chunked)
     moved = max((after_ref[k] - before[k]).abs().max().item() for k in before)
@@ -127,7 +127,7 @@ def test_bfloat16_update_is_close_to_float32():
     """The bfloat16 update moves the parameters as the float32 one does, up to bfloat16's rounding of the hidden
     layers; its logged statistics agree; and the rollouts are float32 (the same actions before the update)."""
     torch.set_num_threads(1)
-    before = _parameters(PPO("MlpPolicy", make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v3"), seed=0,
+    before = _parameters(PPO("MlpPolicy", make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v4"), seed=0,
                              device="cpu", policy_kwargs={"net_arch": [32, 32]}))
     full = _one_update(ChunkedPPO, update_chunk=128)
     low = _one_update(ChunkedPPO, update_chunk=128, update_precision="bfloat16")
@@ -159,7 +159,7 @@ def test_training_speed_benchmark_runs_one_case():
     """``benchmarks/bench_train.py`` measures one case in a fresh process and reports its shares (tiny budget)."""
     script = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_train.py"
     for algo in ("chunked", "bfloat16", "sb3"):
-        done = subprocess.run([sys.executable, str(script), "--one", "leg_env/PlanarLegHop-v3", "1", algo, "--rollouts", "2"],
+        done = subprocess.run([sys.executable, str(script), "--one", "leg_env/PlanarLegHop-v4", "1", algo, "--rollouts", "2"],
                               capture_output=True, text=True, timeout=300, check=False)
         assert done.returncode == 0, done.stderr[-2000:]
         result = json.loads([line for line in done.stdout.splitlines() if line.startswith("RESULT ")][-1][len("RESULT "):])
@@ -210,7 +210,7 @@ def _bounded_update(coef: float, precision: str = "float32"):
     """One SGD step on one rollout of the hop task, the policy's mean action held at (3, -2) (beyond both ends of
     the box [-1, 1]) by a zero action-net weight; returns the model and its action net's bias before the step."""
     torch.set_num_threads(1)
-    venv = make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v3", per_env_info=False)
+    venv = make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegHop-v4", per_env_info=False)
     model = ChunkedPPO("MlpPolicy", venv, n_steps=N_STEPS, batch_size=N_ENVS * N_STEPS, n_epochs=1, learning_rate=1e-3,
                        max_grad_norm=1e9, seed=0, device="cpu", update_chunk=128, update_precision=precision,
                        bounds_loss_coef=coef, policy_kwargs={"net_arch": [32, 32], "optimizer_class": torch.optim.SGD})

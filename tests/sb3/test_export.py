@@ -75,12 +75,12 @@ def test_onnx_graph_equals_predict(which, normalised_run, tmp_path):
 def test_the_graph_names_the_policys_own_task(tmp_path):
     """A policy of another task: the graph takes that task's observations and its metadata names that task."""
     policy = load_policy(HOP)
-    assert policy.env_id == "leg_env/PlanarLegHop-v3"
+    assert policy.env_id == "leg_env/PlanarLegHop-v4"
     path = export_onnx(HOP, tmp_path / "hop.onnx")
     model = onnx.load(path)
     props = {p.key: p.value for p in model.metadata_props}
-    assert props["env_id"] == "leg_env/PlanarLegHop-v3" and "PlanarLegHop-v3" in model.doc_string and "Stance" not in model.doc_string
-    obs = observations(env_id="leg_env/PlanarLegHop-v3")
+    assert props["env_id"] == "leg_env/PlanarLegHop-v4" and "PlanarLegHop-v4" in model.doc_string and "Stance" not in model.doc_string
+    obs = observations(env_id="leg_env/PlanarLegHop-v4")
     assert obs.shape == (NUM_OBS, 22)
     expected, _ = policy.predict(obs, deterministic=True)
     np.testing.assert_allclose(run_onnx(path, obs), expected, rtol=0.0, atol=TOLERANCE)
@@ -116,13 +116,13 @@ def test_a_policy_with_command_gains_exports_with_its_products(tmp_path):
     from train.features import CommandGains
 
     params = TINY + ["policy_kwargs:{net_arch: [16, 16], features_extractor_class: train.features.CommandGains}"]
-    args = TrainArgs(out=tmp_path / "run", env_id="leg_env/PlanarLegHop-v3", params=params, total_timesteps=256, eval_freq=0,
+    args = TrainArgs(out=tmp_path / "run", env_id="leg_env/PlanarLegHop-v4", params=params, total_timesteps=256, eval_freq=0,
                      eval_episodes=1, checkpoint_freq=0, progress_bar=False, verbose=0)  # fmt: skip
     folder = train(args)
     policy = load_policy(folder)
     assert isinstance(policy.model.policy.pi_features_extractor, CommandGains)
     path = export_onnx(folder, tmp_path / "gains.onnx")
     assert {"Slice", "Mul", "Concat"} <= {n.op_type for n in onnx.load(path).graph.node}
-    obs = observations(env_id="leg_env/PlanarLegHop-v3")
+    obs = observations(env_id="leg_env/PlanarLegHop-v4")
     expected, _ = policy.predict(obs, deterministic=True)
     np.testing.assert_allclose(run_onnx(path, obs), expected, rtol=0.0, atol=TOLERANCE)

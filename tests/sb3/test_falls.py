@@ -21,7 +21,7 @@ SCHEDULE = "callback:[{train.callbacks.ConfigSchedule: {schedule: {drift_com_wei
 def hop_run(tmp_path_factory):
     """A tiny hop run whose training env is scheduled (the drift charge and the alive bonus)."""
     out = tmp_path_factory.mktemp("falls") / "run"
-    return train(TrainArgs(out=out, env_id="leg_env/PlanarLegHop-v3", total_timesteps=256, eval_freq=0, checkpoint_freq=0,
+    return train(TrainArgs(out=out, env_id="leg_env/PlanarLegHop-v4", total_timesteps=256, eval_freq=0, checkpoint_freq=0,
                            progress_bar=False, verbose=0,
                            params=["n_envs:4", "n_steps:32", "batch_size:64", "n_epochs:1", "env_kwargs:{height_weight: 4.0}", SCHEDULE]))  # fmt: skip
 
@@ -45,7 +45,7 @@ def test_the_terms_sum_to_the_returns_of_the_evaluation_runner_and_the_window_av
     args = FallsArgs(policy=hop_run, training_env=True, episodes=6, seed=30_000, window=1000, sample=False)
     report = audit(args)
     assert report.env_kwargs == {"height_weight": 4.0, "drift_com_weight": 400.0, "alive_bonus": 3.0}
-    batch = run_batch(policy_predict(load_policy(hop_run)), make_batch("leg_env/PlanarLegHop-v3", 6, report.env_kwargs), report.seeds)
+    batch = run_batch(policy_predict(load_policy(hop_run)), make_batch("leg_env/PlanarLegHop-v4", 6, report.env_kwargs), report.seeds)
     np.testing.assert_allclose(sum(report.terms.values()), batch.returns, rtol=1e-12, atol=1e-9)
     np.testing.assert_array_equal(report.lengths, batch.lengths)
     np.testing.assert_array_equal(report.survived, batch.survived)
@@ -98,7 +98,7 @@ def test_the_audit_gives_the_figures_of_a_loop_of_its_own_bit_for_bit(hop_run, w
     than the episodes, which end at different steps when the actions are drawn (the untrained policy falls)."""
     args = FallsArgs(policy=hop_run, training_env=True, episodes=12, window=window, sample=sample)
     report = audit(args)
-    ref = reference_audit(load_policy(hop_run), "leg_env/PlanarLegHop-v3", report.env_kwargs, report.seeds, window, sample)
+    ref = reference_audit(load_policy(hop_run), "leg_env/PlanarLegHop-v4", report.env_kwargs, report.seeds, window, sample)
     assert len(set(report.lengths.tolist())) > 3 or not sample, "the case needs episodes of different lengths"
     np.testing.assert_array_equal(report.survived, ref["survived"])
     np.testing.assert_array_equal(report.lengths, ref["lengths"])

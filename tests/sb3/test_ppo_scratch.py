@@ -16,7 +16,7 @@ SHIPPED = {  # policy folder: the task it was trained and is evaluated on
     "ppo_balance": "leg_env/PlanarLegBalance-v1",
     "ppo_push_v2": "leg_env/PlanarLegPush-v2",
     "ppo_push_randomized": "leg_env/PlanarLegPush-v2",
-    "ppo_hop_v3": "leg_env/PlanarLegHop-v3",
+    "ppo_hop_v3": "leg_env/PlanarLegHop-v4",
 }
 EVAL_KWARGS = {  # the evaluation env of a policy selected on other than the task as registered (its table.md's)
     "ppo_push_v2": {"push_force": [50.0, 50.0]},  # selected at 50 N pushes; scored on the push curve
@@ -141,7 +141,7 @@ def test_shipped_balance_policy_is_its_configuration():
 
 
 def test_shipped_hop_v3_policy_is_its_configuration():
-    """``policies/ppo_hop_v3`` was trained by the ``PlanarLegHop-v3`` entry of ``train/hyperparams/ppo.yml`` as it is
+    """``policies/ppo_hop_v3`` was trained by the ``PlanarLegHop-v4`` entry of ``train/hyperparams/ppo.yml`` as it is
     now: its card's command resolves to the shipped run's configuration, every key of it (the curricula, the discount
     schedule, the noise floor, the command's products, the bfloat16 update, the selection from 63M steps). The run read
     that entry from a probe file of the same content, whose path its ``config.yaml`` keeps as recorded
@@ -150,7 +150,7 @@ def test_shipped_hop_v3_policy_is_its_configuration():
 
     from train.ppo import TrainArgs, resolve_config
 
-    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegHop-v3", seed=5, eval_freq=3_000_000, eval_episodes=32,
+    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegHop-v4", seed=5, eval_freq=3_000_000, eval_episodes=32,
                      select_after=63_000_000, update_precision="bfloat16")  # fmt: skip
     assert_resolves_to_shipped(args, "ppo_hop_v3")
     shipped = yaml.safe_load((ROOT / "policies" / "ppo_hop_v3" / "config.yaml").read_text())

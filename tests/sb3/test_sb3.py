@@ -298,7 +298,7 @@ def test_set_config_reaches_the_vector_env_by_env_method():
     """A curriculum's path (``train.callbacks.ConfigSchedule``): VecEnv.env_method to ``LegVectorEnv.set_config``."""
     from leg_env.tasks.base import Obs
 
-    venv = make_sb3_vec_env(4, seed=0, env_id="leg_env/PlanarLegHop-v3", command_range=[0.02, 0.15])
+    venv = make_sb3_vec_env(4, seed=0, env_id="leg_env/PlanarLegHop-v4", command_range=[0.02, 0.15])
     venv.env_method("set_config", command_range=(0.1, 0.1))
     assert np.allclose(venv.reset()[:, Obs.command], 0.1)
     with pytest.raises(ValueError, match="would widen"):

@@ -577,8 +577,8 @@ def test_a_curriculum_moves_the_commands_of_the_training_episodes():
     from leg_env.tasks.base import Obs
     from train.callbacks import ConfigSchedule
 
-    venv = make_sb3_vec_env(16, seed=0, env_id="leg_env/PlanarLegHop-v3", per_env_info=False, command_range=[0.02, 0.15])
-    other = make_sb3_vec_env(4, seed=0, env_id="leg_env/PlanarLegHop-v3", command_range=[0.02, 0.15])
+    venv = make_sb3_vec_env(16, seed=0, env_id="leg_env/PlanarLegHop-v4", per_env_info=False, command_range=[0.02, 0.15])
+    other = make_sb3_vec_env(4, seed=0, env_id="leg_env/PlanarLegHop-v4", command_range=[0.02, 0.15])
     schedule = ConfigSchedule({"command_range": [[1000, [0.02, 0.03]], [3000, [0.10, 0.15]]]})
     seen = []
 
@@ -603,13 +603,13 @@ def test_a_curriculum_moves_the_commands_of_the_training_episodes():
 
 
 def test_train_runs_a_curriculum_from_the_hyperparameters(tmp_path):
-    out = train(tiny_args(tmp_path / "run", env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0,
+    out = train(tiny_args(tmp_path / "run", env_id="leg_env/PlanarLegHop-v4", eval_freq=0, checkpoint_freq=0,
                           params=TINY + ["env_kwargs:{command_range: [0.02, 0.15]}", CURRICULUM]))  # fmt: skip
     config = yaml.safe_load((out / "config.yaml").read_text())
     assert config["callback"][0]["train.callbacks.ConfigSchedule"]["schedule"]["command_range"][1] == [192, [0.1, 0.15]]
     # a schedule the training env has no room for fails at the first set_config, naming the field
     with pytest.raises(ValueError, match="set_config\\(command_range\\)"):
-        train(tiny_args(tmp_path / "narrow", env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0,
+        train(tiny_args(tmp_path / "narrow", env_id="leg_env/PlanarLegHop-v4", eval_freq=0, checkpoint_freq=0,
                         params=TINY + ["env_kwargs:{}", CURRICULUM]))  # fmt: skip
     # a bad entry is refused before the run folder is made
     with pytest.raises(ValueError, match="ConfigSchedule"):
@@ -640,8 +640,8 @@ def test_a_run_and_its_resume_start_their_episodes_under_the_curriculum(tmp_path
     recorded = CURRICULUM.replace("}}}]", "}}}, test_train.FirstCommands]")
     params = TINY + ["env_kwargs:{command_range: [0.02, 0.15]}", recorded]
     out = tmp_path / "run"
-    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, params=params))
-    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, total_timesteps=2 * STEPS, params=params))
+    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v4", eval_freq=0, checkpoint_freq=0, params=params))
+    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v4", eval_freq=0, checkpoint_freq=0, total_timesteps=2 * STEPS, params=params))
     first, resumed = FirstCommands.seen
     assert first.min() >= 0.02 - 1e-7 and first.max() <= 0.03 + 1e-7  # the schedule's value at 0 steps
     assert resumed.min() >= 0.1 - 1e-7  # its value at 256 steps, past its last point
@@ -797,10 +797,10 @@ def test_train_keeps_the_command_level_in_the_model_and_resumes_from_it(tmp_path
                   "max_error: 10.0, min_hops: 1}}]")  # fmt: skip
     params = TINY + ["env_kwargs:{command_range: [0.02, 0.15]}", curriculum]
     out = tmp_path / "run"
-    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, total_timesteps=2048, params=params))
+    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v4", eval_freq=0, checkpoint_freq=0, total_timesteps=2048, params=params))
     first = PPO.load(out / "last" / "model.zip", device="cpu").curriculum_level
     assert first > 0
-    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, total_timesteps=4096, params=params))
+    train(tiny_args(out, env_id="leg_env/PlanarLegHop-v4", eval_freq=0, checkpoint_freq=0, total_timesteps=4096, params=params))
     assert PPO.load(out / "last" / "model.zip", device="cpu").curriculum_level >= first
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
@@ -840,7 +840,7 @@ def test_train_takes_a_features_extractor_by_its_class_path(tmp_path):
     from train.features import CommandGains
 
     params = TINY + ["policy_kwargs:{net_arch: [8], features_extractor_class: train.features.CommandGains}"]
-    out = train(tiny_args(tmp_path / "run", env_id="leg_env/PlanarLegHop-v3", eval_freq=0, checkpoint_freq=0, params=params))
+    out = train(tiny_args(tmp_path / "run", env_id="leg_env/PlanarLegHop-v4", eval_freq=0, checkpoint_freq=0, params=params))
     model = PPO.load(out / "model.zip", device="cpu")
     assert isinstance(model.policy.features_extractor, CommandGains)
     assert model.policy.mlp_extractor.policy_net[0].in_features == 44
@@ -849,5 +849,5 @@ def test_train_takes_a_features_extractor_by_its_class_path(tmp_path):
                         ("train.callbacks.ConfigSchedule", "not an SB3 features extractor")]:  # fmt: skip
         bad = TINY + [f"policy_kwargs:{{features_extractor_class: {path}}}"]
         with pytest.raises(ValueError, match=f"features_extractor_class.*({match})"):
-            train(tiny_args(tmp_path / "bad", env_id="leg_env/PlanarLegHop-v3", params=bad))
+            train(tiny_args(tmp_path / "bad", env_id="leg_env/PlanarLegHop-v4", params=bad))
         assert not (tmp_path / "bad").exists()

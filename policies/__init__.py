@@ -9,5 +9,5 @@ per-robot state, SB3's ``episode_start``; all read the observation by the task's
 
 The shipped PPO policies are folders, each with its card (``README.md``), all plain PPO from scratch: ``ppo_stance``
 (the pinned balance), ``ppo_balance``, ``ppo_push_v2``, ``ppo_push_randomized`` (trained on randomised robots) and
-``ppo_hop_v3``. Load any of them with ``train.evaluate.load_policy``.
+``ppo_hop_v4``. Load any of them with ``train.evaluate.load_policy``.
 """

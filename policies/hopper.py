@@ -1,4 +1,4 @@
-"""A model-based hopping controller for ``leg_env/PlanarLegHop-v4`` (and v0-v2): Raibert's three-part decomposition.
+"""A model-based hopping controller for ``leg_env/PlanarLegHop-v4`` (and v0-v3): Raibert's three-part decomposition.
 
 Raibert (1986) splits running into three decoupled servos. On this articulated leg (hip and knee, point
 foot, no spring, 50 N m per joint) each becomes a law on the observation, with the stance torques solved
@@ -138,9 +138,9 @@ class HopperController(BatchedController):
         self.T_s, self.k_v, self.k_x = stance_time, speed_gain, position_gain
         self.attitude_gains, self.friction_margin, self.swing_gains = attitude_gains, friction_margin, swing_gains
 
-    # PlanarLegHop's 22 entries, whose entries after the command (the COM's drift, the ground time, the last hop's
+    # PlanarLegHop's 22 entries (then the last action, with observe_action), whose entries after the command (the COM's drift, the ground time, the last hop's
     # apex) the controller does not read: it keeps its own dead reckoning and apex estimate and hops all the time
-    widths, task, dtype = (22, 24), "PlanarLegHop-v4: 22 entries, 24 with observe_action", np.float64
+    widths, task, dtype = (22, 24), "PlanarLegHop-v4: 24 entries, 22 without observe_action", np.float64
 
     def _allocate(self, n: int) -> None:
         self._x0, self._bias, self._apex = np.zeros(n), np.zeros(n), np.zeros(n)

@@ -685,49 +685,6 @@ def test_hop_limit_charge_is_the_squared_depth_inside_the_ranges_margins_and_cha
         gym.make("leg_env/PlanarLegHop-v4", limit_margin=-0.1)
 
 
-def test_hop_force_charge_is_the_steps_mean_normal_force_beyond_its_limit_and_changes_nothing_else():
-    """With ``force_weight = w`` the term ``reward_force`` is ``-w max(0, lam_y / (m g) - force_limit)``, ``lam_y`` the
-    step's mean normal force, here from the whole robot's vertical momentum: ``m (y_com'(t + dt) - y_com'(t)) =
-    (lam_y - m g) dt + P_y``, with ``P_y`` the step's impact impulses (``info["impulse"]``). Registered, it is 0.
-    The motion, the observation and every other term are those of the registered task. The model-based hopper."""
-    from policies.hopper import HopperController
-
-    plain = gym.make("leg_env/PlanarLegHop-v4").unwrapped
-    assert plain.config.force_weight == 0.0
-    w, limit = 3.0, 1.2
-    charged = gym.make("leg_env/PlanarLegHop-v4", force_weight=w, force_limit=limit).unwrapped
-    p, dt = plain.params, plain.dt
-    m = p.total_mass
-    hopper = HopperController(p, plain.config)
-    charged_steps = free_steps = 0
-    for seed in range(3):
-        o0, i0 = plain.reset(seed=seed)
-        charged.reset(seed=seed)
-        hopper.reset()
-        vy = i0["com_velocity"][1]
-        for _ in range(300):
-            a = hopper.predict(o0)[0].astype(np.float32)
-            o0, r0, t0, _, i0 = plain.step(a)
-            o1, r1, t1, _, i1 = charged.step(a)
-            assert np.array_equal(o0, o1) and t0 == t1 and i0["reward_force"] == 0.0
-            assert all(i0[key] == i1[key] for key in i0 if key.startswith("reward_") and key != "reward_force")
-            lam_y = (m * (i0["com_velocity"][1] - vy) - i0["impulse"][1]) / dt + m * p.g
-            vy = i0["com_velocity"][1]
-            assert lam_y == pytest.approx(i0["normal_force"], rel=1e-6, abs=1e-6 * m * p.g)
-            excess = max(0.0, lam_y / (m * p.g) - limit)
-            assert i1["reward_force"] == pytest.approx(-w * excess, abs=1e-5 * w)  # lam_y to 1e-6 of itself, ~2 m g
-            assert i1["reward_force"] == pytest.approx(-w * max(0.0, i0["normal_force"] / (m * p.g) - limit), rel=1e-12, abs=1e-15)
-            assert r1 == pytest.approx(r0 + i1["reward_force"], rel=1e-12, abs=1e-12)
-            charged_steps += excess > 0.01
-            free_steps += i0["normal_force"] > 0.0 and excess == 0.0
-            if t0:
-                break
-    assert charged_steps > 10 and free_steps > 10
-    for field, value in (("force_weight", -1.0), ("force_limit", -0.5), ("force_weight", float("nan"))):
-        with pytest.raises(ValueError, match=field):
-            gym.make("leg_env/PlanarLegHop-v4", **{field: value})
-
-
 def test_push_reward_charges_the_com_leaving_the_start():
     env = gym.make("leg_env/PlanarLegPush-v2", com_weight=3.0, reset_noise_scale=0.0).unwrapped
     env.reset(seed=0)

@@ -4,7 +4,7 @@
     python -m train.evaluate policies/ppo_stance
     python -m train.evaluate lqr --out runs/lqr_eval
     python -m train.evaluate policies/ppo_push_v2 --baseline stepping lqr --episodes 100 --push-curve
-    python -m train.evaluate policies/ppo_hop_v3 --baseline hopper --episodes 100 --gif
+    python -m train.evaluate policies/ppo_hop_v4 --baseline hopper --episodes 100 --gif
 
 ``policy`` is a run or policy folder (``model.zip``, ``vecnormalize.pkl``, optionally ``config.yaml``
 whose ``eval_env_kwargs`` the evaluation env uses: by default none, the registered task as is, even

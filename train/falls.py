@@ -2,7 +2,7 @@
 
     python -m train.falls runs/hop --training-env
     python -m train.falls runs/hop --training-env --at-steps 45000000 --episodes 512
-    python -m train.falls policies/ppo_hop_v3 --env-kwargs drift_com_weight:400.0 alive_bonus:2.0
+    python -m train.falls policies/ppo_hop_v4 --env-kwargs drift_com_weight:400.0 alive_bonus:2.0
 
 A reward whose terms can turn the per-step reward negative (a charge that grows without bound, such as a quadratic
 charge on the distance from the start) pays a policy for ending an episode: from a state where staying up costs more
@@ -37,7 +37,7 @@ FRESH_SEED = 30_000
 class FallsArgs:
     """Run a trained policy as it is trained and print what its episodes are paid before they fall."""
 
-    policy: Path = Path("policies/ppo_hop_v3")
+    policy: Path = Path("policies/ppo_hop_v4")
     """Run or policy folder (model.zip, vecnormalize.pkl, config.yaml) of an SB3 policy, or a run's best/, last/ or
     checkpoints/<steps>/ folder (the run's config.yaml is read from above it)."""
     training_env: bool = False

@@ -17,7 +17,7 @@ typedef enum { TASK_STANCE = 0, TASK_PUSH = 1, TASK_HOP = 2, N_TASKS = 3 } env_t
 
 #define PUSH_MAX 8     /* pushes scheduled per episode */
 #define HOP_COMMANDS 4 /* hop commands drawn ahead at a reset, for a command schedule (command_steps) */
-#define MAX_TERMS 11   /* reward terms of a task, at most */
+#define MAX_TERMS 10   /* reward terms of a task, at most */
 
 /* The push-recovery task's state: its push schedule. */
 typedef struct {

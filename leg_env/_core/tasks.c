@@ -9,7 +9,7 @@
 
 #define STANCE_TERMS 7 /* alive, drift, unilateral, friction, ctrl, action_rate, power */
 #define PUSH_TERMS 8   /* the balance task's and com */
-#define HOP_TERMS 11   /* alive, height, drift, tilt, impact, slip, ctrl, limit, action_rate, power, force */
+#define HOP_TERMS 10   /* alive, height, drift, tilt, impact, slip, ctrl, limit, action_rate, power */
 
 /* m g of the robot, or 1 without gravity (the observed force is then in newtons). */
 static inline double weight_of(const leg_params *P)
@@ -390,8 +390,6 @@ static void hop_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inerti
     terms[7] = -b->settings->task.hop.w_limit * limit_excess(s->q, b->settings, b->settings->task.hop.limit_margin);
     terms[8] = stance_terms[5]; /* action_rate */
     terms[9] = stance_terms[6]; /* power */
-    /* the step's mean normal force beyond force_limit body weights: hard pushes and landings (0 in flight) */
-    terms[10] = -c->task.hop.w_force * leg_fmax(0.0, o->lam[1] / weight - c->task.hop.force_limit);
     if (o->terminated) /* terminated: nothing but the penalties */
         terms[1] = 0.0;
     next_hop_command(b, i, t);

@@ -15,7 +15,7 @@ from train.ppo import TrainArgs, train
 
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "policies" / "ppo_stance"
-HOP = ROOT / "policies" / "ppo_hop_v3"
+HOP = ROOT / "policies" / "ppo_hop_v4"
 NUM_OBS = 1000
 TOLERANCE = 1e-5
 # a tiny run that normalises observations (the shipped policy normalises returns only): both paths
@@ -81,7 +81,7 @@ def test_the_graph_names_the_policys_own_task(tmp_path):
     props = {p.key: p.value for p in model.metadata_props}
     assert props["env_id"] == "leg_env/PlanarLegHop-v4" and "PlanarLegHop-v4" in model.doc_string and "Stance" not in model.doc_string
     obs = observations(env_id="leg_env/PlanarLegHop-v4")
-    assert obs.shape == (NUM_OBS, 22)
+    assert obs.shape == (NUM_OBS, 24)
     expected, _ = policy.predict(obs, deterministic=True)
     np.testing.assert_allclose(run_onnx(path, obs), expected, rtol=0.0, atol=TOLERANCE)
 

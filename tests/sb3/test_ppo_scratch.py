@@ -1,4 +1,4 @@
-"""The shipped plain-PPO policies (``policies/ppo_balance``, ``ppo_push_v2``, ``ppo_push_randomized``, ``ppo_hop_v3``):
+"""The shipped plain-PPO policies (``policies/ppo_balance``, ``ppo_push_v2``, ``ppo_push_randomized``, ``ppo_hop_v4``):
 a network alone, and their cards' episodes as they score them."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ SHIPPED = {  # policy folder: the task it was trained and is evaluated on
     "ppo_balance": "leg_env/PlanarLegBalance-v1",
     "ppo_push_v2": "leg_env/PlanarLegPush-v2",
     "ppo_push_randomized": "leg_env/PlanarLegPush-v2",
-    "ppo_hop_v3": "leg_env/PlanarLegHop-v4",
+    "ppo_hop_v4": "leg_env/PlanarLegHop-v4",
 }
 EVAL_KWARGS = {  # the evaluation env of a policy selected on other than the task as registered (its table.md's)
     "ppo_push_v2": {"push_force": [50.0, 50.0]},  # selected at 50 N pushes; scored on the push curve
@@ -140,23 +140,20 @@ def test_shipped_balance_policy_is_its_configuration():
     assert_resolves_to_shipped(args, "ppo_balance")
 
 
-def test_shipped_hop_v3_policy_is_its_configuration():
-    """``policies/ppo_hop_v3`` was trained by the ``PlanarLegHop-v4`` entry of ``train/hyperparams/ppo.yml`` as it is
-    now: its card's command resolves to the shipped run's configuration, every key of it (the curricula, the discount
-    schedule, the noise floor, the command's products, the bfloat16 update, the selection from 63M steps). The run read
-    that entry from a probe file of the same content, whose path its ``config.yaml`` keeps as recorded
-    (``hyperparams_file``): the one key that differs."""
-    import yaml
+def test_shipped_hop_policy_is_its_configuration():
+    """``policies/ppo_hop_v4`` was trained by the ``PlanarLegHop-v4`` entry of ``train/hyperparams/ppo.yml`` as it is
+    now: its card's command resolves to the shipped run's configuration, key for key. The entry holds one schedule,
+    of the task's difficulty (the commands' range), and no other: no reward weight, discount or action noise
+    changes during training."""
+    from train.hyperparameters import load_hyperparams
+    from train.ppo import TrainArgs
 
-    from train.ppo import TrainArgs, resolve_config
-
-    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegHop-v4", seed=5, eval_freq=3_000_000, eval_episodes=32,
-                     select_after=63_000_000, update_precision="bfloat16")  # fmt: skip
-    assert_resolves_to_shipped(args, "ppo_hop_v3")
-    shipped = yaml.safe_load((ROOT / "policies" / "ppo_hop_v3" / "config.yaml").read_text())
-    resolved = resolve_config(args)
-    assert set(resolved) == set(shipped)
-    assert [key for key in shipped if resolved[key] != shipped[key]] == ["hyperparams_file"]
+    entry = load_hyperparams(ROOT / "train" / "hyperparams" / "ppo.yml", "leg_env/PlanarLegHop-v4")
+    (callback,) = entry["callback"]
+    assert list(callback) == ["train.callbacks.ConfigSchedule"] and list(callback["train.callbacks.ConfigSchedule"]["schedule"]) == ["command_range"]
+    assert set(entry["env_kwargs"]) == {"command_range"}  # the training env is the task, its commands widened for the schedule
+    args = TrainArgs(out=Path("unused"), env_id="leg_env/PlanarLegHop-v4", seed=2, eval_freq=4_000_000, eval_episodes=32)
+    assert_resolves_to_shipped(args, "ppo_hop_v4")
 
 
 def assert_resolves_to_shipped(args, name: str) -> None:

@@ -843,7 +843,7 @@ def test_train_takes_a_features_extractor_by_its_class_path(tmp_path):
     out = train(tiny_args(tmp_path / "run", env_id="leg_env/PlanarLegHop-v4", eval_freq=0, checkpoint_freq=0, params=params))
     model = PPO.load(out / "model.zip", device="cpu")
     assert isinstance(model.policy.features_extractor, CommandGains)
-    assert model.policy.mlp_extractor.policy_net[0].in_features == 44
+    assert model.policy.mlp_extractor.policy_net[0].in_features == 48  # the hop's 24 entries and their products with the command
     assert yaml.safe_load((out / "config.yaml").read_text())["ppo"]["policy_kwargs"]["features_extractor_class"] == "train.features.CommandGains"
     for path, match in [("train.features.Nothing", "cannot import|not an SB3"), ("no_such.Module", "cannot import"),
                         ("train.callbacks.ConfigSchedule", "not an SB3 features extractor")]:  # fmt: skip

@@ -45,8 +45,8 @@ CASES = {  # name: (env id, keyword arguments)
     "hop randomised": ("leg_env/PlanarLegHop-v4", {"randomize": True}),
     "hop command schedule": ("leg_env/PlanarLegHop-v4", {"command_period": 0.5}),  # the training setting
     "hop training charges": ("leg_env/PlanarLegHop-v4", {"drift_near_weight": 390.0, "drift_near_cap": 1.0, "limit_weight": 400.0}),
-    # the effort settings: the motor model, the power and action-rate charges, the last action observed
-    "hop effort": ("leg_env/PlanarLegHop-v4", {"motor_speed": 8.0, "power_weight": 0.01, "action_rate_weight": 0.5, "observe_action": True}),
+    # the effort settings: the motor model, heavier power and squared action-rate charges (the last action is observed)
+    "hop effort": ("leg_env/PlanarLegHop-v4", {"motor_speed": 8.0, "power_weight": 0.01, "action_rate_weight": 0.5}),
     "stance unilateral effort": (leg_env.ENV_ID, {"contact": "unilateral", "motor_speed": 8.0, "power_weight": 0.01, "action_change_weight": 0.2,
                                                   "observe_action": True}),
 }

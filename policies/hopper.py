@@ -138,8 +138,9 @@ class HopperController(BatchedController):
         self.T_s, self.k_v, self.k_x = stance_time, speed_gain, position_gain
         self.attitude_gains, self.friction_margin, self.swing_gains = attitude_gains, friction_margin, swing_gains
 
-    # PlanarLegHop's 22 entries (then the last action, with observe_action), whose entries after the command (the COM's drift, the ground time, the last hop's
-    # apex) the controller does not read: it keeps its own dead reckoning and apex estimate and hops all the time
+    # PlanarLegHop's 22 entries (then the last action, with observe_action), whose entries after the command (the
+    # COM's drift, the ground time, the last hop's apex, the last action) the controller does not read: it keeps its
+    # own dead reckoning and apex estimate and hops all the time
     widths, task, dtype = (22, 24), "PlanarLegHop-v4: 24 entries, 22 without observe_action", np.float64
 
     def _allocate(self, n: int) -> None:

@@ -58,14 +58,14 @@ after a reset the action that holds the nominal posture), the one the action's c
   ends there.
 - ``reward_action_rate = -(action_rate_weight |a - a_last|^2 + action_change_weight |a - a_last|_1)`` (0 and 1, as
   in ``PlanarLegStance``): the action's change in absolute value, summed over the two entries, so that a jitter
-  costs in proportion to the action rate ``train.motion`` measures (the hopper's 0.062 per entry costs 0.12 a
+  costs in proportion to the action rate ``train.motion`` measures (the hopper's 0.063 per entry costs 0.13 a
   step; v3's PPO policy's 0.170, 0.34).
 - ``reward_power = -power_weight (max(0, tau_hip dq1) + max(0, tau_knee dq2)) / dt`` (0.006 per W, as in
   ``PlanarLegStance``): the joints' positive mechanical power; the hopper's 43 W costs 0.26 a step, v3's PPO
   policy's 100 W 0.6. Twice this weight (0.012) or more, PPO never finds the hop (``research/hop_probes.md``).
 
-The options ``motor_speed`` (the motor model) and the squared charge on the action's change are the balance task's
-too (0 and ``inf`` here).
+The options ``motor_speed`` (the motor model) and the squared charge on the action's change
+(``action_rate_weight``) are the balance task's too (``inf`` and 0 here).
 
 Flight is the task, so it is not charged. **Unilateral violation** here means what it means on the
 unilateral ground of ``PlanarLegStance``: ``info["unilateral_violation"]`` (``lam_y < 0``) and
@@ -111,8 +111,9 @@ v3's policy leaned 36); the survival IQM is 100% [81%, 100%], the return IQM 2,8
 and a tilt of 6.4 degrees: six bars of ten. No seed meets the four the hopper's gait sets. The policies hop twice as
 often as the hopper (27-31 hops an episode for the four seeds that survive every episode, against 14), for about the
 work per hop the hopper spends (27 J against 30 J for the shipped seed), so on the episodes both survive they spend
-70-84 W against 44 W, with an action rate of 0.11-0.15 (0.063), 14.5-33% of the entries saturated (14.5%) and a peak normal force of 2.6-2.7 body weights (2.1). At their work per hop
-the power bar asks for at most about 16 hops an episode.
+70-84 W against 44 W, with an action rate of 0.11-0.15 (0.063), 14.5-33% of the entries saturated (14.5%) and a peak
+normal force of 2.6-2.7 body weights (2.1). At their work per hop the power bar asks for at most about 16 hops an
+episode.
 
 What was tried on the way, and what each probe found, is kept with the research records
 (``research/hop_probes.md``).
@@ -124,8 +125,8 @@ What was tried on the way, and what each probe found, is kept with the research 
   ``30 dx^2`` (was 10); a hop is a flight of at least 150 ms (was 50 ms). v3's PPO policy, trained with schedules of
   four reward weights, the discount and the action noise, leaned its torso 36 degrees, saturated 38% of its action
   entries, changed its action by 0.170 a step and spent 100 W, 2.3 times the hopper's.
-* v3 (removed): the height term pays the last landed hop's apex at every step while the robot keeps hopping, and that apex is
-  observation entry 21. v1 and v2 paid a hop's kernels for each step it spent in the air, so a gait airborne most of
+* v3 (removed): the height term pays the last landed hop's apex at every step while the robot keeps hopping, and
+  that apex is observation entry 21. v1 and v2 paid a hop's kernels for each step it spent in the air, so a gait airborne most of
   the time earned the term over and over: plain PPO on v2 bounced at 2.5-3 cm, in the air about 80% of the time.
   Now a precise hop once a second pays as much per second as a precise hop every 0.3 s.
 * v2 (removed): a flight's height term paid only for a hop (a flight of at least ``min_flight``), once the robot had

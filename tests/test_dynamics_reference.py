@@ -112,6 +112,7 @@ def sympy_reference():
             "p_com": com_.ravel(),
         }
 
+    evaluate.raw = f  # f(q, qd, params) -> [M, h, G, Jc, Jcdot_qd, p_f, K, P, p_com], complex arguments too
     return evaluate
 
 

@@ -9,7 +9,7 @@
 
 #include "env.h"
 
-#define MAX_ARGS 12 /* arguments of an entry point, at most */
+#define MAX_ARGS 14 /* arguments of an entry point, at most */
 
 /* One call's arguments, in its entry's order: an array's data, rows, values per row and row stride (0 for one
  * row shared by every robot); a scalar's value; an integer or flag; an object. */
@@ -106,6 +106,17 @@ static void k_rk4_step(call *c)
         const leg_drive u = {ROW(2)[0], ROW(2)[1], *ROW(4), 0.0};
         leg_trig(ROW(0), &s1, &co1, &s2, &co2);
         rk4_control_step(PAR(3), &u, ROW(0), ROW(1), ROW(5), c->x[6], (int)c->x[7], c->x[8], (int)c->k[9], s1, co1, s2, co2, ROW(10));
+    }
+}
+
+static void k_rk4_jacobians(call *c)
+{
+    EACH {
+        double s1, co1, s2, co2;
+        const leg_drive u = {ROW(2)[0], ROW(2)[1], *ROW(4), 0.0};
+        leg_trig(ROW(0), &s1, &co1, &s2, &co2);
+        rk4_control_jacobians(PAR(3), &u, ROW(0), ROW(1), ROW(5), c->x[6], (int)c->x[7], c->x[8], (int)c->k[9], (int)c->k[10], s1, co1,
+                              s2, co2, ROW(11), ROW(12), ROW(13));
     }
 }
 

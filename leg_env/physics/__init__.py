@@ -2,7 +2,7 @@
 
 Everything a user of the dynamics needs is importable from here::
 
-    from leg_env.physics import LegParams, stance_dynamics, hybrid_step
+    from leg_env.physics import LegParams, stance_dynamics, hybrid_step, stance_step_jacobians
 
 =================== ================================================================================
 module              what it holds
@@ -13,6 +13,7 @@ module              what it holds
 ``contact``         the unilateral ground: contact modes, the slip solve, the impact map, the Painleve bound
 ``integrate``       the pinned foot's (and free flight's) RK4 control step with exact contact projection
 ``hybrid``          the control step on the unilateral ground: every contact event located inside the step
+``derivatives``     the Jacobians of the control step as computed, ``d(q, qd)`` after it by ``(q, qd)`` and ``tau``
 ``layout``          the numpy dtypes of the compiled core's structs (a robot, its state, what a step gives)
 ``arrays``          the broadcasting and checks every function above applies to its arrays
 =================== ================================================================================
@@ -37,6 +38,7 @@ _HOMES = {
                   "step_inplace"),
     "hybrid": ("hybrid_step", "HybridStep", "LIFTOFF", "SLIP_ONSET", "SLIDING_STOP", "TOUCHDOWN", "EVENT_NAMES", "MAX_EVENTS",
                "LOG_SIZE", "GROUND_TOL", "SETTLE_SPEED", "ROOT_TIME"),
+    "derivatives": ("StepJacobians", "stance_step_jacobians", "flight_step_jacobians"),
 }
 _HOME = {name: module for module, names in _HOMES.items() for name in names}
 __all__ = list(_HOME)

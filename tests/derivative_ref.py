@@ -103,3 +103,158 @@ class ComplexStep:
             e[j] = 1j * EPS
             B[:, j] = run(x, tau + e).imag / EPS
         return A, B
+
+
+STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT = 0, 1, 2, 3
+
+
+class Refused(Exception):
+    """A step this reference does not write (another event or mode choice than it knows)."""
+
+
+class HybridComplexStep(ComplexStep):
+    """The unilateral ground's control step through slip onset, lift-off and touchdown, in complex arithmetic:
+    ``hybrid_step`` written from its documentation (``leg_env.physics.hybrid``) on the SymPy terms.
+
+    Substeps of ``h = t_left / n_left`` in the current mode: stick (the KKT solve, then the base projected onto the
+    anchor), slip in direction ``sigma`` (only ``y_f'' = 0``: ``[[M, -(J_y - sigma mu J_x)^T], [J_y, 0]] [qdd; lam_y] =
+    [S^T tau - h; -gamma_y]``, then the foot put back on the ground line with ``y_f' = 0``) or flight. When a substep
+    ends with a witness below zero (stick: ``lam_y`` and ``mu lam_y - |lam_x|``; slip: ``lam_y``; flight: ``y_f``), the
+    event's time ``s`` inside it is the root of ``g(Phi(x, s)) = 0``, found in complex arithmetic (Newton's iteration
+    from the real root: its fixed point is the complex root, so the root's derivative is carried). Then the reset:
+    slip onset: slip against the friction the stick needed; lift-off: flight; touchdown: the base lowered so the foot
+    is on the ground, the plastic sticking impulse ``qd+ = qd - M^-1 Jc^T (Jc M^-1 Jc^T)^-1 Jc qd``, stick with the
+    anchor at the foot. The rest of the step runs with ``n_left`` raised to the step rule's count at the new rates if
+    that is more. Only these events and choices: a step that meets another (a sliding stop, a slip onset after which the
+    foot does not slide against the stick's friction) raises ``Refused``.
+    """
+
+    def __init__(self, p, mu: float):
+        super().__init__(p)
+        self.mu = mu
+
+    def forces(self, q, qd, tau, mode):
+        """``(qdd, lam)`` of the mode."""
+        M, h, Jc, jd, _ = self.terms(q, qd)
+        rhs = S_T @ tau - h
+        if mode == FLIGHT:
+            return np.linalg.solve(M, rhs), np.zeros(2, dtype=complex)
+        if mode == STICK:
+            K = np.zeros((7, 7), dtype=complex)
+            K[:5, :5], K[:5, 5:], K[5:, :5] = M, -Jc.T, Jc
+            x = np.linalg.solve(K, np.concatenate([rhs, -jd]))
+            return x[:5], x[5:]
+        sigma = 1.0 if mode == SLIP_FORWARD else -1.0
+        K = np.zeros((6, 6), dtype=complex)
+        K[:5, :5], K[:5, 5], K[5, :5] = M, -(Jc[1] - sigma * self.mu * Jc[0]), Jc[1]
+        x = np.linalg.solve(K, np.concatenate([rhs, [-jd[1]]]))
+        return x[:5], np.array([-sigma * self.mu * x[5], x[5]])
+
+    def substep(self, q, qd, tau, h, mode, anchor):
+        f = lambda q_, qd_: self.forces(q_, qd_, tau, mode)[0]  # noqa: E731
+        k1q, k1v = qd, f(q, qd)
+        k2q = qd + h / 2 * k1v
+        k2v = f(q + h / 2 * k1q, k2q)
+        k3q = qd + h / 2 * k2v
+        k3v = f(q + h / 2 * k2q, k3q)
+        k4q = qd + h * k3v
+        k4v = f(q + h * k3q, k4q)
+        q = q + h / 6 * (k1q + 2 * k2q + 2 * k3q + k4q)
+        qd = qd + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        if mode == STICK:
+            q, qd = self.project(q, qd, anchor)
+        elif mode != FLIGHT:  # the foot on the ground line, its normal velocity zero
+            _, _, Jc, _, p_f = self.terms(q, qd)
+            q, qd = q.copy(), qd.copy()
+            q[1] += anchor[1] - p_f[1]
+            qd[1] = -Jc[1, 2:] @ qd[2:]
+        return q, qd
+
+    def witnesses(self, q, qd, tau, mode) -> dict:
+        if mode == FLIGHT:
+            return {"touchdown": self.terms(q, qd)[4][1]}
+        lam = self.forces(q, qd, tau, mode)[1]
+        if mode == STICK:
+            return {"liftoff": lam[1], "slip_onset": self.mu * lam[1] - np.sign(lam[0].real) * lam[0]}
+        _, _, Jc, _, _ = self.terms(q, qd)
+        return {"liftoff": lam[1], "sliding_stop": (1.0 if mode == SLIP_FORWARD else -1.0) * (Jc[0] @ qd)}
+
+    def hybrid_step(self, q, qd, tau, mode, dt, substeps, max_angle, anchor_x=None):
+        """``(x after the step, the events located)``; ``anchor_x=None``: the foot's x of ``q``."""
+        q, qd, tau = (np.asarray(a, dtype=complex) for a in (q, qd, tau))
+        anchor = np.array([self.terms(q, qd)[4][0] if anchor_x is None else anchor_x, 0.0], dtype=complex)
+        n_left = substeps_for(qd, dt, substeps, max_angle)
+        t_left = complex(dt)
+        events = []
+        while n_left > 0:
+            h = t_left / n_left
+            q1, qd1 = self.substep(q, qd, tau, h, mode, anchor)
+            crossed = [k for k, w in self.witnesses(q1, qd1, tau, mode).items() if w.real < 0.0]
+            if not crossed:
+                q, qd, t_left, n_left = q1, qd1, t_left - h, n_left - 1
+                continue
+
+            def root(kind):
+                """The real root of the witness by bisection, and g."""
+                def g(s):
+                    return self.witnesses(*self.substep(q, qd, tau, s, mode, anchor), tau, mode)[kind]
+
+                lo, hi = 0.0, h.real
+                for _ in range(60):
+                    mid = 0.5 * (lo + hi)
+                    lo, hi = (mid, hi) if g(mid).real >= 0.0 else (lo, mid)
+                return 0.5 * (lo + hi), g
+
+            roots = {kind: root(kind) for kind in crossed}
+            kind = min(roots, key=lambda k: roots[k][0])
+            if kind == "sliding_stop":
+                raise Refused("a sliding stop (the sticking impulse is not written here)")
+            if any(abs(roots[k][0] - roots[kind][0]) <= 1e-9 for k in roots if k != kind):
+                raise Refused("two events at once")
+            s0, g = roots[kind]
+            s = complex(s0)
+            slope = (g(s.real + 1e-9).real - g(s.real - 1e-9).real) / 2e-9
+            for _ in range(6):
+                s = s - g(s) / slope
+            lam_before = self.forces(*self.substep(q, qd, tau, s.real - 1e-9, mode, anchor), tau, mode)[1]
+            q, qd = self.substep(q, qd, tau, s, mode, anchor)
+            t_left = t_left - s
+            events.append(kind)
+            if kind == "slip_onset":  # slip against the friction the stick needed, if the foot then moves that way
+                mode = SLIP_BACKWARD if lam_before[0].real > 0.0 else SLIP_FORWARD
+                qdd, lam = self.forces(q, qd, tau, mode)
+                _, _, Jc, jd, _ = self.terms(q, qd)
+                tie = -1e-6 * self.p.g  # at the onset the slide's foot acceleration is zero but for round-off
+                if (1.0 if mode == SLIP_FORWARD else -1.0) * (Jc[0] @ qdd + jd[0]).real < tie or lam[1].real < 0.0:
+                    raise Refused("the mode choice after the slip onset takes another mode")
+            elif kind == "liftoff":
+                mode = FLIGHT
+            else:  # touchdown: on the ground, the sticking impulse, stick at the foot
+                q = q.copy()
+                q[1] -= self.terms(q, qd)[4][1]
+                M, _, Jc, _, p_f = self.terms(q, qd)
+                Minv_JT = np.linalg.solve(M, Jc.T)
+                qd = qd - Minv_JT @ np.linalg.solve(Jc @ Minv_JT, Jc @ qd)
+                anchor = np.array([p_f[0], 0.0], dtype=complex)
+                mode = STICK
+            n_left = max(n_left, substeps_for(qd, t_left.real, 1, max_angle))
+        return np.concatenate([q, qd]), events
+
+    def hybrid_jacobians(self, q, qd, tau, mode, dt, substeps, max_angle, anchor_x=None):
+        """``(A, B, events)`` by complex steps (the anchor's x follows ``q`` if ``anchor_x`` is None)."""
+        x = np.concatenate([q, qd]).astype(complex)
+        A, B = np.empty((10, 10)), np.empty((10, 2))
+        _, events = self.hybrid_step(q, qd, tau, mode, dt, substeps, max_angle, anchor_x)
+        tau = np.asarray(tau, dtype=complex)
+        for j in range(10):
+            e = np.zeros(10, dtype=complex)
+            e[j] = 1j * EPS
+            y, ev = self.hybrid_step((x + e)[:5], (x + e)[5:], tau, mode, dt, substeps, max_angle, anchor_x)
+            assert ev == events
+            A[:, j] = y.imag / EPS
+        for j in range(2):
+            e = np.zeros(2, dtype=complex)
+            e[j] = 1j * EPS
+            y, _ = self.hybrid_step(x[:5], x[5:], tau + e, mode, dt, substeps, max_angle, anchor_x)
+            B[:, j] = y.imag / EPS
+        return A, B, events

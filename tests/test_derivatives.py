@@ -5,7 +5,11 @@
 2. Centred finite differences of the step itself (``stance_step``, ``flight_step``) over states drawn from rollouts
    of the pinned task (random actions and the LQR controller) and random flights: the relative (Frobenius) error of
    ``A`` and ``B`` at most ``FD_RTOL``, with the substep count the same at both perturbations (the share where it is
-   not is reported and bounded).
+   not is reported and bounded). The same for ``hybrid_step`` over rollouts of every task on the unilateral ground
+   (random actions and each task's controller), reported per kind of event: at most ``FD_RTOL`` on steps without an
+   event, ``FD_RTOL_EVENT`` on steps with one, wherever the events are the same at both perturbations. A robot in
+   contact is perturbed only along its contact's manifold (the foot on the ground, and at rest in stick), where the
+   step is smooth; a foot in the air, along every direction.
 3. Identities: moving the whole robot (with the anchor following it) moves the next state by as much; a held anchor
    makes the base's position and velocity before the step irrelevant.
 """
@@ -17,7 +21,7 @@ import numpy as np
 import pytest
 
 from conftest import random_params
-from derivative_ref import ComplexStep, substeps_for
+from derivative_ref import ComplexStep, HybridComplexStep, Refused, substeps_for
 from leg_env import physics as dyn
 from leg_env.physics.derivatives import NX, flight_step_jacobians, stance_step_jacobians
 from leg_env.physics.params import LegParams
@@ -25,10 +29,13 @@ from leg_env.physics.params import LegParams
 DT, SUBSTEPS, MAX_ANGLE = 0.01, 2, 0.02
 REF_CASES = 40  # random (robot, state) pairs per model against the complex-step reference
 REF_RTOL = 1e-12
+REF_RTOL_EVENT = 1e-9  # through an event located to ROOT_TIME (1e-12 s) rather than to the exact root
 FD_RTOL = 1e-6  # the issue's bar on steps without an event
 FD_EPS_X, FD_EPS_TAU = 1e-6, 1e-4  # [m, rad, m/s, rad/s], [N m]
 ROLLOUT_ROBOTS, ROLLOUT_STEPS = 256, 40  # 2 policies x 256 x 40 = 20,480 states of the pinned task
 FLIGHT_CASES = 4096
+FD_RTOL_EVENT = 1e-4  # the issue's bar on steps with an event
+HYBRID_ROBOTS, HYBRID_STEPS = 64, 200  # per task and controller: 3 tasks x 2 x 64 x 200 = 76,800 states
 
 
 def rel(a, b) -> np.ndarray:
@@ -185,6 +192,210 @@ def test_flight_against_finite_differences():
     J = flight_step_jacobians(q, qd, tau, p)
     assert same.mean() > 0.99
     assert rel(J.A, A_fd)[same].max() <= FD_RTOL and rel(J.B, B_fd)[same].max() <= FD_RTOL
+
+
+# ------------------------------------------------------------------ the unilateral ground
+
+
+def unilateral_rollout_states(env_id: str, controller):
+    """(q, qd, tau, mode, anchor_x, load) before each step of a rollout of ``env_id`` under ``controller`` (None:
+    random actions), and the robot's parameters and friction."""
+    envs = gym.make_vec(env_id, num_envs=HYBRID_ROBOTS, vectorization_mode="vector_entry_point")
+    obs, _ = envs.reset(seed=17)
+    env = envs.unwrapped
+    rng = np.random.default_rng(23)
+    out = []
+    for _ in range(HYBRID_STEPS):
+        q, qd, anchor = env.state
+        mode = env._state["mode"].astype(np.int64)
+        action = rng.uniform(-1.0, 1.0, (HYBRID_ROBOTS, 2)) if controller is None else controller.predict(obs, deterministic=True)[0]
+        obs, _, _, _, info = envs.step(action)
+        load = info.get("push_force", np.zeros(HYBRID_ROBOTS))
+        out.append((q, qd, info["torque"].copy(), mode, anchor[:, 0].copy(), np.asarray(load, float).copy()))
+    params, mu = env.params, env.config.mu
+    envs.close()
+    return (*(np.concatenate([o[k] for o in out]) for k in range(6)), params, mu)
+
+
+def manifold_basis(q, qd, mode, p) -> np.ndarray:
+    """(N, 10, 10): the first columns an orthonormal basis of the directions along which the step is smooth, the rest
+    zero: in stick the foot stays on the ground (y_f) and at rest (x_f', y_f'), in slip on the ground (y_f, y_f'); a
+    foot in the air moves freely, one within 10 um of the ground (a flight just begun) not towards it."""
+    n = q.shape[0]
+    Jc = dyn.contact_jacobian(q, p)
+    # d(Jc qd)/dq by centred differences: only to lay the directions on the manifold (their error is second order)
+    G = np.empty((n, 2, 5))
+    for j in range(5):
+        e = np.zeros(5)
+        e[j] = 1e-6
+        G[:, :, j] = ((dyn.contact_jacobian(q + e, p) - dyn.contact_jacobian(q - e, p)) @ qd[:, :, None])[:, :, 0] / 2e-6
+    zeros = np.zeros((n, 5))
+    height = dyn.foot_position(q, p)[:, 1]
+    basis = np.zeros((n, NX, NX))
+    for i in range(n):
+        rows = []
+        if mode[i] != dyn.FLIGHT or height[i] < 1e-5:
+            rows.append(np.concatenate([Jc[i, 1], zeros[i]]))
+        if mode[i] in (dyn.STICK, dyn.SLIP_FORWARD, dyn.SLIP_BACKWARD):
+            rows.append(np.concatenate([G[i, 1], Jc[i, 1]]))
+        if mode[i] == dyn.STICK:
+            rows.append(np.concatenate([G[i, 0], Jc[i, 0]]))
+        if rows:
+            _, _, vt = np.linalg.svd(np.array(rows))
+            basis[i, :, : NX - len(rows)] = vt[len(rows):].T
+        else:
+            basis[i] = np.eye(NX)
+    return basis
+
+
+def controllers():
+    from policies.gated import GatedController
+    from policies.hopper import HopperController
+    from policies.stepping import SteppingController
+
+    return {"leg_env/PlanarLegBalance-v1": GatedController, "leg_env/PlanarLegPush-v2": SteppingController,
+            "leg_env/PlanarLegHop-v4": HopperController}
+
+
+def test_hybrid_step_is_the_step():
+    rng = np.random.default_rng(2)
+    p = random_params(rng)
+    states = [random_state(p, rng, True) for _ in range(32)]
+    q, qd, tau = (np.array([s[k] for s in states]) for k in range(3))
+    q, qd = dyn.project_stance(q, qd, p, dyn.foot_position(q, p) * [1.0, 0.0])  # the feet on the ground
+    q[::2, 1] += rng.uniform(0.0, 0.05, 16)  # half of them in the air
+    qd[::2, 1] -= 1.0
+    load = rng.normal(0.0, 20.0, 32)
+    ref = dyn.hybrid_step(q, qd, tau, p, 0.6, load_x=load)
+    J = dyn.hybrid_step_jacobians(q, qd, tau, p, 0.6, load_x=load)
+    for name, value in ref._asdict().items():
+        np.testing.assert_array_equal(getattr(J.step, name), value, err_msg=name)
+    assert (J.step.events > 0).any() and J.defined.all()
+    one = dyn.hybrid_step_jacobians(q[5], qd[5], tau[5], p, 0.6, load_x=load[5])
+    np.testing.assert_array_equal(one.A, J.A[5])
+    assert one.A.shape == (NX, NX) and one.undefined.shape == ()
+
+
+@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v4"])
+def test_hybrid_against_finite_differences_on_rollouts(env_id, capsys):
+    rows = []
+    worst = {}
+    for controller in (None, controllers()[env_id]()):
+        q, qd, tau, mode, anchor_x, load, p, mu = unilateral_rollout_states(env_id, controller)
+        J = dyn.hybrid_step_jacobians(q, qd, tau, p, mu, mode=mode, load_x=load)
+        basis = manifold_basis(q, qd, mode, p)
+        x = np.concatenate([q, qd], axis=1)
+        kinds = J.step.event_kind
+        same = np.ones(q.shape[0], bool)
+
+        def differences(run, n_dirs, eps):
+            """Five-point centred differences (fourth order): an event is located to ROOT_TIME (1e-12 s), which a
+            difference with a small step amplifies, so the step must stay large and its truncation error small."""
+            nonlocal same
+            out = np.empty((q.shape[0], NX, n_dirs))
+            for k in range(n_dirs):
+                ends = {}
+                for m in (-2, -1, 1, 2):
+                    r = run(k, m * eps)
+                    same &= (r.event_kind == kinds).all(axis=1) & (r.mode == J.step.mode)
+                    ends[m] = np.concatenate([r.q, r.qd], axis=1)
+                out[:, :, k] = (8.0 * (ends[1] - ends[-1]) - (ends[2] - ends[-2])) / (12.0 * eps)
+            return out
+
+        def along_basis(k, d):
+            xs = x + d * basis[:, :, k]
+            return dyn.hybrid_step(xs[:, :5], xs[:, 5:], tau, p, mu, mode=mode, load_x=load)
+
+        def along_torque(j, d):
+            e = np.zeros(2)
+            e[j] = d
+            return dyn.hybrid_step(q, qd, tau + e, p, mu, mode=mode, load_x=load)
+
+        # the better of two step sizes: near a grazing re-contact the larger step's truncation error dominates, at the
+        # smaller the round-off of an event's location
+        err = np.full(q.shape[0], np.inf)
+        for scale in (1.0, 0.1):
+            AN = differences(along_basis, NX, FD_EPS_X * scale)
+            B = differences(along_torque, 2, FD_EPS_TAU * scale)
+            err = np.minimum(err, np.maximum(rel(J.A @ basis, AN), rel(J.B, B)))
+        checked = same & J.defined
+        first = np.where(kinds[:, 0] < 0, -1, kinds[:, 0])
+        for kind, name in [(-1, "no event"), *enumerate(dyn.EVENT_NAMES)]:
+            m = checked & (first == kind)
+            if m.any():
+                worst[name] = max(worst.get(name, 0.0), err[m].max())
+                rows.append(f"{name}: {m.sum()} (median {np.median(err[m]):.1e}, max {err[m].max():.1e})")
+        rows.append(f"{'random' if controller is None else type(controller).__name__}: {q.shape[0]} states, events changed "
+                    f"under a perturbation at {1 - same.mean():.2%}, undefined at {1 - J.defined.mean():.2%}")
+        assert same.mean() > 0.99 and J.defined.mean() > 0.99
+    with capsys.disabled():
+        print(f"\n{env_id}: " + "; ".join(rows))
+    assert worst["no event"] <= FD_RTOL
+    assert max(v for k, v in worst.items() if k != "no event") <= FD_RTOL_EVENT
+    if env_id == "leg_env/PlanarLegHop-v4":  # the hop's cycle: touchdowns with their impacts, and lift-offs
+        assert "touchdown" in worst and "liftoff" in worst
+
+
+def test_hybrid_against_complex_step_through_events():
+    """Through slip onset, lift-off (from a slip) and touchdown with its impact, against complex-step
+    differentiation of the independent hybrid step of ``derivative_ref.HybridComplexStep``: the touchdowns of a
+    hopper's rollout, and stick starts that break away (and some of them then lift off)."""
+    from policies.hopper import HopperController
+
+    seen = {}
+    q, qd, tau, mode, _, load, p, mu = unilateral_rollout_states("leg_env/PlanarLegHop-v4", HopperController())
+    J = dyn.hybrid_step_jacobians(q, qd, tau, p, mu, mode=mode)
+    touchdowns = np.flatnonzero((mode == dyn.FLIGHT) & (J.step.event_kind[:, 0] == dyn.TOUCHDOWN) & (J.step.event_kind[:, 1] < 0))
+    cases = [(p, mu, q[i], qd[i], tau[i], dyn.FLIGHT) for i in touchdowns[:4]]
+    # stick starts under random torques, consistent at the start, that leave the stick within the step
+    rng = np.random.default_rng(1)
+    p, mu, n = LegParams(), 0.8, 20000
+    q_eq, tau_eq, _ = dyn.static_equilibrium(p)
+    q = q_eq + np.concatenate([np.zeros((n, 2)), rng.normal(0.0, 0.1, (n, 3))], axis=1)
+    q, qd = dyn.project_stance(q, rng.normal(0.0, 4.0, (n, 5)), p, np.zeros(2))
+    tau = tau_eq + rng.normal(0.0, 40.0, (n, 2))
+    _, lam = dyn.stance_dynamics(q, qd, tau, p)
+    consistent = (lam[:, 1] > 0.0) & (np.abs(lam[:, 0]) <= mu * lam[:, 1])
+    kinds = dyn.hybrid_step(q, qd, tau, p, mu, mode=np.zeros(n, np.int64)).event_kind
+    for seq in ([dyn.SLIP_ONSET], [dyn.SLIP_ONSET, dyn.LIFTOFF]):
+        want = np.full(kinds.shape[1], -1)
+        want[: len(seq)] = seq
+        rows = np.flatnonzero(consistent & (kinds == want).all(axis=1))
+        cases += [(p, mu, q[i], qd[i], tau[i], dyn.STICK) for i in rows[:4]]
+    refused = 0
+    for p_, mu_, q_, qd_, tau_, mode_ in cases:
+        ref = HybridComplexStep(p_, mu_)
+        try:
+            A, B, events = ref.hybrid_jacobians(q_, qd_, tau_, mode_, DT, SUBSTEPS, MAX_ANGLE)
+        except Refused:  # a step the reference does not write
+            refused += 1
+            continue
+        Jc = dyn.hybrid_step_jacobians(q_, qd_, tau_, p_, mu_, mode=mode_)
+        assert [dyn.EVENT_NAMES[k] for k in Jc.step.event_kind if k >= 0] == events
+        err = max(rel(Jc.A, A), rel(Jc.B, B))
+        assert err <= REF_RTOL_EVENT, (events, err)
+        seen[tuple(events)] = seen.get(tuple(events), 0) + 1
+    assert refused <= 2
+    assert seen.get(("touchdown",), 0) >= 3 and seen.get(("slip_onset",), 0) >= 3 and seen.get(("slip_onset", "liftoff"), 0) >= 2, seen
+
+
+def test_no_derivative_is_flagged_not_given():
+    """Past the Painleve bound (a foot sliding where no contact force is consistent, the worst posture of
+    ``tests/test_unilateral.py``) the step is not a smooth map: flagged, A and B NaN. Below the bound (mu 0.3) the same
+    slide gets its derivative."""
+    from leg_env.physics.derivatives import PAINLEVE
+
+    p = LegParams()
+    q = np.array([0.0, 0.0, -0.45, -0.925, 0.05])
+    q[1] -= dyn.foot_position(q, p)[1]
+    lam_c, _ = dyn.free_foot_acceleration(q, np.zeros(5), np.zeros(2), p)
+    sigma = np.sign(lam_c[0, 1])
+    qd = np.linalg.lstsq(dyn.contact_jacobian(q, p), np.array([0.3 * sigma, 0.0]), rcond=None)[0]
+    tau = np.array([0.0, -20.0])
+    J = dyn.hybrid_step_jacobians(np.stack([q, q]), np.stack([qd, qd]), np.stack([tau, tau]), p, np.array([0.9, 0.3]))
+    assert J.step.painleve[0] >= 1 and J.step.painleve[1] == 0
+    assert J.undefined[0] & PAINLEVE and not J.defined[0] and np.isnan(J.A[0]).all() and np.isnan(J.B[0]).all()
+    assert J.defined[1] and np.isfinite(J.A[1]).all() and np.isfinite(J.B[1]).all()
 
 
 # ------------------------------------------------------------------ 3. identities

@@ -9,7 +9,7 @@
 
 #include "env.h"
 
-#define MAX_ARGS 14 /* arguments of an entry point, at most */
+#define MAX_ARGS 16 /* arguments of an entry point, at most */
 
 /* One call's arguments, in its entry's order: an array's data, rows, values per row and row stride (0 for one
  * row shared by every robot); a scalar's value; an integer or flag; an object. */
@@ -133,6 +133,24 @@ static void k_hybrid_step(call *c)
         }
         *INT(6) = hybrid_control_step(PAR(3), &u, ROW(0), ROW(1), (int)*INT(6), ROW(7), c->x[8], (int)c->x[9], c->x[10], s1, co1, s2,
                                       co2, &rec->tally, &rec->log);
+    }
+}
+
+static void k_hybrid_jacobians(call *c)
+{
+    EACH {
+        double s1, co1, s2, co2;
+        leg_record *rec = (leg_record *)c->a[11] + i;
+        const leg_drive u = {ROW(2)[0], ROW(2)[1], *ROW(4), *ROW(5)};
+        leg_trig(ROW(0), &s1, &co1, &s2, &co2);
+        for (int j = 0; j < LEG_LOG_SIZE; j++) {
+            rec->log.event_kind[j] = -1;
+            rec->log.event_time[j] = NAN;
+        }
+        int mode = (int)*INT(6);
+        *INT(15) = hybrid_control_jacobians(PAR(3), &u, ROW(0), ROW(1), &mode, ROW(7), c->x[8], (int)c->x[9], c->x[10], s1, co1, s2,
+                                            co2, (int)c->k[12], &rec->tally, &rec->log, ROW(13), ROW(14));
+        *INT(6) = mode;
     }
 }
 

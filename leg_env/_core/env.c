@@ -153,7 +153,7 @@ static int start_unilateral(const leg_params *P, double *q, double *qd, double *
     const leg_model M = model_of(P);
     leg_tally tally;
     memset(&tally, 0, sizeof tally);
-    const int m = choose_mode(LEG_FLIGHT, &X, anchor, &M, &u, -1, 0, &tally);
+    const int m = choose_mode(LEG_FLIGHT, &X, anchor, &M, &u, -1, 0, &tally, NULL);
     x_to(&X, q, qd);
     if (m != LEG_STICK)
         anchor[0] = q[0] + P->l1 * co1 + P->l2 * co2;

@@ -125,7 +125,7 @@ static leg_x stop_foot(const leg_model *M, const leg_x *X, leg_tally *rec)
  * gets the one consistent mode (mode_at_rest). `mode` is the current one (a stick that stays keeps its
  * anchor), `exclude` a mode that a transition has just made inconsistent (or -1). Updates anchor[0]. */
 static int choose_mode(int mode, leg_x *X, double *anchor, const leg_model *M, const leg_drive *u, int exclude,
-                       int settled, leg_tally *rec)
+                       int settled, leg_tally *rec, leg_hybrid_tangent *J)
 {
     const double t_hip = u->tau_hip, t_knee = u->tau_knee, F = u->load_x, mu = u->mu;
     leg_foot f = foot_of(M, X);
@@ -137,6 +137,8 @@ static int choose_mode(int mode, leg_x *X, double *anchor, const leg_model *M, c
         double Px, Py;
         if (impact_core(f.vx, f.vy, mu, R.Lxx, R.Lxy, R.Lyy, &Px, &Py) == LEG_IMPACT_PAINLEVE)
             rec->painleve += 1;
+        if (J != NULL)
+            impulse_tangent(M, X, mu, J);
         *X = kick(M, X, Px, Py, rec);
         f = foot_of(M, X);
     }
@@ -147,6 +149,8 @@ static int choose_mode(int mode, leg_x *X, double *anchor, const leg_model *M, c
         if (painleve)
             rec->painleve += 1;
         if (new_mode < 0) { /* no consistent force: a tangential impact stops the foot */
+            if (J != NULL)
+                impulse_tangent(M, X, INFINITY, J);
             *X = stop_foot(M, X, rec);
         } else if (new_mode == LEG_FLIGHT && settled) {
             new_mode = f.vx > 0.0 ? LEG_SLIP_FORWARD : LEG_SLIP_BACKWARD;
@@ -164,10 +168,16 @@ static int choose_mode(int mode, leg_x *X, double *anchor, const leg_model *M, c
     }
     if (new_mode == LEG_STICK) {
         const leg_foot g = foot_of(M, X);
-        if (mode != LEG_STICK)
+        if (mode != LEG_STICK) {
             anchor[0] = g.x;
-        if (g.vx != 0.0 || g.vy != 0.0)
+            if (J != NULL)
+                anchor_tangent(&M->p, X, J);
+        }
+        if (g.vx != 0.0 || g.vy != 0.0) {
+            if (J != NULL)
+                impulse_tangent(M, X, INFINITY, J);
             *X = stop_foot(M, X, rec);
+        }
     }
     return new_mode;
 }
@@ -253,19 +263,26 @@ static int locate(int mode, const leg_model *M, const leg_drive *u, const double
 
 /* The reset map of event `kind` at X (just past it), then the mode choice; returns the new mode. */
 static int transition(int kind, int mode, leg_x *X, double *anchor, const leg_model *M, const leg_drive *u,
-                      int *settled, leg_tally *rec)
+                      int *settled, leg_tally *rec, leg_hybrid_tangent *J)
 {
     if (kind == LEG_TOUCHDOWN) {
         const leg_foot f = foot_of(M, X);
         X->y = X->y - (f.y - anchor[1]);
+        if (J != NULL) /* y_b = ground - l1 s1 - l2 s2 */
+            for (int j = 0; j < LEG_ND; j++) {
+                const double dth1 = J->T.t[IA][j] + J->T.t[IB][j], dth2 = dth1 + J->T.t[IC][j];
+                J->T.t[IY][j] = -(M->p.l1 * X->c1 * dth1 + M->p.l2 * X->c2 * dth2);
+            }
         if (-f.vy < LEG_SETTLE_SPEED && !*settled) {
             *settled = 1;
             rec->settles += 1;
         }
     } else if (kind == LEG_SLIDING_STOP) {
+        if (J != NULL)
+            impulse_tangent(M, X, INFINITY, J);
         *X = stop_foot(M, X, rec);
     }
-    return choose_mode(mode, X, anchor, M, u, kind != LEG_TOUCHDOWN ? mode : -1, *settled, rec);
+    return choose_mode(mode, X, anchor, M, u, kind != LEG_TOUCHDOWN ? mode : -1, *settled, rec, J);
 }
 
 /* Add a substep of length h in `mode` from X0 to X1 to the step's record. */
@@ -312,7 +329,8 @@ typedef struct {
  * projection) is on it, so its touchdown is watched from there, or a fall back within the step would go
  * unlocated. Called with `mode` a constant (advance_in()), so that the compiler specialises the RK4 stages. */
 LEG_INLINE int advance(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
-                       double *w0a, double *w0b, int settled, int events, leg_tally *rec, leg_crossing *c)
+                       double *w0a, double *w0b, int settled, int events, leg_tally *rec, leg_crossing *c,
+                       leg_hybrid_tangent *J)
 {
     int kind_a, kind_b;
     event_kinds(mode, &kind_a, &kind_b);
@@ -341,6 +359,15 @@ LEG_INLINE int advance(int mode, const leg_model *M, const leg_drive *u, const d
             return 1;
         }
         book(mode, M, h, &g->X, &X1, &sums, rec);
+        if (J != NULL) { /* h = t_left / n_left: an event earlier in the step moves it */
+            double dh[LEG_NT];
+            for (int j = 0; j < LEG_ND; j++)
+                dh[j] = -J->dtime[j] / g->n_left;
+            rk4_substep_tangent(LEG_ND, mode, M, u, &g->X, h, &X1, J->dtau, J->danchor, J->timed ? dh : NULL, &J->T);
+            if (J->timed)
+                for (int j = 0; j < LEG_ND; j++)
+                    J->dtime[j] += dh[j];
+        }
         g->X = X1;
         g->t += h;
         g->t_left -= h;
@@ -356,29 +383,27 @@ LEG_INLINE int advance(int mode, const leg_model *M, const leg_drive *u, const d
 }
 
 /* advance() in the mode `mode`, each mode a constant. */
-static inline int advance_in(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
-                             double *w0a, double *w0b, int settled, int events, leg_tally *rec, leg_crossing *c)
+LEG_INLINE int advance_in(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
+                          double *w0a, double *w0b, int settled, int events, leg_tally *rec, leg_crossing *c,
+                          leg_hybrid_tangent *J)
 {
     switch (mode) {
     case LEG_STICK:
-        return advance(LEG_STICK, M, u, anchor, g, w0a, w0b, settled, events, rec, c);
+        return advance(LEG_STICK, M, u, anchor, g, w0a, w0b, settled, events, rec, c, J);
     case LEG_FLIGHT:
-        return advance(LEG_FLIGHT, M, u, anchor, g, w0a, w0b, settled, events, rec, c);
+        return advance(LEG_FLIGHT, M, u, anchor, g, w0a, w0b, settled, events, rec, c, J);
     case LEG_SLIP_FORWARD:
-        return advance(LEG_SLIP_FORWARD, M, u, anchor, g, w0a, w0b, settled, events, rec, c);
+        return advance(LEG_SLIP_FORWARD, M, u, anchor, g, w0a, w0b, settled, events, rec, c, J);
     default:
-        return advance(LEG_SLIP_BACKWARD, M, u, anchor, g, w0a, w0b, settled, events, rec, c);
+        return advance(LEG_SLIP_BACKWARD, M, u, anchor, g, w0a, w0b, settled, events, rec, c, J);
     }
 }
 
-/* One hybrid control step of one robot, in place; returns the mode at its end.
- * q, qd: the world state; anchor: the stick contact point (anchor[1] the ground's height; anchor[0] is
- * rewritten: the contact point in stick, else the foot's x); s1 .. co2: the sines/cosines of q's link
- * angles; rec: overwritten with what the step added up; log (NULL: none kept): each located transition's
- * kind and time written as it comes (the entries after the last are left as they were). */
-static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *q, double *qd, int mode,
-                               double *anchor, double dt, int substeps, double max_angle, double s1, double co1,
-                               double s2, double co2, leg_tally *rec, leg_log *log)
+/* The hybrid control step of hybrid_control_step(), and, with J, its tangent (tangent.c's leg_hybrid_tangent) carried
+ * along: every substep taken, every located event (its time's derivative from its witness), every reset map. */
+LEG_INLINE int hybrid_step_body(const leg_params *P, const leg_drive *u, double *q, double *qd, int mode, double *anchor,
+                                double dt, int substeps, double max_angle, double s1, double co1, double s2, double co2,
+                                leg_tally *rec, leg_log *log, leg_hybrid_tangent *J)
 {
     leg_model model;
     model_init(&model, P);
@@ -398,7 +423,7 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
         keep = f.y - anchor[1] > LEG_GROUND_TOL || f.vy > LEG_REST_SPEED;
     }
     if (!keep) {
-        mode = choose_mode(mode, &g.X, anchor, M, u, -1, settled, rec);
+        mode = choose_mode(mode, &g.X, anchor, M, u, -1, settled, rec, J);
         g.k = derivative(mode, M, u, &g.X);
     }
     g.t = 0.0;
@@ -408,9 +433,18 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
     double w0a, w0b;
     witnesses(mode, M, u, &g.X, &g.k, anchor, &w0a, &w0b);
     leg_crossing c;
-    while (advance_in(mode, M, u, anchor, &g, &w0a, &w0b, settled, events, rec, &c)) {
+    while (advance_in(mode, M, u, anchor, &g, &w0a, &w0b, settled, events, rec, &c, J)) {
         leg_located at;
         const int kind = locate(mode, M, u, anchor, &g.X, &g.k, c.h, &c.X1, &c.k1, &c.sums, c.watch_a, c.watch_b, &at);
+        if (J != NULL) {
+            event_tangent(kind, mode, M, u, &g.X, at.s, &at.X, J);
+            if (c.watch_a && c.watch_b) { /* both witnesses past zero at the located point: two events at once */
+                double wa, wb;
+                witnesses(mode, M, u, &at.X, &at.k, anchor, &wa, &wb);
+                if (wa < 0.0 && wb < 0.0)
+                    J->undefined |= LEG_D_SIMULTANEOUS;
+            }
+        }
         book(mode, M, at.s, &g.X, &at.X, &at.sums, rec);
         g.rk4_steps += at.rk4_steps;
         g.t += at.s;
@@ -425,7 +459,7 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
             rec->settles += 1;
         }
         g.X = at.X;
-        mode = transition(kind, mode, &g.X, anchor, M, u, &settled, rec);
+        mode = transition(kind, mode, &g.X, anchor, M, u, &settled, rec, J);
         /* the rest of the step in the new mode, by the step rule at the post-event rates */
         const int n_rule = substeps_for_rates(g.X.va, g.X.vb, g.X.vc, g.t_left, 1, max_angle);
         if (n_rule > g.n_left)
@@ -440,5 +474,49 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
     rec->work = u->tau_hip * (g.X.b - q[3]) + u->tau_knee * (g.X.c - q[4]);
     rec->work_load = u->load_x * (g.X.x - q[0]); /* exact: F constant over the step, x_b continuous */
     x_to(&g.X, q, qd);
+    if (J != NULL && (settled || rec->painleve > 0))
+        J->undefined |= settled ? LEG_D_SETTLED : LEG_D_PAINLEVE;
     return mode;
+}
+
+/* One hybrid control step of one robot, in place; returns the mode at its end.
+ * q, qd: the world state; anchor: the stick contact point (anchor[1] the ground's height; anchor[0] is
+ * rewritten: the contact point in stick, else the foot's x); s1 .. co2: the sines/cosines of q's link
+ * angles; rec: overwritten with what the step added up; log (NULL: none kept): each located transition's
+ * kind and time written as it comes (the entries after the last are left as they were). */
+static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *q, double *qd, int mode,
+                               double *anchor, double dt, int substeps, double max_angle, double s1, double co1,
+                               double s2, double co2, leg_tally *rec, leg_log *log)
+{
+    return hybrid_step_body(P, u, q, qd, mode, anchor, dt, substeps, max_angle, s1, co1, s2, co2, rec, log, NULL);
+}
+
+/* hybrid_control_step() with its derivatives (row-major): A = d(q, qd) after / d(q, qd) before, (10, 10), and
+ * B = d(q, qd) after / d(tau_hip, tau_knee), (10, 2). follow: the anchor's x is the foot's of the state before the
+ * step (hybrid_step's default), so that it moves with q; else it is held. Returns the LEG_D_* reasons the derivative
+ * does not exist (0: it does; else A and B are NaN). */
+static int hybrid_control_jacobians(const leg_params *P, const leg_drive *u, double *q, double *qd, int *mode, double *anchor,
+                                    double dt, int substeps, double max_angle, double s1, double co1, double s2, double co2,
+                                    int follow, leg_tally *rec, leg_log *log, double *A, double *B)
+{
+    leg_hybrid_tangent J;
+    memset(&J, 0, sizeof J);
+    for (int i = 0; i < LEG_NX; i++)
+        J.T.t[i][i] = 1.0;
+    J.dtau[0][LEG_NX] = 1.0;
+    J.dtau[1][LEG_NX + 1] = 1.0;
+    if (follow) { /* anchor_x = x_f(q) = x_b + l1 co1 + l2 co2 */
+        J.danchor[0][IX] = 1.0;
+        J.danchor[0][IA] = J.danchor[0][IB] = -P->l1 * s1 - P->l2 * s2;
+        J.danchor[0][IC] = -P->l2 * s2;
+    }
+    *mode = hybrid_step_body(P, u, q, qd, *mode, anchor, dt, substeps, max_angle, s1, co1, s2, co2, rec, log, &J);
+    const double fill = J.undefined ? NAN : 0.0;
+    for (int i = 0; i < LEG_NX; i++) {
+        for (int j = 0; j < LEG_NX; j++)
+            A[i * LEG_NX + j] = J.T.t[i][j] + fill;
+        for (int j = 0; j < LEG_NU; j++)
+            B[i * LEG_NU + j] = J.T.t[i][LEG_NX + j] + fill;
+    }
+    return J.undefined;
 }

@@ -29,8 +29,8 @@
 #include "dynamics.c"
 #include "contact.c"
 #include "integrate.c"
-#include "hybrid.c"
 #include "tangent.c"
+#include "hybrid.c"
 #include "env.c"
 #include "tasks.c"
 #include "draws.c"
@@ -122,6 +122,12 @@ static const entry ENTRIES[] = {
      NULL, RELEASED,
      {INOUT(q, 5), INOUT(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), {"mu", 'd', 'N', 'i', 1, 0.0, DBL_MAX, 0},
       {"mode", 'q', 'N', 'u', 1, LEG_STICK, LEG_FLIGHT, 0}, INOUT(anchor, 2), STEP_RULE, {"record", 'R', 'N', 'o', 1, ANY, 0}}},
+    {"hybrid_jacobians", "hybrid_step with its derivatives A (N, 10, 10) and B (N, 10, 2), NaN where they do not exist; follow: "
+                         "the anchor's x is the foot's of q and moves with it; undefined: why not (0: they exist).", k_hybrid_jacobians,
+     NULL, RELEASED,
+     {INOUT(q, 5), INOUT(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), {"mu", 'd', 'N', 'i', 1, 0.0, DBL_MAX, 0},
+      {"mode", 'q', 'N', 'u', 1, LEG_STICK, LEG_FLIGHT, 0}, INOUT(anchor, 2), STEP_RULE, {"record", 'R', 'N', 'o', 1, ANY, 0},
+      FLAG(follow), OUT(A, 100), OUT(B, 20), {"undefined", 'q', 'N', 'o', 1, ANY, 0}}},
     {"rk4_jacobians", "rk4_step with its derivatives A = d(q, qd) / d(q, qd) before (N, 10, 10) and B = d(q, qd) / d tau (N, 10, 2); "
                       "follow: the anchor is the foot of q and moves with it.", k_rk4_jacobians, NULL, RELEASED,
      {INOUT(q, 5), INOUT(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), IN(anchor, 2), STEP_RULE, FLAG(stance), FLAG(follow),

@@ -38,7 +38,7 @@ _HOMES = {
                   "step_inplace"),
     "hybrid": ("hybrid_step", "HybridStep", "LIFTOFF", "SLIP_ONSET", "SLIDING_STOP", "TOUCHDOWN", "EVENT_NAMES", "MAX_EVENTS",
                "LOG_SIZE", "GROUND_TOL", "SETTLE_SPEED", "ROOT_TIME"),
-    "derivatives": ("StepJacobians", "stance_step_jacobians", "flight_step_jacobians"),
+    "derivatives": ("StepJacobians", "HybridJacobians", "stance_step_jacobians", "flight_step_jacobians", "hybrid_step_jacobians"),
 }
 _HOME = {name: module for module, names in _HOMES.items() for name in names}
 __all__ = list(_HOME)

@@ -24,6 +24,14 @@ end of the first substep.
 
 Flight (``flight_step_jacobians``): the free robot, no projection.
 
+The unilateral ground (``hybrid_step_jacobians``): the derivative of ``hybrid_step`` through every event it locates
+(touchdown with its impact map, lift-off, slip onset, sliding stop). Across an event at time ``s`` in a substep the
+located state is ``x(s) = Phi(x0, s)`` with ``g(x(s)) = 0`` for the event's witness ``g``; differentiating,
+``ds = -(dg/dx dPhi/dx0 dx0) / (dg/dx dPhi/ds)``, and the state just past the event moves by
+``dPhi/dx0 dx0 + dPhi/ds ds`` before the reset map's derivative applies: the saltation matrix of the discrete map. The
+rest of the step has ``dt - s`` left, so the later substeps' lengths move with ``ds`` too. Where no derivative exists
+(a grazing event, two at once, the Painleve rule, a Zeno settle) the robot is flagged and its ``A``, ``B`` are NaN.
+
 Each Jacobian is checked in the tests against centred finite differences of the step and against complex-step
 differentiation of an independent RK4 step built on the SymPy Lagrangian's ``M``, ``h`` and ``Jc``.
 """
@@ -37,12 +45,21 @@ import numpy as np
 from .._core import kernels
 from .arrays import NQ, NU, batched, core_params, vec
 from .dynamics import foot_position
+from .hybrid import HybridStep, prepared_call
 from .integrate import DT, MAX_ANGLE, SUBSTEPS, checked_steps
 from .params import LegParams
 
-__all__ = ["StepJacobians", "stance_step_jacobians", "flight_step_jacobians", "NX"]
+__all__ = ["StepJacobians", "HybridJacobians", "stance_step_jacobians", "flight_step_jacobians", "hybrid_step_jacobians",
+           "GRAZING", "SIMULTANEOUS", "PAINLEVE", "SETTLED", "UNDEFINED_NAMES", "NX"]
 
 NX = 2 * NQ  # the state (q, qd)
+
+# Why the derivative of a hybrid step does not exist (bits of HybridJacobians.undefined; 0: it exists)
+GRAZING = 1  # a located event's witness crossed zero tangentially: the event's time has no derivative
+SIMULTANEOUS = 2  # two witnesses crossed at once: the events' order, and so the map, changes with the state
+PAINLEVE = 4  # the Painleve rule chose the mode (no consistent contact force): the map is not smooth there
+SETTLED = 8  # a Zeno settle (a touchdown slower than SETTLE_SPEED, or MAX_EVENTS events) held the foot down
+UNDEFINED_NAMES = {GRAZING: "grazing", SIMULTANEOUS: "simultaneous", PAINLEVE: "painleve", SETTLED: "settled"}
 
 
 class StepJacobians(NamedTuple):
@@ -53,6 +70,20 @@ class StepJacobians(NamedTuple):
     lam_mean: np.ndarray  # (..., 2) the mean contact force over the step [N] (zero in flight)
     A: np.ndarray  # (..., 10, 10) d(q, qd) after / d(q, qd) before
     B: np.ndarray  # (..., 10, 2) d(q, qd) after / d(tau_hip, tau_knee) [per N m]
+
+
+class HybridJacobians(NamedTuple):
+    """A hybrid control step and its derivatives (every array with the call's leading axes)."""
+
+    step: HybridStep  # what hybrid_step returns
+    A: np.ndarray  # (..., 10, 10) d(q, qd) after / d(q, qd) before; NaN where the derivative does not exist
+    B: np.ndarray  # (..., 10, 2) d(q, qd) after / d(tau_hip, tau_knee) [per N m]; NaN likewise
+    undefined: np.ndarray  # (...) int: why the derivative does not exist (GRAZING | SIMULTANEOUS | PAINLEVE | SETTLED), 0 where it does
+
+    @property
+    def defined(self) -> np.ndarray:
+        """(...) bool: where the derivative exists (and ``A``, ``B`` hold it)."""
+        return self.undefined == 0
 
 
 def _rk4_jacobians(q, qd, tau, p, anchor, dt, substeps, max_angle, stance: bool) -> StepJacobians:
@@ -97,3 +128,32 @@ def flight_step_jacobians(q, qd, tau, p: LegParams, dt: float = DT, substeps: in
         ValueError: as ``flight_step``.
     """
     return _rk4_jacobians(q, qd, tau, p, None, dt, substeps, max_angle, False)
+
+
+def hybrid_step_jacobians(
+    q, qd, tau, p: LegParams, mu, mode=None, anchor_x=None, dt: float = DT, substeps: int = SUBSTEPS,
+    max_angle: float = MAX_ANGLE, load_x=0.0,
+) -> HybridJacobians:
+    """``leg_env.physics.hybrid.hybrid_step`` on the unilateral ground and its Jacobians ``A``, ``B``.
+
+    Takes exactly ``hybrid_step``'s arguments and gives the same step (bit for bit, in ``.step``) with its
+    derivatives through every located event: the crossing substep differentiated at its located length, that length's
+    derivative from the event's witness (``ds = -dg / (dg/ds)``, the saltation of the discrete map), the reset map
+    (the touchdown's placement on the ground, the impact map in whichever of its branches it took, the sticking
+    impulse of a sliding stop) and the later substeps, whose lengths move with the event's time. With
+    ``anchor_x=None`` the stick anchor is the foot of ``q`` and its derivative follows ``q``; a given anchor is held.
+    The substep counts and the sequence of events and modes are held: ``A`` is the derivative of the branch the step
+    took.
+
+    Where the derivative does not exist (``undefined``: a grazing event, two events at once, the Painleve rule, a
+    Zeno settle), ``A`` and ``B`` are NaN and ``defined`` is False.
+
+    Raises:
+        ValueError: as ``hybrid_step`` (the message names the argument).
+    """
+    call = prepared_call(q, qd, tau, p, mu, mode, anchor_x, dt, substeps, max_angle, load_x)
+    n = call.arguments[0].shape[0]
+    A, B, undefined = np.empty((n, NX * NX)), np.empty((n, NX * NU)), np.empty(n, np.int64)
+    kernels.hybrid_jacobians(*call.arguments, anchor_x is None, A, B, undefined)
+    lead = call.lead
+    return HybridJacobians(call.result(), A.reshape(lead + (NX, NX)), B.reshape(lead + (NX, NU)), undefined.reshape(lead))

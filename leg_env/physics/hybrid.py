@@ -138,6 +138,52 @@ def hybrid_step(
     Returns:
         ``HybridStep``: the new state and mode, and what the step did.
     """
+    call = prepared_call(q, qd, tau, p, mu, mode, anchor_x, dt, substeps, max_angle, load_x)
+    kernels.hybrid_step(*call.arguments)
+    return call.result()
+
+
+class PreparedCall(NamedTuple):
+    """A hybrid step's arguments checked and laid out for the compiled core (``prepared_call``)."""
+
+    lead: tuple  # the call's leading shape
+    arguments: tuple  # q, qd, tau, p, load, mu, mode, anchor, dt, substeps, max_angle, record: the core's order
+    dt: float
+
+    def result(self) -> "HybridStep":
+        """The ``HybridStep`` the core wrote into the arguments."""
+        qf, qdf, _, _, _, _, modes, anchor, _, _, _, record = self.arguments
+        lead, dt = self.lead, self.dt
+
+        def r(x, tail=()):
+            return np.ascontiguousarray(x).reshape(lead + tail)
+
+        return HybridStep(
+            q=r(qf, (NQ,)),
+            qd=r(qdf, (NQ,)),
+            mode=r(modes),
+            anchor_x=r(anchor[:, 0].copy()),
+            lam_mean=r(record["impulse"] / dt, (2,)),
+            impulse=r(record["kick"], (2,)),
+            stick_time=r(record["stick_time"]),
+            slip_time=r(record["slip_time"]),
+            flight_time=r(record["flight_time"]),
+            slip_distance=r(record["slip_distance"]),
+            work=r(record["work"]),
+            work_load=r(record["work_load"]),
+            slip_dissipation=r(record["slip_dissipation"]),
+            impact_dissipation=r(record["impact_dissipation"]),
+            events=r(record["events"].astype(np.int64)),
+            painleve=r(record["painleve"].astype(np.int64)),
+            settles=r(record["settles"].astype(np.int64)),
+            event_time=r(record["event_time"], (LOG_SIZE,)),
+            event_kind=r(record["event_kind"].astype(np.int64), (LOG_SIZE,)),
+            rk4_steps=r(record["rk4_steps"].astype(np.int64)),
+        )
+
+
+def prepared_call(q, qd, tau, p: LegParams, mu, mode, anchor_x, dt, substeps, max_angle, load_x) -> PreparedCall:
+    """``hybrid_step``'s arguments checked (an error names the argument) and laid out for the compiled core."""
     dt, substeps, max_angle = checked_steps(dt, substeps, max_angle)
     lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
     qf, qdf = qf.copy(), qdf.copy()
@@ -164,30 +210,5 @@ def hybrid_step(
     if not np.all(np.isfinite(load)):
         raise ValueError("load_x must be finite")
     record = np.empty(n, dtype=RECORD)
-    kernels.hybrid_step(qf, qdf, tf, core_params(p), load, mu_f, modes, anchor, dt, substeps, max_angle, record)
+    return PreparedCall(lead, (qf, qdf, tf, core_params(p), load, mu_f, modes, anchor, dt, substeps, max_angle, record), dt)
 
-    def r(x, tail=()):
-        return np.ascontiguousarray(x).reshape(lead + tail)
-
-    return HybridStep(
-        q=r(qf, (NQ,)),
-        qd=r(qdf, (NQ,)),
-        mode=r(modes),
-        anchor_x=r(anchor[:, 0].copy()),
-        lam_mean=r(record["impulse"] / dt, (2,)),
-        impulse=r(record["kick"], (2,)),
-        stick_time=r(record["stick_time"]),
-        slip_time=r(record["slip_time"]),
-        flight_time=r(record["flight_time"]),
-        slip_distance=r(record["slip_distance"]),
-        work=r(record["work"]),
-        work_load=r(record["work_load"]),
-        slip_dissipation=r(record["slip_dissipation"]),
-        impact_dissipation=r(record["impact_dissipation"]),
-        events=r(record["events"].astype(np.int64)),
-        painleve=r(record["painleve"].astype(np.int64)),
-        settles=r(record["settles"].astype(np.int64)),
-        event_time=r(record["event_time"], (LOG_SIZE,)),
-        event_kind=r(record["event_kind"].astype(np.int64), (LOG_SIZE,)),
-        rk4_steps=r(record["rk4_steps"].astype(np.int64)),
-    )

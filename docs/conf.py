@@ -59,7 +59,7 @@ napoleon_numpy_docstring = True
 
 # types from libraries with no inventory here (the build needs no network): named, not linked
 nitpick_ignore_regex = [
-    (r"py:.*", r"(numpy|np|gymnasium|gym|collections|typing|enum|dataclasses|argparse)(\..*)?"),
+    (r"py:.*", r"(numpy|np|gymnasium|gym|torch|collections|typing|enum|dataclasses|argparse)(\..*)?"),
     (r"py:class", r"(optional )?(NDArray|ArrayLike|ndarray|callable|array_like|float|int|bool|str|dict|tuple|list)"),
     # the generic names of Gymnasium's signatures, and classes documented with their tasks, not here
     (r"py:class", r"(ObsType|ActType|AutoresetMode|StanceConfig|PushConfig|HopConfig|observation)"),

@@ -456,3 +456,112 @@ def test_bad_input_is_named():
         stance_step_jacobians(q, qd, tau, p, anchor=np.zeros(3))
     with pytest.raises(TypeError):
         stance_step_jacobians(q, qd, tau, p, anchr=None)
+
+
+# ------------------------------------------------------------------ the vector env's Jacobians
+
+
+@pytest.mark.parametrize("env_id, kwargs", [
+    ("leg_env/PlanarLegStance-v0", {}),
+    ("leg_env/PlanarLegHop-v4", {}),
+    ("leg_env/PlanarLegBalance-v1", {"motor_speed": 20.0}),
+    ("leg_env/PlanarLegPush-v2", {"randomize": True}),
+], ids=["pinned", "hop", "balance-motor", "push-randomized"])
+def test_env_jacobians_against_differences_of_its_steps(env_id, kwargs):
+    """``envs.unwrapped.jacobians(actions)`` against centred differences of the env's own steps (copies of it):
+    ``B`` in action units (the torque limit, the motor model, a robot of its own per row), and ``A``'s columns of the
+    joint rates, through which the motor model's torque falls with speed. An action beyond its bound has no effect."""
+    import copy
+
+    n, eps = 32, 1e-6
+    envs = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
+    envs.reset(seed=1)
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        envs.step(rng.uniform(-1.0, 1.0, (n, 2)))
+    actions = rng.uniform(-0.9, 0.9, (n, 2))
+    actions[0, 0] = 1.5
+    before = envs.unwrapped.state
+    A, B = envs.unwrapped.jacobians(actions)
+    np.testing.assert_array_equal(envs.unwrapped.state[0], before[0])  # nothing stepped
+
+    def stepped(change):
+        e = copy.deepcopy(envs)
+        a = change(e, actions.copy())
+        e.step(a)
+        q, qd, _ = e.unwrapped.state
+        return np.concatenate([q, qd], axis=1), e.unwrapped.elapsed_steps > 0
+
+    def column(change_plus, change_minus):
+        (yp, ok_p), (ym, ok_m) = stepped(change_plus), stepped(change_minus)
+        return (yp - ym) / (2 * eps), ok_p & ok_m
+
+    B_fd, A_fd, ok = np.empty_like(B), np.empty((n, NX, 2)), np.ones(n, bool)
+    q, _, _ = envs.unwrapped.state
+    Jc = dyn.contact_jacobian(q, envs.unwrapped.params)
+    direction = np.zeros((n, NX, 2))  # along q1' (q2'), the base's velocity taking up the foot's change
+    for j in range(2):
+        direction[:, 8 + j, j] = 1.0
+        direction[:, 5:7, j] = -Jc[:, :, 3 + j]
+    for j in range(2):
+        def shift(d, j=j):
+            def change(e, a):
+                a[:, j] += d
+                return a
+            return change
+
+        def rate(d, j=j):
+            def change(e, a):  # the joint's rate, the base's velocity keeping the foot's (on the contact's manifold)
+                e.unwrapped._state["qd"] += d * direction[:, 5:, j]
+                return a
+            return change
+
+        B_fd[:, :, j], ok_b = column(shift(eps), shift(-eps))
+        A_fd[:, :, j], ok_a = column(rate(eps), rate(-eps))
+        ok &= ok_a & ok_b
+    ok &= np.isfinite(B).all(axis=(1, 2))
+    assert ok.sum() >= n - 8
+    assert rel(B, B_fd)[ok].max() <= 1e-5
+    assert rel(A @ direction, A_fd)[ok].max() <= 1e-5
+    np.testing.assert_array_equal(B[0, :, 0], 0.0)
+
+
+# ------------------------------------------------------------------ torch
+
+
+def test_torch_rollout_gradients_are_the_jacobians():
+    """A differentiable rollout of hops (leg_env.autograd): its gradient is the product of the steps'
+    Jacobians, checked by torch's own gradcheck on one step and by the chain of A, B over a rollout through events."""
+    import torch
+
+    from leg_env import autograd
+
+    p, mu = LegParams(), 0.8
+    q_eq, tau_eq, _ = dyn.static_equilibrium(p)
+    n, T = 8, 40
+    rng = np.random.default_rng(0)
+    q = np.tile(q_eq, (n, 1))
+    q[:, 1] += rng.uniform(0.005, 0.02, n)  # dropped from a little height: each rollout lands
+    x0 = torch.tensor(np.concatenate([q, np.zeros((n, 5))], axis=1), requires_grad=True)
+    taus = torch.tensor(np.tile(tau_eq, (T, n, 1)) + rng.normal(0.0, 3.0, (T, n, 2)), requires_grad=True)
+    x, mode, anchor, events = x0, None, None, 0
+    chain = np.tile(np.eye(NX), (n, 1, 1))
+    for t in range(T):
+        J = dyn.hybrid_step_jacobians(x.detach().numpy()[:, :5], x.detach().numpy()[:, 5:], taus[t].detach().numpy(), p, mu,
+                                      mode=mode, anchor_x=anchor)
+        chain = J.A @ chain
+        x, step = autograd.hybrid_step(x, taus[t], p, mu, mode=mode, anchor_x=anchor)
+        mode, anchor, events = step.mode, step.anchor_x, events + int(step.events.sum())
+    assert events >= n  # every robot landed
+    weights = torch.tensor(rng.normal(size=(n, NX)))
+    (x * weights).sum().backward()
+    expected = np.einsum("ni,nij->nj", weights.numpy(), chain)
+    np.testing.assert_allclose(x0.grad.numpy(), expected, rtol=1e-10, atol=1e-12)
+    assert taus.grad.abs().sum() > 0
+    # torch's gradcheck of one pinned step (its own finite differences)
+    q1, qd1 = dyn.project_stance(q_eq + np.r_[0, 0, rng.normal(0, 0.05, 3)], rng.normal(0, 0.3, 5), p, np.zeros(2))
+    x1 = torch.tensor(np.concatenate([q1, qd1])[None], requires_grad=True)
+    tau1 = torch.tensor(tau_eq[None], requires_grad=True)
+    assert torch.autograd.gradcheck(lambda a, b: autograd.stance_step(a, b, p)[0], (x1, tau1), eps=1e-6, atol=1e-5)
+    with pytest.raises(ValueError, match="float64"):
+        autograd.hybrid_step(x0.float(), taus[0].float(), p, mu)

@@ -221,17 +221,17 @@ static inline leg_accel mode_partials(int mode, const leg_model *M, const leg_dr
 
 /* One RK4 stage's derivative k = (qd, qdd) and its tangent dk = (dS's rates, D dz), for the stage's state tangent dS.
  * dtau: the torques' tangent (rows tau_hip, tau_knee). */
-static inline void stage_tangent(int nc, const leg_partials *D, const leg_tangent *dS, const double dtau[LEG_NU][LEG_NT],
-                                 leg_tangent *dk)
+static inline void stage_tangent(int nc, int base, const leg_partials *D, const leg_tangent *dS,
+                                 const double dtau[LEG_NU][LEG_NT], leg_tangent *dk)
 {
-    for (int i = 0; i < LEG_NQ; i++)
+    for (int i = base ? 0 : IA; i < LEG_NQ; i++)
         for (int j = 0; j < nc; j++)
             dk->t[i][j] = dS->t[IVX + i][j];
     for (int j = 0; j < nc; j++) {
         const double dth1 = dS->t[IA][j] + dS->t[IB][j], dth2 = dth1 + dS->t[IC][j];
         const double dw1 = dS->t[IVA][j] + dS->t[IVB][j], dw2 = dw1 + dS->t[IVC][j];
         const double dz[LEG_NZ] = {dth1, dth2, dw1, dw2, dtau[0][j], dtau[1][j]};
-        for (int r = 0; r < LEG_NQ; r++) {
+        for (int r = base ? 0 : IA; r < LEG_NQ; r++) {
             double s = 0.0;
             for (int k = 0; k < LEG_NZ; k++)
                 s += D->d[r][k] * dz[k];
@@ -240,17 +240,23 @@ static inline void stage_tangent(int nc, const leg_partials *D, const leg_tangen
     }
 }
 
+/* Whether row i of a tangent is the base's position or velocity: in stick the projection sets them after every
+ * substep from the leg, and nothing in the substep reads them (base 0 skips them). */
+static inline int base_row(int i) { return i == IX || i == IY || i == IVX || i == IVY; }
+
 /* out = a + c b + f dh (column j: dh[j] times the primal derivative f; dh NULL: none), entry by entry. */
-static inline void tangent_axpy(int nc, const leg_tangent *a, double c, const leg_tangent *b, const double *f,
+static inline void tangent_axpy(int nc, int base, const leg_tangent *a, double c, const leg_tangent *b, const double *f,
                                 const double *dh, double dh_scale, leg_tangent *out)
 {
-    for (int i = 0; i < LEG_NX; i++)
+    for (int i = 0; i < LEG_NX; i++) {
+        if (!base && base_row(i))
+            continue;
         for (int j = 0; j < nc; j++)
             out->t[i][j] = a->t[i][j] + c * b->t[i][j];
-    if (dh != NULL)
-        for (int i = 0; i < LEG_NX; i++)
+        if (dh != NULL)
             for (int j = 0; j < nc; j++)
                 out->t[i][j] += dh_scale * dh[j] * f[i];
+    }
 }
 
 /* The contact's projection (rk4_substep's) on the tangent of a substep's end state Y: in stick the base follows the
@@ -283,13 +289,14 @@ static void rk4_substep_tangent(int nc, int mode, const leg_model *M, const leg_
                                 const double *dh, leg_tangent *T)
 {
     const double ch = RK4_HALF * h;
+    const int base = mode != LEG_STICK; /* in stick the projection sets the base's rows from the leg's */
     leg_partials D;
     leg_tangent dk1, dk2, dk3, dk4, dS;
     double S1, C1, S2, C2;
     /* stage 1 at X */
     const double w1 = X->va + X->vb, w2 = w1 + X->vc;
     const leg_accel k1 = mode_partials(mode, M, u, X->s1, X->c1, X->s2, X->c2, w1, w2, &D);
-    stage_tangent(nc, &D, T, dtau, &dk1);
+    stage_tangent(nc, base, &D, T, dtau, &dk1);
     const double f1[LEG_NX] = {X->vx, X->vy, X->va, X->vb, X->vc, k1.xdd, k1.ydd, k1.thbdd, k1.q1dd, k1.q2dd};
     /* stage 2 at X + h/2 k1 */
     const double vx2 = X->vx + ch * k1.xdd, vy2 = X->vy + ch * k1.ydd;
@@ -298,8 +305,8 @@ static void rk4_substep_tangent(int nc, int mode, const leg_model *M, const leg_
     turn(X->s2, X->c2, ch * w2, &S2, &C2);
     const double w1_2 = va2 + vb2, w2_2 = w1_2 + vc2;
     const leg_accel k2 = mode_partials(mode, M, u, S1, C1, S2, C2, w1_2, w2_2, &D);
-    tangent_axpy(nc, T, ch, &dk1, f1, dh, RK4_HALF, &dS);
-    stage_tangent(nc, &D, &dS, dtau, &dk2);
+    tangent_axpy(nc, base, T, ch, &dk1, f1, dh, RK4_HALF, &dS);
+    stage_tangent(nc, base, &D, &dS, dtau, &dk2);
     const double f2[LEG_NX] = {vx2, vy2, va2, vb2, vc2, k2.xdd, k2.ydd, k2.thbdd, k2.q1dd, k2.q2dd};
     /* stage 3 at X + h/2 k2 */
     const double vx3 = X->vx + ch * k2.xdd, vy3 = X->vy + ch * k2.ydd;
@@ -308,8 +315,8 @@ static void rk4_substep_tangent(int nc, int mode, const leg_model *M, const leg_
     turn(X->s2, X->c2, ch * w2_2, &S2, &C2);
     const double w1_3 = va3 + vb3, w2_3 = w1_3 + vc3;
     const leg_accel k3 = mode_partials(mode, M, u, S1, C1, S2, C2, w1_3, w2_3, &D);
-    tangent_axpy(nc, T, ch, &dk2, f2, dh, RK4_HALF, &dS);
-    stage_tangent(nc, &D, &dS, dtau, &dk3);
+    tangent_axpy(nc, base, T, ch, &dk2, f2, dh, RK4_HALF, &dS);
+    stage_tangent(nc, base, &D, &dS, dtau, &dk3);
     const double f3[LEG_NX] = {vx3, vy3, va3, vb3, vc3, k3.xdd, k3.ydd, k3.thbdd, k3.q1dd, k3.q2dd};
     /* stage 4 at X + h k3 */
     const double vx4 = X->vx + h * k3.xdd, vy4 = X->vy + h * k3.ydd;
@@ -317,15 +324,20 @@ static void rk4_substep_tangent(int nc, int mode, const leg_model *M, const leg_
     turn(X->s1, X->c1, h * w1_3, &S1, &C1);
     turn(X->s2, X->c2, h * w2_3, &S2, &C2);
     const leg_accel k4 = mode_partials(mode, M, u, S1, C1, S2, C2, va4 + vb4, va4 + vb4 + vc4, &D);
-    tangent_axpy(nc, T, h, &dk3, f3, dh, 1.0, &dS);
-    stage_tangent(nc, &D, &dS, dtau, &dk4);
+    tangent_axpy(nc, base, T, h, &dk3, f3, dh, 1.0, &dS);
+    stage_tangent(nc, base, &D, &dS, dtau, &dk4);
     /* y1 = y0 + h (k1 + 2 k2 + 2 k3 + k4) / 6 */
-    for (int i = 0; i < LEG_NX; i++)
+    for (int i = 0; i < LEG_NX; i++) {
+        if (!base && base_row(i))
+            continue;
         for (int j = 0; j < nc; j++)
             T->t[i][j] += h * (RK4_W0 * (dk1.t[i][j] + dk4.t[i][j]) + RK4_W1 * (dk2.t[i][j] + dk3.t[i][j]));
+    }
     if (dh != NULL) {
         const double f4[LEG_NX] = {vx4, vy4, va4, vb4, vc4, k4.xdd, k4.ydd, k4.thbdd, k4.q1dd, k4.q2dd};
         for (int i = 0; i < LEG_NX; i++) {
+            if (!base && base_row(i))
+                continue;
             const double f = RK4_W0 * (f1[i] + f4[i]) + RK4_W1 * (f2[i] + f3[i]);
             for (int j = 0; j < nc; j++)
                 T->t[i][j] += dh[j] * f;

@@ -413,6 +413,31 @@ class LegVectorEnv(VectorEnv):
         for chunk in chunks:
             chunk.result()
 
+    def jacobians(self, actions) -> tuple[np.ndarray, np.ndarray]:
+        """The exact Jacobians of the next ``step(actions)`` from the batch's current states; the env is not stepped.
+
+        Args:
+            actions: ``(num_envs, 2)``, as ``step`` takes them (in [-1, 1]; beyond, clipped).
+
+        Returns:
+            ``(A, B)``: ``A`` ``(num_envs, 10, 10)``, d(q, qd) after the step / d(q, qd) now, and ``B``
+            ``(num_envs, 10, 2)``, d(q, qd) after the step / d action, in the action's units (the torque limit
+            times the torque's derivative; 0 for an entry beyond its bound). ``q = (x_b, y_b, th_b, q1, q2)`` as in
+            ``state``. On the unilateral ground a robot whose step has no derivative (a grazing event, two at once,
+            the Painleve rule, a Zeno settle; ``leg_env.physics.derivatives``) gets NaN. The anchor is the state's,
+            held.
+
+        Raises:
+            ValueError: ``actions`` of the wrong shape, or not finite.
+        """
+        from ..physics.derivatives import action_jacobians
+
+        a = self._checked_actions(actions)
+        c = self.config
+        A, B, _ = action_jacobians(self._state, self._robots, a, dt=c.dt, substeps=c.substeps, max_angle=c.max_angle,
+                                   motor_speed=c.motor_speed, unilateral=self.unilateral)
+        return A, B
+
     def _checked_actions(self, actions) -> np.ndarray:
         """``actions`` as a C-contiguous float64 ``(num_envs, 2)`` array; ``ValueError`` if malformed or non-finite.
 

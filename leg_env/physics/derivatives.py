@@ -50,6 +50,7 @@ from .integrate import DT, MAX_ANGLE, SUBSTEPS, checked_steps
 from .params import LegParams
 
 __all__ = ["StepJacobians", "HybridJacobians", "stance_step_jacobians", "flight_step_jacobians", "hybrid_step_jacobians",
+           "action_jacobians",
            "GRAZING", "SIMULTANEOUS", "PAINLEVE", "SETTLED", "UNDEFINED_NAMES", "NX"]
 
 NX = 2 * NQ  # the state (q, qd)
@@ -157,3 +158,57 @@ def hybrid_step_jacobians(
     kernels.hybrid_jacobians(*call.arguments, anchor_x is None, A, B, undefined)
     lead = call.lead
     return HybridJacobians(call.result(), A.reshape(lead + (NX, NX)), B.reshape(lead + (NX, NU)), undefined.reshape(lead))
+
+
+def action_jacobians(state, robots, actions, *, dt: float, substeps: int, max_angle: float, motor_speed: float,
+                     unilateral: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The Jacobians of an environment's next control step from its current states, in its action units.
+
+    What ``LegVectorEnv.jacobians`` computes, from the env's arrays: ``state`` ``(N,)`` rows of its state (``q``,
+    ``qd``, ``anchor``, ``mode``, ``load``), ``robots`` ``(N,)`` or ``(1,)`` rows of its robots (parameters, friction,
+    torque limits), ``actions`` ``(N, 2)`` finite. The torque of an action entry is ``clip(a, -1, 1)`` times its
+    limit, through the motor model (``motor_speed``; ``inf``: an ideal torque source) at the joint's speed.
+
+    Returns:
+        ``(A, B, undefined)``: ``A`` ``(N, 10, 10)`` = d(q, qd) after / d(q, qd) now, with the motor model's
+        dependence on the joint speeds; ``B`` ``(N, 10, 2)`` = d(q, qd) after / d action: the torque's derivative
+        times the limit, from inside the range at a bound and 0 beyond it; ``undefined`` ``(N,)`` as
+        ``HybridJacobians.undefined`` (0 on the pinned foot). The anchor is the state's, held (the env carries it).
+    """
+    n = state.shape[0]
+    robots = np.broadcast_to(robots, (n,)) if robots.shape[0] == 1 else robots
+    p = np.ascontiguousarray(robots["p"]).view(np.float64).reshape(n, -1)
+    limit = np.asarray(robots["torque_limit"], dtype=np.float64)
+    a = np.asarray(actions, dtype=np.float64)
+    q, qd = state["q"].copy(), state["qd"].copy()
+    tau_c = np.clip(a, -1.0, 1.0) * limit
+    dtau_da = np.where(np.abs(a) <= 1.0, limit, 0.0)
+    dtau_dw = np.zeros((n, NU))
+    if np.isinf(motor_speed):
+        tau = tau_c
+    else:  # tau = tau_c clip(1 - s w / w0, 0, 1), s the torque's sign: the speed in its direction costs torque
+        w = qd[:, 3:5]
+        along = np.where(tau_c > 0.0, w, -w)
+        raw = 1.0 - along / motor_speed
+        factor = np.clip(raw, 0.0, 1.0)
+        inside = (raw > 0.0) & (raw < 1.0) & (tau_c != 0.0)
+        tau = tau_c * factor
+        dtau_da = dtau_da * factor
+        dtau_dw = np.where(inside, -np.abs(tau_c) / motor_speed, 0.0)
+    tau = np.ascontiguousarray(tau)
+    A, B = np.empty((n, NX * NX)), np.empty((n, NX * NU))
+    anchor = np.ascontiguousarray(state["anchor"])
+    load = np.ascontiguousarray(state["load"], dtype=np.float64)
+    if unilateral:
+        from .layout import RECORD
+
+        undefined = np.empty(n, np.int64)
+        mode = state["mode"].astype(np.int64)
+        kernels.hybrid_jacobians(q, qd, tau, p, load, np.ascontiguousarray(robots["mu"], dtype=np.float64), mode,
+                                 anchor.copy(), dt, substeps, max_angle, np.empty(n, RECORD), False, A, B, undefined)
+    else:
+        undefined = np.zeros(n, np.int64)
+        kernels.rk4_jacobians(q, qd, tau, p, load, anchor, dt, substeps, max_angle, True, False, np.empty((n, 2)), A, B)
+    A, B = A.reshape(n, NX, NX), B.reshape(n, NX, NU)
+    A[:, :, 8:10] += B * dtau_dw[:, None, :]  # the motor's torque falls with the joint's speed (q1', q2')
+    return A, B * dtau_da[:, None, :], undefined

@@ -8,7 +8,8 @@ one thread, the compiled kernels called directly:
 
 * the step: ``kernels.rk4_step`` (what ``stance_step`` and the pinned task run) or ``kernels.hybrid_step`` (what
   ``hybrid_step`` and the unilateral tasks run);
-* the step with ``A`` and ``B``: ``kernels.rk4_jacobians`` or ``kernels.hybrid_jacobians``;
+* the step with ``A`` and ``B``: ``kernels.rk4_jacobians`` or ``kernels.hybrid_jacobians``; and with ``P`` too (the
+  derivative by the robot's eleven parameters and the friction coefficient);
 * forward differences of ``A`` and ``B``: the step on the 13 N states of the batch and its 12 one-sided perturbations
   (10 state entries, 2 torques) in one call, then the differences;
 * centred differences: the step on 25 N states (each direction perturbed both ways) in one call, then the differences.
@@ -76,7 +77,12 @@ def cases(p: LegParams, stance: bool, q, qd, tau):
 
     def jacobians():
         qq, vv, lam, A, B = q.copy(), qd.copy(), np.empty((N, 2)), np.empty((N, 100)), np.empty((N, 20))
-        kernels.rk4_jacobians(qq, vv, tau, P, np.zeros(N), anchor, DT, SUBSTEPS, MAX_ANGLE, stance, stance, lam, A, B)
+        kernels.rk4_jacobians(qq, vv, tau, P, np.zeros(N), anchor, DT, SUBSTEPS, MAX_ANGLE, stance, stance, lam, A, B, None)
+
+    def with_params():
+        qq, vv, lam, A, B = q.copy(), qd.copy(), np.empty((N, 2)), np.empty((N, 100)), np.empty((N, 20))
+        kernels.rk4_jacobians(qq, vv, tau, P, np.zeros(N), anchor, DT, SUBSTEPS, MAX_ANGLE, stance, stance, lam, A, B,
+                              np.empty((N, 120)))
 
     def differences(sides: int):
         """The step on the batch and its perturbations in one call: rows [base, +e_0 .. +e_11 (, -e_0 .. -e_11)]."""
@@ -95,7 +101,7 @@ def cases(p: LegParams, stance: bool, q, qd, tau):
             return (y[1:] - y[0]) / EPS
         return (y[1:13] - y[13:]) / (2 * EPS)
 
-    return {"step": step, "A, B": jacobians, "forward differences (13 steps)": lambda: differences(1),
+    return {"step": step, "A, B": jacobians, "A, B, P": with_params, "forward differences (13 steps)": lambda: differences(1),
             "centred differences (25 steps)": lambda: differences(2)}
 
 
@@ -131,7 +137,13 @@ def hybrid_cases(q, qd, tau, mode, p: LegParams, mu: float):
     def jacobians():
         qq, vv, mm, aa, rec = q.copy(), qd.copy(), mode.copy(), anchor.copy(), np.empty(N, RECORD)
         A, B, undefined = np.empty((N, 100)), np.empty((N, 20)), np.empty(N, np.int64)
-        kernels.hybrid_jacobians(qq, vv, tau, P, load, mus, mm, aa, DT, SUBSTEPS, MAX_ANGLE, rec, True, A, B, undefined)
+        kernels.hybrid_jacobians(qq, vv, tau, P, load, mus, mm, aa, DT, SUBSTEPS, MAX_ANGLE, rec, True, A, B, undefined, None)
+
+    def with_params():
+        qq, vv, mm, aa, rec = q.copy(), qd.copy(), mode.copy(), anchor.copy(), np.empty(N, RECORD)
+        A, B, undefined = np.empty((N, 100)), np.empty((N, 20)), np.empty(N, np.int64)
+        kernels.hybrid_jacobians(qq, vv, tau, P, load, mus, mm, aa, DT, SUBSTEPS, MAX_ANGLE, rec, True, A, B, undefined,
+                                 np.empty((N, 120)))
 
     def differences(sides: int):
         k = 1 + 12 * sides
@@ -150,7 +162,7 @@ def hybrid_cases(q, qd, tau, mode, p: LegParams, mu: float):
             return (y[1:] - y[0]) / EPS
         return (y[1:13] - y[13:]) / (2 * EPS)
 
-    return {"step": step, "A, B": jacobians, "forward differences (13 steps)": lambda: differences(1),
+    return {"step": step, "A, B": jacobians, "A, B, P": with_params, "forward differences (13 steps)": lambda: differences(1),
             "centred differences (25 steps)": lambda: differences(2)}
 
 

@@ -39,10 +39,11 @@ class ComplexStep:
 
     def __init__(self, p):
         self.p = p
+        self.params = p.array.astype(complex)  # the parameters the terms are evaluated with (a complex step moves them)
         self.f = sympy_reference().raw
 
     def terms(self, q, qd):
-        M, h, _, Jc, jd, p_f, *_ = self.f(q, qd, self.p.array)
+        M, h, _, Jc, jd, p_f, *_ = self.f(q, qd, self.params)
         cast = lambda a: np.asarray(a, dtype=complex)  # noqa: E731
         return cast(M), cast(h).ravel(), cast(Jc), cast(jd).ravel(), cast(p_f).ravel()
 
@@ -103,6 +104,17 @@ class ComplexStep:
             e[j] = 1j * EPS
             B[:, j] = run(x, tau + e).imag / EPS
         return A, B
+
+    def param_jacobian(self, q, qd, tau, dt, substeps, max_angle, stance: bool, anchor=None):
+        """``P`` (10, 12) by complex steps of the parameters (LegParams' fields in order; the last column, mu's, zero)."""
+        n = substeps_for(qd, dt, substeps, max_angle)
+        P = np.zeros((10, 12))
+        for k in range(11):
+            self.params[k] += 1j * EPS
+            a = self.terms(np.asarray(q, complex), np.asarray(qd, complex))[4] if anchor is None else np.asarray(anchor, dtype=complex)
+            P[:, k] = self.step(q, qd, tau, a, dt, substeps, max_angle, stance, n).imag / EPS
+            self.params[k] = self.p.array[k]
+        return P
 
 
 STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT = 0, 1, 2, 3
@@ -239,6 +251,22 @@ class HybridComplexStep(ComplexStep):
                 mode = STICK
             n_left = max(n_left, substeps_for(qd, t_left.real, 1, max_angle))
         return np.concatenate([q, qd]), events
+
+    def hybrid_param_jacobian(self, q, qd, tau, mode, dt, substeps, max_angle, anchor_x=None):
+        """``(P, events)`` by complex steps of the parameters and of mu (the last column)."""
+        P = np.empty((10, 12))
+        _, events = self.hybrid_step(q, qd, tau, mode, dt, substeps, max_angle, anchor_x)
+        for k in range(12):
+            if k < 11:
+                self.params[k] += 1j * EPS
+            else:
+                self.mu = self.mu + 1j * EPS
+            y, ev = self.hybrid_step(q, qd, tau, mode, dt, substeps, max_angle, anchor_x)
+            assert ev == events
+            P[:, k] = y.imag / EPS
+            self.params[:] = self.p.array
+            self.mu = self.mu.real if isinstance(self.mu, complex) else self.mu
+        return P, events
 
     def hybrid_jacobians(self, q, qd, tau, mode, dt, substeps, max_angle, anchor_x=None):
         """``(A, B, events)`` by complex steps (the anchor's x follows ``q`` if ``anchor_x`` is None)."""

@@ -93,9 +93,11 @@ def test_against_complex_step_of_the_sympy_step(stance):
     for _ in range(REF_CASES):
         p = random_params(rng)
         q, qd, tau = random_state(p, rng, stance)
-        A_ref, B_ref = ComplexStep(p).jacobians(q, qd, tau, DT, SUBSTEPS, MAX_ANGLE, stance)
-        J = (stance_step_jacobians if stance else flight_step_jacobians)(q, qd, tau, p)
-        worst = max(worst, rel(J.A, A_ref), rel(J.B, B_ref))
+        ref = ComplexStep(p)
+        A_ref, B_ref = ref.jacobians(q, qd, tau, DT, SUBSTEPS, MAX_ANGLE, stance)
+        P_ref = ref.param_jacobian(q, qd, tau, DT, SUBSTEPS, MAX_ANGLE, stance)
+        J = (stance_step_jacobians if stance else flight_step_jacobians)(q, qd, tau, p, params=True)
+        worst = max(worst, rel(J.A, A_ref), rel(J.B, B_ref), rel(J.P, P_ref))
         substeps_seen.add(substeps_for(qd, DT, SUBSTEPS, MAX_ANGLE))
     assert worst <= REF_RTOL, worst
     assert len(substeps_seen) >= 3  # the step rule's substep count varied over the cases
@@ -338,8 +340,9 @@ def test_hybrid_against_finite_differences_on_rollouts(env_id, capsys):
 
 def test_hybrid_against_complex_step_through_events():
     """Through slip onset, lift-off (from a slip) and touchdown with its impact, against complex-step
-    differentiation of the independent hybrid step of ``derivative_ref.HybridComplexStep``: the touchdowns of a
-    hopper's rollout, and stick starts that break away (and some of them then lift off)."""
+    differentiation of the independent hybrid step of ``derivative_ref.HybridComplexStep``, by the state, the torques,
+    the parameters and mu: the touchdowns of a hopper's rollout, and stick starts that break away (and some of them
+    then lift off)."""
     from policies.hopper import HopperController
 
     seen = {}
@@ -367,16 +370,79 @@ def test_hybrid_against_complex_step_through_events():
         ref = HybridComplexStep(p_, mu_)
         try:
             A, B, events = ref.hybrid_jacobians(q_, qd_, tau_, mode_, DT, SUBSTEPS, MAX_ANGLE)
+            P, _ = ref.hybrid_param_jacobian(q_, qd_, tau_, mode_, DT, SUBSTEPS, MAX_ANGLE)
         except Refused:  # a step the reference does not write
             refused += 1
             continue
-        Jc = dyn.hybrid_step_jacobians(q_, qd_, tau_, p_, mu_, mode=mode_)
+        Jc = dyn.hybrid_step_jacobians(q_, qd_, tau_, p_, mu_, mode=mode_, params=True)
         assert [dyn.EVENT_NAMES[k] for k in Jc.step.event_kind if k >= 0] == events
-        err = max(rel(Jc.A, A), rel(Jc.B, B))
+        err = max(rel(Jc.A, A), rel(Jc.B, B), rel(Jc.P, P))
         assert err <= REF_RTOL_EVENT, (events, err)
         seen[tuple(events)] = seen.get(tuple(events), 0) + 1
     assert refused <= 2
     assert seen.get(("touchdown",), 0) >= 3 and seen.get(("slip_onset",), 0) >= 3 and seen.get(("slip_onset", "liftoff"), 0) >= 2, seen
+
+
+@pytest.mark.parametrize("env_id", ["leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v4"])
+def test_param_jacobian_against_finite_differences_on_rollouts(env_id, capsys):
+    """``P`` (the parameters and mu) against five-point differences of the step in each parameter, over rollout
+    states (random actions; the hop: its controller, so that it lands), per kind of event. Changing a length moves the
+    foot: for a robot in contact the base follows (y_b, and its velocity) so that the foot stays on the ground and, in
+    stick, at rest; that direction is ``P``'s column plus ``A`` times the base's change."""
+    import dataclasses
+
+    from leg_env.physics.params import PARAM_NAMES
+    from policies.hopper import HopperController
+
+    controller = HopperController() if env_id.endswith("Hop-v4") else None
+    q, qd, tau, mode, _, load, p, mu = unilateral_rollout_states(env_id, controller)
+    q, qd, tau, mode, load = (a[: HYBRID_ROBOTS * 100] for a in (q, qd, tau, mode, load))
+    n = q.shape[0]
+    J = dyn.hybrid_step_jacobians(q, qd, tau, p, mu, mode=mode, load_x=load, params=True)
+    kinds = J.step.event_kind
+    th1 = q[:, 2] + q[:, 3]
+    w1 = qd[:, 2] + qd[:, 3]
+    angles, rates = (th1, th1 + q[:, 4]), (w1, w1 + qd[:, 4])
+    contact = (mode != dyn.FLIGHT) | (dyn.foot_position(q, p)[:, 1] < 1e-5)
+    follow = np.zeros((n, NX, 2))  # the base's change per unit of l1, l2
+    for c in range(2):
+        follow[:, 1, c] = np.where(contact, -np.sin(angles[c]), 0.0)
+        follow[:, 6, c] = np.where(contact, -np.cos(angles[c]) * rates[c], 0.0)
+        follow[:, 5, c] = np.where(mode == dyn.STICK, np.sin(angles[c]) * rates[c], 0.0)
+    predicted = J.P.copy()
+    predicted[:, :, 6:8] += J.A @ follow
+    same = np.ones(n, bool)
+    err = np.full(n, np.inf)
+    for scale in (1e-6, 1e-7):
+        P = np.empty((n, NX, 12))
+        for k in range(12):
+            value = getattr(p, PARAM_NAMES[k]) if k < 11 else mu
+            eps = scale * max(1.0, abs(value))
+            ends = {}
+            for m in (-2, -1, 1, 2):
+                q_, qd_ = q, qd
+                if k in (6, 7):
+                    q_, qd_ = q + m * eps * follow[:, :5, k - 6], qd + m * eps * follow[:, 5:, k - 6]
+                p_ = dataclasses.replace(p, **{PARAM_NAMES[k]: value + m * eps}) if k < 11 else p
+                r = dyn.hybrid_step(q_, qd_, tau, p_, mu + m * eps if k == 11 else mu, mode=mode, load_x=load)
+                same &= (r.event_kind == kinds).all(axis=1) & (r.mode == J.step.mode)
+                ends[m] = np.concatenate([r.q, r.qd], axis=1)
+            P[:, :, k] = (8.0 * (ends[1] - ends[-1]) - (ends[2] - ends[-2])) / (12.0 * eps)
+        err = np.minimum(err, rel(predicted, P))
+    checked = same & J.defined
+    first = np.where(kinds[:, 0] < 0, -1, kinds[:, 0])
+    rows, worst = [], {}
+    for kind, name in [(-1, "no event"), *enumerate(dyn.EVENT_NAMES)]:
+        m = checked & (first == kind)
+        if m.any():
+            worst[name] = err[m].max()
+            rows.append(f"{name}: {m.sum()} (median {np.median(err[m]):.1e}, max {err[m].max():.1e})")
+    with capsys.disabled():
+        print(f"\n{env_id}, P: " + "; ".join(rows) + f"; events changed under a perturbation at {1 - same.mean():.2%}")
+    assert same.mean() > 0.99
+    assert worst["no event"] <= FD_RTOL
+    assert max(v for k, v in worst.items() if k != "no event") <= FD_RTOL_EVENT
+    assert "touchdown" in worst
 
 
 def test_no_derivative_is_flagged_not_given():

@@ -9,7 +9,7 @@
 
 #include "env.h"
 
-#define MAX_ARGS 16 /* arguments of an entry point, at most */
+#define MAX_ARGS 18 /* arguments of an entry point, at most */
 
 /* One call's arguments, in its entry's order: an array's data, rows, values per row and row stride (0 for one
  * row shared by every robot); a scalar's value; an integer or flag; an object. */
@@ -116,7 +116,7 @@ static void k_rk4_jacobians(call *c)
         const leg_drive u = {ROW(2)[0], ROW(2)[1], *ROW(4), 0.0};
         leg_trig(ROW(0), &s1, &co1, &s2, &co2);
         rk4_control_jacobians(PAR(3), &u, ROW(0), ROW(1), ROW(5), c->x[6], (int)c->x[7], c->x[8], (int)c->k[9], (int)c->k[10], s1, co1,
-                              s2, co2, ROW(11), ROW(12), ROW(13));
+                              s2, co2, ROW(11), ROW(12), ROW(13), c->a[14] != NULL ? ROW(14) : NULL);
     }
 }
 
@@ -149,7 +149,7 @@ static void k_hybrid_jacobians(call *c)
         }
         int mode = (int)*INT(6);
         *INT(15) = hybrid_control_jacobians(PAR(3), &u, ROW(0), ROW(1), &mode, ROW(7), c->x[8], (int)c->x[9], c->x[10], s1, co1, s2,
-                                            co2, (int)c->k[12], &rec->tally, &rec->log, ROW(13), ROW(14));
+                                            co2, (int)c->k[12], &rec->tally, &rec->log, ROW(13), ROW(14), c->a[16] != NULL ? ROW(16) : NULL);
         *INT(6) = mode;
     }
 }

@@ -268,11 +268,8 @@ static int transition(int kind, int mode, leg_x *X, double *anchor, const leg_mo
     if (kind == LEG_TOUCHDOWN) {
         const leg_foot f = foot_of(M, X);
         X->y = X->y - (f.y - anchor[1]);
-        if (J != NULL) /* y_b = ground - l1 s1 - l2 s2 */
-            for (int j = 0; j < LEG_ND; j++) {
-                const double dth1 = J->T.t[IA][j] + J->T.t[IB][j], dth2 = dth1 + J->T.t[IC][j];
-                J->T.t[IY][j] = -(M->p.l1 * X->c1 * dth1 + M->p.l2 * X->c2 * dth2);
-            }
+        if (J != NULL)
+            placement_tangent(&M->p, X, J);
         if (-f.vy < LEG_SETTLE_SPEED && !*settled) {
             *settled = 1;
             rec->settles += 1;
@@ -361,11 +358,11 @@ LEG_INLINE int advance(int mode, const leg_model *M, const leg_drive *u, const d
         book(mode, M, h, &g->X, &X1, &sums, rec);
         if (J != NULL) { /* h = t_left / n_left: an event earlier in the step moves it */
             double dh[LEG_NT];
-            for (int j = 0; j < LEG_ND; j++)
+            for (int j = 0; j < J->nd; j++)
                 dh[j] = -J->dtime[j] / g->n_left;
-            rk4_substep_tangent(LEG_ND, mode, M, u, &g->X, h, &X1, J->dtau, J->danchor, J->timed ? dh : NULL, &J->T);
+            rk4_substep_tangent(J->nd, J->nd, mode, M, u, &g->X, h, &X1, J->dtau, J->danchor, J->timed ? dh : NULL, &J->T);
             if (J->timed)
-                for (int j = 0; j < LEG_ND; j++)
+                for (int j = 0; j < J->nd; j++)
                     J->dtime[j] += dh[j];
         }
         g->X = X1;
@@ -491,32 +488,21 @@ static int hybrid_control_step(const leg_params *P, const leg_drive *u, double *
     return hybrid_step_body(P, u, q, qd, mode, anchor, dt, substeps, max_angle, s1, co1, s2, co2, rec, log, NULL);
 }
 
-/* hybrid_control_step() with its derivatives (row-major): A = d(q, qd) after / d(q, qd) before, (10, 10), and
- * B = d(q, qd) after / d(tau_hip, tau_knee), (10, 2). follow: the anchor's x is the foot's of the state before the
- * step (hybrid_step's default), so that it moves with q; else it is held. Returns the LEG_D_* reasons the derivative
- * does not exist (0: it does; else A and B are NaN). */
+/* hybrid_control_step() with its derivatives (row-major): A = d(q, qd) after / d(q, qd) before, (10, 10),
+ * B = d(q, qd) after / d(tau_hip, tau_knee), (10, 2), and (Pj not NULL) Pj = d(q, qd) after / d(the parameters, mu),
+ * (10, 12). follow: the anchor's x is the foot's of the state before the step (hybrid_step's default), so that it
+ * moves with q; else it is held. Returns the LEG_D_* reasons the derivative does not exist (0: it does; else A, B and
+ * Pj are NaN). */
 static int hybrid_control_jacobians(const leg_params *P, const leg_drive *u, double *q, double *qd, int *mode, double *anchor,
                                     double dt, int substeps, double max_angle, double s1, double co1, double s2, double co2,
-                                    int follow, leg_tally *rec, leg_log *log, double *A, double *B)
+                                    int follow, leg_tally *rec, leg_log *log, double *A, double *B, double *Pj)
 {
     leg_hybrid_tangent J;
     memset(&J, 0, sizeof J);
-    for (int i = 0; i < LEG_NX; i++)
-        J.T.t[i][i] = 1.0;
-    J.dtau[0][LEG_NX] = 1.0;
-    J.dtau[1][LEG_NX + 1] = 1.0;
-    if (follow) { /* anchor_x = x_f(q) = x_b + l1 co1 + l2 co2 */
-        J.danchor[0][IX] = 1.0;
-        J.danchor[0][IA] = J.danchor[0][IB] = -P->l1 * s1 - P->l2 * s2;
-        J.danchor[0][IC] = -P->l2 * s2;
-    }
+    const leg_x X = x_from(q, qd, s1, co1, s2, co2);
+    tangent_start(P, &X, follow ? 1 : 0, &J.T, J.dtau, J.danchor);
+    J.nd = Pj != NULL ? LEG_NDP : LEG_ND;
     *mode = hybrid_step_body(P, u, q, qd, *mode, anchor, dt, substeps, max_angle, s1, co1, s2, co2, rec, log, &J);
-    const double fill = J.undefined ? NAN : 0.0;
-    for (int i = 0; i < LEG_NX; i++) {
-        for (int j = 0; j < LEG_NX; j++)
-            A[i * LEG_NX + j] = J.T.t[i][j] + fill;
-        for (int j = 0; j < LEG_NU; j++)
-            B[i * LEG_NU + j] = J.T.t[i][LEG_NX + j] + fill;
-    }
+    tangent_out(&J.T, J.undefined ? NAN : 0.0, A, B, Pj);
     return J.undefined;
 }

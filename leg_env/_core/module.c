@@ -122,16 +122,18 @@ static const entry ENTRIES[] = {
      NULL, RELEASED,
      {INOUT(q, 5), INOUT(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), {"mu", 'd', 'N', 'i', 1, 0.0, DBL_MAX, 0},
       {"mode", 'q', 'N', 'u', 1, LEG_STICK, LEG_FLIGHT, 0}, INOUT(anchor, 2), STEP_RULE, {"record", 'R', 'N', 'o', 1, ANY, 0}}},
-    {"hybrid_jacobians", "hybrid_step with its derivatives A (N, 10, 10) and B (N, 10, 2), NaN where they do not exist; follow: "
-                         "the anchor's x is the foot's of q and moves with it; undefined: why not (0: they exist).", k_hybrid_jacobians,
+    {"hybrid_jacobians", "hybrid_step with its derivatives A (N, 10, 10), B (N, 10, 2) and, unless None, P (N, 10, 12), NaN where "
+                         "they do not exist; follow: the anchor's x is the foot's of q and moves with it; undefined: why not (0: "
+                         "they exist).", k_hybrid_jacobians,
      NULL, RELEASED,
      {INOUT(q, 5), INOUT(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), {"mu", 'd', 'N', 'i', 1, 0.0, DBL_MAX, 0},
       {"mode", 'q', 'N', 'u', 1, LEG_STICK, LEG_FLIGHT, 0}, INOUT(anchor, 2), STEP_RULE, {"record", 'R', 'N', 'o', 1, ANY, 0},
-      FLAG(follow), OUT(A, 100), OUT(B, 20), {"undefined", 'q', 'N', 'o', 1, ANY, 0}}},
-    {"rk4_jacobians", "rk4_step with its derivatives A = d(q, qd) / d(q, qd) before (N, 10, 10) and B = d(q, qd) / d tau (N, 10, 2); "
-                      "follow: the anchor is the foot of q and moves with it.", k_rk4_jacobians, NULL, RELEASED,
+      FLAG(follow), OUT(A, 100), OUT(B, 20), {"undefined", 'q', 'N', 'o', 1, ANY, 0}, {"P", 'd', 'N', 'o', 120, ANY, OPT_NONE}}},
+    {"rk4_jacobians", "rk4_step with its derivatives A = d(q, qd) / d(q, qd) before (N, 10, 10), B = d(q, qd) / d tau (N, 10, 2) "
+                      "and, unless None, P = d(q, qd) / d(params, mu) (N, 10, 12); follow: the anchor is the foot of q and moves "
+                      "with it.", k_rk4_jacobians, NULL, RELEASED,
      {INOUT(q, 5), INOUT(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), IN(anchor, 2), STEP_RULE, FLAG(stance), FLAG(follow),
-      OUT(lam_mean, 2), OUT(A, 100), OUT(B, 20)}},
+      OUT(lam_mean, 2), OUT(A, 100), OUT(B, 20), {"P", 'd', 'N', 'o', 120, ANY, OPT_NONE}}},
     {"start", "Robots put on their contact (at the nominal posture plus noise, or where the state has them if noise is None) and "
               "evaluated by the task.", k_start, check_start, HELD,
      {TASK, ENV_ARRAYS, {"noise", 'd', 'N', 'i', 6, ANY, OPT_NONE}, REAL(scale, 0.0, DBL_MAX, 0)}},

@@ -47,13 +47,14 @@ from .arrays import NQ, NU, batched, core_params, vec
 from .dynamics import foot_position
 from .hybrid import HybridStep, prepared_call
 from .integrate import DT, MAX_ANGLE, SUBSTEPS, checked_steps
-from .params import LegParams
+from .params import PARAM_NAMES, LegParams
 
 __all__ = ["StepJacobians", "HybridJacobians", "stance_step_jacobians", "flight_step_jacobians", "hybrid_step_jacobians",
            "action_jacobians",
            "GRAZING", "SIMULTANEOUS", "PAINLEVE", "SETTLED", "UNDEFINED_NAMES", "NX"]
 
 NX = 2 * NQ  # the state (q, qd)
+NPD = len(PARAM_NAMES) + 1  # P's columns: LegParams' fields in order, then mu
 
 # Why the derivative of a hybrid step does not exist (bits of HybridJacobians.undefined; 0: it exists)
 GRAZING = 1  # a located event's witness crossed zero tangentially: the event's time has no derivative
@@ -71,6 +72,7 @@ class StepJacobians(NamedTuple):
     lam_mean: np.ndarray  # (..., 2) the mean contact force over the step [N] (zero in flight)
     A: np.ndarray  # (..., 10, 10) d(q, qd) after / d(q, qd) before
     B: np.ndarray  # (..., 10, 2) d(q, qd) after / d(tau_hip, tau_knee) [per N m]
+    P: np.ndarray | None = None  # (..., 10, 12) d(q, qd) after / d(LegParams' fields in order, mu), with params=True
 
 
 class HybridJacobians(NamedTuple):
@@ -80,6 +82,7 @@ class HybridJacobians(NamedTuple):
     A: np.ndarray  # (..., 10, 10) d(q, qd) after / d(q, qd) before; NaN where the derivative does not exist
     B: np.ndarray  # (..., 10, 2) d(q, qd) after / d(tau_hip, tau_knee) [per N m]; NaN likewise
     undefined: np.ndarray  # (...) int: why the derivative does not exist (GRAZING | SIMULTANEOUS | PAINLEVE | SETTLED), 0 where it does
+    P: np.ndarray | None = None  # (..., 10, 12) d(q, qd) after / d(LegParams' fields in order, mu), with params=True; NaN likewise
 
     @property
     def defined(self) -> np.ndarray:
@@ -87,7 +90,7 @@ class HybridJacobians(NamedTuple):
         return self.undefined == 0
 
 
-def _rk4_jacobians(q, qd, tau, p, anchor, dt, substeps, max_angle, stance: bool) -> StepJacobians:
+def _rk4_jacobians(q, qd, tau, p, anchor, dt, substeps, max_angle, stance: bool, params: bool) -> StepJacobians:
     dt, substeps, max_angle = checked_steps(dt, substeps, max_angle)
     q = vec(q, NQ, "q")
     follow = stance and anchor is None
@@ -99,41 +102,46 @@ def _rk4_jacobians(q, qd, tau, p, anchor, dt, substeps, max_angle, stance: bool)
     qf, qdf = qf.copy(), qdf.copy()
     n = qf.shape[0]
     lam, A, B = np.empty((n, 2)), np.empty((n, NX * NX)), np.empty((n, NX * NU))
-    kernels.rk4_jacobians(qf, qdf, tf, core_params(p), np.zeros(n), af, dt, substeps, max_angle, stance, follow, lam, A, B)
+    P = np.empty((n, NX * NPD)) if params else None
+    kernels.rk4_jacobians(qf, qdf, tf, core_params(p), np.zeros(n), af, dt, substeps, max_angle, stance, follow, lam, A, B, P)
     return StepJacobians(
         qf.reshape(lead + (NQ,)), qdf.reshape(lead + (NQ,)), lam.reshape(lead + (2,)), A.reshape(lead + (NX, NX)),
-        B.reshape(lead + (NX, NU)),
+        B.reshape(lead + (NX, NU)), None if P is None else P.reshape(lead + (NX, NPD)),
     )
 
 
 def stance_step_jacobians(
-    q, qd, tau, p: LegParams, dt: float = DT, substeps: int = SUBSTEPS, anchor=None, max_angle: float = MAX_ANGLE
+    q, qd, tau, p: LegParams, dt: float = DT, substeps: int = SUBSTEPS, anchor=None, max_angle: float = MAX_ANGLE,
+    params: bool = False,
 ) -> StepJacobians:
     """``leg_env.physics.integrate.stance_step`` (the foot pinned at ``anchor``) and its Jacobians ``A``, ``B``.
 
     Takes exactly ``stance_step``'s arguments, and gives the same step (bit for bit) with its derivatives. With
-    ``anchor=None`` the anchor is the foot of ``q`` and its derivative follows ``q``; a given anchor is held.
+    ``anchor=None`` the anchor is the foot of ``q`` and its derivative follows ``q``; a given anchor is held. With
+    ``params=True`` also ``P``, the derivative by the robot's parameters (``LegParams``' fields in order) and ``mu``
+    (zero here: the pinned foot has no friction).
 
     Raises:
         ValueError: as ``stance_step``: an array of the wrong shape, or a setting of the step rule out of range (the
             message names it).
     """
-    return _rk4_jacobians(q, qd, tau, p, anchor, dt, substeps, max_angle, True)
+    return _rk4_jacobians(q, qd, tau, p, anchor, dt, substeps, max_angle, True, params)
 
 
-def flight_step_jacobians(q, qd, tau, p: LegParams, dt: float = DT, substeps: int = SUBSTEPS, max_angle: float = MAX_ANGLE
-                          ) -> StepJacobians:
-    """``leg_env.physics.integrate.flight_step`` (no contact) and its Jacobians ``A``, ``B`` (``lam_mean`` is zero).
+def flight_step_jacobians(q, qd, tau, p: LegParams, dt: float = DT, substeps: int = SUBSTEPS, max_angle: float = MAX_ANGLE,
+                          params: bool = False) -> StepJacobians:
+    """``leg_env.physics.integrate.flight_step`` (no contact) and its Jacobians ``A``, ``B`` (``lam_mean`` is zero);
+    with ``params=True`` also ``P``, as ``stance_step_jacobians``.
 
     Raises:
         ValueError: as ``flight_step``.
     """
-    return _rk4_jacobians(q, qd, tau, p, None, dt, substeps, max_angle, False)
+    return _rk4_jacobians(q, qd, tau, p, None, dt, substeps, max_angle, False, params)
 
 
 def hybrid_step_jacobians(
     q, qd, tau, p: LegParams, mu, mode=None, anchor_x=None, dt: float = DT, substeps: int = SUBSTEPS,
-    max_angle: float = MAX_ANGLE, load_x=0.0,
+    max_angle: float = MAX_ANGLE, load_x=0.0, params: bool = False,
 ) -> HybridJacobians:
     """``leg_env.physics.hybrid.hybrid_step`` on the unilateral ground and its Jacobians ``A``, ``B``.
 
@@ -146,8 +154,10 @@ def hybrid_step_jacobians(
     The substep counts and the sequence of events and modes are held: ``A`` is the derivative of the branch the step
     took.
 
-    Where the derivative does not exist (``undefined``: a grazing event, two events at once, the Painleve rule, a
-    Zeno settle), ``A`` and ``B`` are NaN and ``defined`` is False.
+    With ``params=True`` also ``P``, the derivative by the robot's parameters (``LegParams``' fields in order) and the
+    friction coefficient ``mu`` (last): for system identification. Where the derivative does not exist
+    (``undefined``: a grazing event, two events at once, the Painleve rule, a Zeno settle), ``A``, ``B`` and ``P`` are
+    NaN and ``defined`` is False.
 
     Raises:
         ValueError: as ``hybrid_step`` (the message names the argument).
@@ -155,9 +165,11 @@ def hybrid_step_jacobians(
     call = prepared_call(q, qd, tau, p, mu, mode, anchor_x, dt, substeps, max_angle, load_x)
     n = call.arguments[0].shape[0]
     A, B, undefined = np.empty((n, NX * NX)), np.empty((n, NX * NU)), np.empty(n, np.int64)
-    kernels.hybrid_jacobians(*call.arguments, anchor_x is None, A, B, undefined)
+    P = np.empty((n, NX * NPD)) if params else None
+    kernels.hybrid_jacobians(*call.arguments, anchor_x is None, A, B, undefined, P)
     lead = call.lead
-    return HybridJacobians(call.result(), A.reshape(lead + (NX, NX)), B.reshape(lead + (NX, NU)), undefined.reshape(lead))
+    return HybridJacobians(call.result(), A.reshape(lead + (NX, NX)), B.reshape(lead + (NX, NU)), undefined.reshape(lead),
+                           None if P is None else P.reshape(lead + (NX, NPD)))
 
 
 def action_jacobians(state, robots, actions, *, dt: float, substeps: int, max_angle: float, motor_speed: float,
@@ -205,10 +217,10 @@ def action_jacobians(state, robots, actions, *, dt: float, substeps: int, max_an
         undefined = np.empty(n, np.int64)
         mode = state["mode"].astype(np.int64)
         kernels.hybrid_jacobians(q, qd, tau, p, load, np.ascontiguousarray(robots["mu"], dtype=np.float64), mode,
-                                 anchor.copy(), dt, substeps, max_angle, np.empty(n, RECORD), False, A, B, undefined)
+                                 anchor.copy(), dt, substeps, max_angle, np.empty(n, RECORD), False, A, B, undefined, None)
     else:
         undefined = np.zeros(n, np.int64)
-        kernels.rk4_jacobians(q, qd, tau, p, load, anchor, dt, substeps, max_angle, True, False, np.empty((n, 2)), A, B)
+        kernels.rk4_jacobians(q, qd, tau, p, load, anchor, dt, substeps, max_angle, True, False, np.empty((n, 2)), A, B, None)
     A, B = A.reshape(n, NX, NX), B.reshape(n, NX, NU)
     A[:, :, 8:10] += B * dtau_dw[:, None, :]  # the motor's torque falls with the joint's speed (q1', q2')
     return A, B * dtau_da[:, None, :], undefined

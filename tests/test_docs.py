@@ -110,7 +110,7 @@ def test_the_lesson_is_executed_and_the_api_documented(site):
     lesson = (html / "_generated" / "lesson.html").read_text(encoding="utf-8")
     assert "cell_output" in lesson  # myst-nb ran the notebook (it is stored without outputs)
     api = (html / "api.html").read_text(encoding="utf-8")
-    for module in ("leg_env.physics.dynamics", "leg_env.physics.contact", "leg_env.physics.hybrid", "leg_env.physics.integrate", "leg_env.physics.derivatives", "leg_env.physics.params", "leg_env.envs"):
+    for module in ("leg_env.physics.dynamics", "leg_env.physics.contact", "leg_env.physics.hybrid", "leg_env.physics.integrate", "leg_env.physics.derivatives", "leg_env.physics.params", "leg_env.envs", "leg_env.identify", "leg_env.autograd"):
         assert f'id="module-{module}"' in api, f"{module} is not documented"
     benchmarks = (html / "benchmarks.html").read_text(encoding="utf-8")
     assert "Environment speed" in benchmarks and "Soak" in benchmarks

@@ -67,6 +67,27 @@ def states(p: LegParams, stance: bool, rng):
     return np.ascontiguousarray(q), np.ascontiguousarray(qd), tau
 
 
+def perturbed(q, qd, tau, sides: int):
+    """The batch and its perturbations, for one call of the step: rows [base, +e_0 .. +e_11 (, -e_0 .. -e_11)] of
+    (q, qd, tau); returns their q, qd, tau and the number of copies."""
+    k = 1 + 12 * sides
+    x = np.tile(np.concatenate([q, qd, tau], axis=1), (k, 1)).reshape(k, N, 12)
+    for j in range(12):
+        x[1 + j, :, j] += EPS
+        if sides == 2:
+            x[13 + j, :, j] -= EPS
+    x = x.reshape(k * N, 12)
+    return np.ascontiguousarray(x[:, :5]), np.ascontiguousarray(x[:, 5:10]), np.ascontiguousarray(x[:, 10:]), k
+
+
+def differenced(qq, vv, k: int, sides: int):
+    """Forward (sides 1) or centred (2) differences of the stepped copies."""
+    y = np.concatenate([qq, vv], axis=1).reshape(k, N, 10)
+    if sides == 1:
+        return (y[1:] - y[0]) / EPS
+    return (y[1:13] - y[13:]) / (2 * EPS)
+
+
 def cases(p: LegParams, stance: bool, q, qd, tau):
     P = p.array
     anchor = foot_position(q, p)
@@ -85,21 +106,10 @@ def cases(p: LegParams, stance: bool, q, qd, tau):
                               np.empty((N, 120)))
 
     def differences(sides: int):
-        """The step on the batch and its perturbations in one call: rows [base, +e_0 .. +e_11 (, -e_0 .. -e_11)]."""
-        k = 1 + 12 * sides
-        x = np.tile(np.concatenate([q, qd, tau], axis=1), (k, 1)).reshape(k, N, 12)
-        for j in range(12):
-            x[1 + j, :, j] += EPS
-            if sides == 2:
-                x[13 + j, :, j] -= EPS
-        x = x.reshape(k * N, 12)
-        qq, vv, tt = np.ascontiguousarray(x[:, :5]), np.ascontiguousarray(x[:, 5:10]), np.ascontiguousarray(x[:, 10:])
+        qq, vv, tt, k = perturbed(q, qd, tau, sides)
         lam = np.empty((k * N, 2))
         kernels.rk4_step(qq, vv, tt, P, np.zeros(k * N), np.tile(anchor, (k, 1)), DT, SUBSTEPS, MAX_ANGLE, stance, lam)
-        y = np.concatenate([qq, vv], axis=1).reshape(k, N, 10)
-        if sides == 1:
-            return (y[1:] - y[0]) / EPS
-        return (y[1:13] - y[13:]) / (2 * EPS)
+        return differenced(qq, vv, k, sides)
 
     return {"step": step, "A, B": jacobians, "A, B, P": with_params, "forward differences (13 steps)": lambda: differences(1),
             "centred differences (25 steps)": lambda: differences(2)}
@@ -146,21 +156,11 @@ def hybrid_cases(q, qd, tau, mode, p: LegParams, mu: float):
                                  np.empty((N, 120)))
 
     def differences(sides: int):
-        k = 1 + 12 * sides
-        x = np.tile(np.concatenate([q, qd, tau], axis=1), (k, 1)).reshape(k, N, 12)
-        for j in range(12):
-            x[1 + j, :, j] += EPS
-            if sides == 2:
-                x[13 + j, :, j] -= EPS
-        x = x.reshape(k * N, 12)
-        qq, vv, tt = np.ascontiguousarray(x[:, :5]), np.ascontiguousarray(x[:, 5:10]), np.ascontiguousarray(x[:, 10:])
+        qq, vv, tt, k = perturbed(q, qd, tau, sides)
         rec = np.empty(k * N, RECORD)
         kernels.hybrid_step(qq, vv, tt, P, np.zeros(k * N), np.full(k * N, mu), np.tile(mode, k), np.tile(anchor, (k, 1)), DT,
                             SUBSTEPS, MAX_ANGLE, rec)
-        y = np.concatenate([qq, vv], axis=1).reshape(k, N, 10)
-        if sides == 1:
-            return (y[1:] - y[0]) / EPS
-        return (y[1:13] - y[13:]) / (2 * EPS)
+        return differenced(qq, vv, k, sides)
 
     return {"step": step, "A, B": jacobians, "A, B, P": with_params, "forward differences (13 steps)": lambda: differences(1),
             "centred differences (25 steps)": lambda: differences(2)}

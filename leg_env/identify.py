@@ -48,8 +48,9 @@ __all__ = ["fit", "Identification", "BASE_NAMES", "base_parameters", "FITTED", "
 FITTED = ("m_b", "m1", "m2", "I_b", "I1", "I2", "c1", "c2", "mu")
 """The parameters ``fit`` estimates by default (the lengths and gravity are known)."""
 BASE_NAMES = ("m", "a", "b", "J1", "J2", "I_b", "mu")
-"""The identifiable combinations: total mass, the leg's first moment about the hip and the shank's about the knee,
-the leg's inertia about the hip and the shank's about the knee, the torso's inertia, the friction coefficient."""
+"""The names of the identifiable combinations, in order (the total mass, the leg's first moment about the hip and the
+shank's about the knee, the leg's inertia about the hip and the shank's about the knee, the torso's inertia, the
+friction coefficient)."""
 DEFAULT_NOISE = (1e-3, 1e-3, 1e-2, 1e-2, 1e-2, 1e-2, 1e-2, 1e-1, 1e-1, 1e-1)
 """The measurement noise ``fit`` assumes without one given (std of x_b, y_b [m], th_b, q1, q2 [rad], their rates)."""
 _DEBUG = False  # print each Levenberg-Marquardt iteration (for maintainers)

@@ -53,6 +53,12 @@ def random_state(p, rng, stance: bool):
     return q, qd, tau
 
 
+def random_batch(p, rng, stance: bool, n: int):
+    """(q, qd, tau) of n random states (random_state's)."""
+    states = [random_state(p, rng, stance) for _ in range(n)]
+    return tuple(np.array([s[k] for s in states]) for k in range(3))
+
+
 # ------------------------------------------------------------------ the step itself
 
 
@@ -61,8 +67,7 @@ def test_the_step_is_the_step(stance):
     """The Jacobians come with the step they differentiate, bit for bit, batched and one robot at a time."""
     rng = np.random.default_rng(0)
     p = random_params(rng)
-    states = [random_state(p, rng, stance) for _ in range(16)]
-    q, qd, tau = (np.array([s[k] for s in states]) for k in range(3))
+    q, qd, tau = random_batch(p, rng, stance, 16)
     if stance:
         q1, qd1, lam = dyn.stance_step(q, qd, tau, p)
         J = stance_step_jacobians(q, qd, tau, p)
@@ -262,8 +267,7 @@ def controllers():
 def test_hybrid_step_is_the_step():
     rng = np.random.default_rng(2)
     p = random_params(rng)
-    states = [random_state(p, rng, True) for _ in range(32)]
-    q, qd, tau = (np.array([s[k] for s in states]) for k in range(3))
+    q, qd, tau = random_batch(p, rng, True, 32)
     q, qd = dyn.project_stance(q, qd, p, dyn.foot_position(q, p) * [1.0, 0.0])  # the feet on the ground
     q[::2, 1] += rng.uniform(0.0, 0.05, 16)  # half of them in the air
     qd[::2, 1] -= 1.0
@@ -472,8 +476,7 @@ def test_moving_the_whole_robot_moves_the_next_state(stance):
     """Translation invariance: with the anchor following q, d(next)/d(x_b) = e_x_b and d(next)/d(y_b) = e_y_b."""
     rng = np.random.default_rng(3)
     p = random_params(rng)
-    states = [random_state(p, rng, stance) for _ in range(64)]
-    q, qd, tau = (np.array([s[k] for s in states]) for k in range(3))
+    q, qd, tau = random_batch(p, rng, stance, 64)
     J = (stance_step_jacobians if stance else flight_step_jacobians)(q, qd, tau, p)
     for j in (0, 1):
         np.testing.assert_allclose(J.A[:, :, j], np.broadcast_to(np.eye(NX)[j], (64, NX)), atol=1e-12)
@@ -484,8 +487,7 @@ def test_a_held_anchor_forgets_the_base():
     step have no effect (their columns of A are zero), and the foot after the step stays on the anchor to first order."""
     rng = np.random.default_rng(4)
     p = random_params(rng)
-    states = [random_state(p, rng, True) for _ in range(64)]
-    q, qd, tau = (np.array([s[k] for s in states]) for k in range(3))
+    q, qd, tau = random_batch(p, rng, True, 64)
     anchor = dyn.foot_position(q, p)
     J = stance_step_jacobians(q, qd, tau, p, anchor=anchor)
     np.testing.assert_array_equal(J.A[:, :, [0, 1, 5, 6]], 0.0)
@@ -522,6 +524,15 @@ def test_bad_input_is_named():
         stance_step_jacobians(q, qd, tau, p, anchor=np.zeros(3))
     with pytest.raises(TypeError):
         stance_step_jacobians(q, qd, tau, p, anchr=None)
+    for bad in ("q", "qd", "tau"):
+        args = {"q": q.copy(), "qd": qd.copy(), "tau": tau.copy()}
+        args[bad][0] = np.nan
+        with pytest.raises(ValueError, match=f"{bad} must be finite"):
+            stance_step_jacobians(args["q"], args["qd"], args["tau"], p)
+        with pytest.raises(ValueError, match=f"{bad} must be finite"):
+            dyn.hybrid_step_jacobians(args["q"], args["qd"], args["tau"], p, 0.8)
+    with pytest.raises(ValueError, match="mu"):
+        dyn.hybrid_step_jacobians(q, qd, tau, p, -1.0)
 
 
 # ------------------------------------------------------------------ the vector env's Jacobians

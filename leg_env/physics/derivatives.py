@@ -100,6 +100,9 @@ def _rk4_jacobians(q, qd, tau, p, anchor, dt, substeps, max_angle, stance: bool,
         anchor = np.zeros(2)
     lead, (qf, qdf, tf, af) = batched(("q", q), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")), ("anchor", anchor))
     qf, qdf = qf.copy(), qdf.copy()
+    for name, a in (("q", qf), ("qd", qdf), ("tau", tf), ("anchor", af)):
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be finite")
     n = qf.shape[0]
     lam, A, B = np.empty((n, 2)), np.empty((n, NX * NX)), np.empty((n, NX * NU))
     P = np.empty((n, NX * NPD)) if params else None

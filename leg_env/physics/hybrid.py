@@ -187,6 +187,9 @@ def prepared_call(q, qd, tau, p: LegParams, mu, mode, anchor_x, dt, substeps, ma
     dt, substeps, max_angle = checked_steps(dt, substeps, max_angle)
     lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
     qf, qdf = qf.copy(), qdf.copy()
+    for name, a in (("q", qf), ("qd", qdf), ("tau", tf)):
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be finite, got {checks.shown(a[~np.isfinite(a).all(axis=1)][:3])}")
     n = qf.shape[0]
     mu_f = checked_mu(mu, lead)
     foot = foot_position(qf, p)

@@ -122,19 +122,19 @@ def test_against_complex_step_with_a_held_anchor():
 # ------------------------------------------------------------------ 2. finite differences on rollouts
 
 
-def pinned_rollout_states():
-    """(q, qd, tau) before each step of rollouts of the pinned task: random actions, then the LQR controller."""
+def pinned_rollout_states(controllers_=None):
+    """(q, qd, tau) before each step of rollouts of the pinned task: random actions, then the LQR controller (or the
+    given controllers, None standing for random actions)."""
     from policies.lqr import LQRController
 
     out = []
-    for controller in ("random", "lqr"):
+    for controller in (controllers_ if controllers_ is not None else (None, LQRController())):
         envs = gym.make_vec("leg_env/PlanarLegStance-v0", num_envs=ROLLOUT_ROBOTS, vectorization_mode="vector_entry_point")
         obs, _ = envs.reset(seed=31)
-        policy = None if controller == "random" else LQRController()
         rng = np.random.default_rng(5)
         for _ in range(ROLLOUT_STEPS):
             q, qd, _ = (a.copy() for a in envs.unwrapped.state)
-            action = rng.uniform(-1.0, 1.0, (ROLLOUT_ROBOTS, 2)) if policy is None else policy.predict(obs, deterministic=True)[0]
+            action = rng.uniform(-1.0, 1.0, (ROLLOUT_ROBOTS, 2)) if controller is None else controller.predict(obs, deterministic=True)[0]
             obs, _, _, _, info = envs.step(action)
             out.append((q, qd, info["torque"].copy()))
         envs.close()
@@ -168,9 +168,10 @@ def centred_fd(step, q, qd, tau):
     return A, B, same
 
 
-def test_pinned_against_finite_differences_on_rollouts(capsys):
-    q, qd, tau, p = pinned_rollout_states()
-    assert q.shape[0] >= 10_000
+def pinned_fd_check(controllers_=None):
+    """Centred differences of ``stance_step`` against its Jacobians on pinned rollout states: (states, share with the
+    substep count changed, errors of A and B where it is not)."""
+    q, qd, tau, p = pinned_rollout_states(controllers_)
 
     def step(q_, qd_, tau_):
         a, b, _ = dyn.stance_step(q_, qd_, tau_, p)
@@ -178,9 +179,14 @@ def test_pinned_against_finite_differences_on_rollouts(capsys):
 
     A_fd, B_fd, same = centred_fd(step, q, qd, tau)
     J = stance_step_jacobians(q, qd, tau, p)
-    err_A, err_B = rel(J.A, A_fd)[same], rel(J.B, B_fd)[same]
+    return q.shape[0], same, rel(J.A, A_fd)[same], rel(J.B, B_fd)[same]
+
+
+def test_pinned_against_finite_differences_on_rollouts(capsys):
+    n, same, err_A, err_B = pinned_fd_check()
+    assert n >= 10_000
     with capsys.disabled():
-        print(f"\npinned: {q.shape[0]} states, substep count changed under a perturbation at {1 - same.mean():.2%}; "
+        print(f"\npinned: {n} states, substep count changed under a perturbation at {1 - same.mean():.2%}; "
               f"A median {np.median(err_A):.1e} max {err_A.max():.1e}; B median {np.median(err_B):.1e} max {err_B.max():.1e}")
     assert same.mean() > 0.99
     assert err_A.max() <= FD_RTOL and err_B.max() <= FD_RTOL
@@ -282,58 +288,64 @@ def test_hybrid_step_is_the_step():
     assert one.A.shape == (NX, NX) and one.undefined.shape == ()
 
 
+def hybrid_fd_check(env_id: str, controller, worst: dict, rows: list) -> None:
+    """Five-point differences of ``hybrid_step`` against its Jacobians on rollout states of ``env_id`` under
+    ``controller`` (None: random actions): each kind of event's largest relative error into ``worst``, a line of
+    counts into ``rows``; at most 1% of the states may change their events under a perturbation or be undefined."""
+    q, qd, tau, mode, anchor_x, load, p, mu = unilateral_rollout_states(env_id, controller)
+    J = dyn.hybrid_step_jacobians(q, qd, tau, p, mu, mode=mode, load_x=load)
+    basis = manifold_basis(q, qd, mode, p)
+    x = np.concatenate([q, qd], axis=1)
+    kinds = J.step.event_kind
+    same = np.ones(q.shape[0], bool)
+
+    def differences(run, n_dirs, eps):
+        """Five-point centred differences (fourth order): an event is located to ROOT_TIME (1e-12 s), which a
+        difference with a small step amplifies, so the step must stay large and its truncation error small."""
+        nonlocal same
+        out = np.empty((q.shape[0], NX, n_dirs))
+        for k in range(n_dirs):
+            ends = {}
+            for m in (-2, -1, 1, 2):
+                r = run(k, m * eps)
+                same &= (r.event_kind == kinds).all(axis=1) & (r.mode == J.step.mode)
+                ends[m] = np.concatenate([r.q, r.qd], axis=1)
+            out[:, :, k] = (8.0 * (ends[1] - ends[-1]) - (ends[2] - ends[-2])) / (12.0 * eps)
+        return out
+
+    def along_basis(k, d):
+        xs = x + d * basis[:, :, k]
+        return dyn.hybrid_step(xs[:, :5], xs[:, 5:], tau, p, mu, mode=mode, load_x=load)
+
+    def along_torque(j, d):
+        e = np.zeros(2)
+        e[j] = d
+        return dyn.hybrid_step(q, qd, tau + e, p, mu, mode=mode, load_x=load)
+
+    # the better of two step sizes: near a grazing re-contact the larger step's truncation error dominates, at the
+    # smaller the round-off of an event's location
+    err = np.full(q.shape[0], np.inf)
+    for scale in (1.0, 0.1):
+        AN = differences(along_basis, NX, FD_EPS_X * scale)
+        B = differences(along_torque, 2, FD_EPS_TAU * scale)
+        err = np.minimum(err, np.maximum(rel(J.A @ basis, AN), rel(J.B, B)))
+    checked = same & J.defined
+    first = np.where(kinds[:, 0] < 0, -1, kinds[:, 0])
+    for kind, name in [(-1, "no event"), *enumerate(dyn.EVENT_NAMES)]:
+        m = checked & (first == kind)
+        if m.any():
+            worst[name] = max(worst.get(name, 0.0), err[m].max())
+            rows.append(f"{name}: {m.sum()} (median {np.median(err[m]):.1e}, max {err[m].max():.1e})")
+    rows.append(f"{'random' if controller is None else type(controller).__name__}: {q.shape[0]} states, events changed "
+                f"under a perturbation at {1 - same.mean():.2%}, undefined at {1 - J.defined.mean():.2%}")
+    assert same.mean() > 0.99 and J.defined.mean() > 0.99
+
+
 @pytest.mark.parametrize("env_id", ["leg_env/PlanarLegBalance-v1", "leg_env/PlanarLegPush-v2", "leg_env/PlanarLegHop-v4"])
 def test_hybrid_against_finite_differences_on_rollouts(env_id, capsys):
-    rows = []
-    worst = {}
+    rows, worst = [], {}
     for controller in (None, controllers()[env_id]()):
-        q, qd, tau, mode, anchor_x, load, p, mu = unilateral_rollout_states(env_id, controller)
-        J = dyn.hybrid_step_jacobians(q, qd, tau, p, mu, mode=mode, load_x=load)
-        basis = manifold_basis(q, qd, mode, p)
-        x = np.concatenate([q, qd], axis=1)
-        kinds = J.step.event_kind
-        same = np.ones(q.shape[0], bool)
-
-        def differences(run, n_dirs, eps):
-            """Five-point centred differences (fourth order): an event is located to ROOT_TIME (1e-12 s), which a
-            difference with a small step amplifies, so the step must stay large and its truncation error small."""
-            nonlocal same
-            out = np.empty((q.shape[0], NX, n_dirs))
-            for k in range(n_dirs):
-                ends = {}
-                for m in (-2, -1, 1, 2):
-                    r = run(k, m * eps)
-                    same &= (r.event_kind == kinds).all(axis=1) & (r.mode == J.step.mode)
-                    ends[m] = np.concatenate([r.q, r.qd], axis=1)
-                out[:, :, k] = (8.0 * (ends[1] - ends[-1]) - (ends[2] - ends[-2])) / (12.0 * eps)
-            return out
-
-        def along_basis(k, d):
-            xs = x + d * basis[:, :, k]
-            return dyn.hybrid_step(xs[:, :5], xs[:, 5:], tau, p, mu, mode=mode, load_x=load)
-
-        def along_torque(j, d):
-            e = np.zeros(2)
-            e[j] = d
-            return dyn.hybrid_step(q, qd, tau + e, p, mu, mode=mode, load_x=load)
-
-        # the better of two step sizes: near a grazing re-contact the larger step's truncation error dominates, at the
-        # smaller the round-off of an event's location
-        err = np.full(q.shape[0], np.inf)
-        for scale in (1.0, 0.1):
-            AN = differences(along_basis, NX, FD_EPS_X * scale)
-            B = differences(along_torque, 2, FD_EPS_TAU * scale)
-            err = np.minimum(err, np.maximum(rel(J.A @ basis, AN), rel(J.B, B)))
-        checked = same & J.defined
-        first = np.where(kinds[:, 0] < 0, -1, kinds[:, 0])
-        for kind, name in [(-1, "no event"), *enumerate(dyn.EVENT_NAMES)]:
-            m = checked & (first == kind)
-            if m.any():
-                worst[name] = max(worst.get(name, 0.0), err[m].max())
-                rows.append(f"{name}: {m.sum()} (median {np.median(err[m]):.1e}, max {err[m].max():.1e})")
-        rows.append(f"{'random' if controller is None else type(controller).__name__}: {q.shape[0]} states, events changed "
-                    f"under a perturbation at {1 - same.mean():.2%}, undefined at {1 - J.defined.mean():.2%}")
-        assert same.mean() > 0.99 and J.defined.mean() > 0.99
+        hybrid_fd_check(env_id, controller, worst, rows)
     with capsys.disabled():
         print(f"\n{env_id}: " + "; ".join(rows))
     assert worst["no event"] <= FD_RTOL

@@ -465,45 +465,34 @@ LEG_INLINE void substep_tangent_body(int nc, int nd, int mode, const leg_model *
                                      double h, const leg_x *Y, const double dtau[LEG_NU][LEG_NT],
                                      const double danchor[2][LEG_NT], const double *dh, leg_tangent *T)
 {
-    const double ch = RK4_HALF * h;
     const int base = mode != LEG_STICK; /* in stick the projection sets the base's rows from the leg's */
     const int nz = nd > LEG_ND ? LEG_NZ : LEG_NZ0;
     leg_partials D;
     leg_tangent dk1, dk2, dk3, dk4, dS;
     double S1, C1, S2, C2;
-    /* stage 1 at X */
-    const double w1 = X->va + X->vb, w2 = w1 + X->vc;
-    const leg_accel k1 = mode_partials(nz, mode, M, u, X->s1, X->c1, X->s2, X->c2, w1, w2, &D);
+    /* stage 1 at X, then stages 2-4 at X + c k_prev with c = h/2, h/2, h: the stages of rk4_substep */
+    static const double STAGE_C[3] = {RK4_HALF, RK4_HALF, 1.0};
+    leg_tangent *const dk[4] = {&dk1, &dk2, &dk3, &dk4};
+    double f[4][LEG_NX];
+    double w1 = X->va + X->vb, w2 = w1 + X->vc;
+    leg_accel k = mode_partials(nz, mode, M, u, X->s1, X->c1, X->s2, X->c2, w1, w2, &D);
     stage_tangent(nc, nz, base, &D, T, dtau, &dk1);
-    const double f1[LEG_NX] = {X->vx, X->vy, X->va, X->vb, X->vc, k1.xdd, k1.ydd, k1.thbdd, k1.q1dd, k1.q2dd};
-    /* stage 2 at X + h/2 k1 */
-    const double vx2 = X->vx + ch * k1.xdd, vy2 = X->vy + ch * k1.ydd;
-    const double va2 = X->va + ch * k1.thbdd, vb2 = X->vb + ch * k1.q1dd, vc2 = X->vc + ch * k1.q2dd;
-    turn(X->s1, X->c1, ch * w1, &S1, &C1);
-    turn(X->s2, X->c2, ch * w2, &S2, &C2);
-    const double w1_2 = va2 + vb2, w2_2 = w1_2 + vc2;
-    const leg_accel k2 = mode_partials(nz, mode, M, u, S1, C1, S2, C2, w1_2, w2_2, &D);
-    tangent_axpy(nc, base, T, ch, &dk1, f1, dh, RK4_HALF, &dS);
-    stage_tangent(nc, nz, base, &D, &dS, dtau, &dk2);
-    const double f2[LEG_NX] = {vx2, vy2, va2, vb2, vc2, k2.xdd, k2.ydd, k2.thbdd, k2.q1dd, k2.q2dd};
-    /* stage 3 at X + h/2 k2 */
-    const double vx3 = X->vx + ch * k2.xdd, vy3 = X->vy + ch * k2.ydd;
-    const double va3 = X->va + ch * k2.thbdd, vb3 = X->vb + ch * k2.q1dd, vc3 = X->vc + ch * k2.q2dd;
-    turn(X->s1, X->c1, ch * w1_2, &S1, &C1);
-    turn(X->s2, X->c2, ch * w2_2, &S2, &C2);
-    const double w1_3 = va3 + vb3, w2_3 = w1_3 + vc3;
-    const leg_accel k3 = mode_partials(nz, mode, M, u, S1, C1, S2, C2, w1_3, w2_3, &D);
-    tangent_axpy(nc, base, T, ch, &dk2, f2, dh, RK4_HALF, &dS);
-    stage_tangent(nc, nz, base, &D, &dS, dtau, &dk3);
-    const double f3[LEG_NX] = {vx3, vy3, va3, vb3, vc3, k3.xdd, k3.ydd, k3.thbdd, k3.q1dd, k3.q2dd};
-    /* stage 4 at X + h k3 */
-    const double vx4 = X->vx + h * k3.xdd, vy4 = X->vy + h * k3.ydd;
-    const double va4 = X->va + h * k3.thbdd, vb4 = X->vb + h * k3.q1dd, vc4 = X->vc + h * k3.q2dd;
-    turn(X->s1, X->c1, h * w1_3, &S1, &C1);
-    turn(X->s2, X->c2, h * w2_3, &S2, &C2);
-    const leg_accel k4 = mode_partials(nz, mode, M, u, S1, C1, S2, C2, va4 + vb4, va4 + vb4 + vc4, &D);
-    tangent_axpy(nc, base, T, h, &dk3, f3, dh, 1.0, &dS);
-    stage_tangent(nc, nz, base, &D, &dS, dtau, &dk4);
+    const double f1[LEG_NX] = {X->vx, X->vy, X->va, X->vb, X->vc, k.xdd, k.ydd, k.thbdd, k.q1dd, k.q2dd};
+    memcpy(f[0], f1, sizeof f1);
+    for (int st = 1; st < 4; st++) {
+        const double c = STAGE_C[st - 1] * h;
+        const double vx = X->vx + c * k.xdd, vy = X->vy + c * k.ydd;
+        const double va = X->va + c * k.thbdd, vb = X->vb + c * k.q1dd, vc = X->vc + c * k.q2dd;
+        turn(X->s1, X->c1, c * w1, &S1, &C1);
+        turn(X->s2, X->c2, c * w2, &S2, &C2);
+        w1 = va + vb;
+        w2 = w1 + vc;
+        k = mode_partials(nz, mode, M, u, S1, C1, S2, C2, w1, w2, &D);
+        tangent_axpy(nc, base, T, c, dk[st - 1], f[st - 1], dh, STAGE_C[st - 1], &dS);
+        stage_tangent(nc, nz, base, &D, &dS, dtau, dk[st]);
+        const double fs[LEG_NX] = {vx, vy, va, vb, vc, k.xdd, k.ydd, k.thbdd, k.q1dd, k.q2dd};
+        memcpy(f[st], fs, sizeof fs);
+    }
     /* y1 = y0 + h (k1 + 2 k2 + 2 k3 + k4) / 6 */
     for (int i = 0; i < LEG_NX; i++) {
         if (!base && base_row(i))
@@ -512,13 +501,12 @@ LEG_INLINE void substep_tangent_body(int nc, int nd, int mode, const leg_model *
             T->t[i][j] += h * (RK4_W0 * (dk1.t[i][j] + dk4.t[i][j]) + RK4_W1 * (dk2.t[i][j] + dk3.t[i][j]));
     }
     if (dh != NULL) {
-        const double f4[LEG_NX] = {vx4, vy4, va4, vb4, vc4, k4.xdd, k4.ydd, k4.thbdd, k4.q1dd, k4.q2dd};
         for (int i = 0; i < LEG_NX; i++) {
             if (!base && base_row(i))
                 continue;
-            const double f = RK4_W0 * (f1[i] + f4[i]) + RK4_W1 * (f2[i] + f3[i]);
+            const double fi = RK4_W0 * (f[0][i] + f[3][i]) + RK4_W1 * (f[1][i] + f[2][i]);
             for (int j = 0; j < nc; j++)
-                T->t[i][j] += dh[j] * f;
+                T->t[i][j] += dh[j] * fi;
         }
     }
     project_tangent(nc, mode, &M->p, Y, danchor, T);

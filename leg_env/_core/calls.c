@@ -120,6 +120,15 @@ static void k_rk4_jacobians(call *c)
     }
 }
 
+/* A hybrid step's log before the step: no event (the step writes those it locates). */
+static void clear_log(leg_log *log)
+{
+    for (int j = 0; j < LEG_LOG_SIZE; j++) {
+        log->event_kind[j] = -1;
+        log->event_time[j] = NAN;
+    }
+}
+
 static void k_hybrid_step(call *c)
 {
     EACH {
@@ -127,10 +136,7 @@ static void k_hybrid_step(call *c)
         leg_record *rec = (leg_record *)c->a[11] + i;
         const leg_drive u = {ROW(2)[0], ROW(2)[1], *ROW(4), *ROW(5)};
         leg_trig(ROW(0), &s1, &co1, &s2, &co2);
-        for (int j = 0; j < LEG_LOG_SIZE; j++) { /* the log after the last event: none */
-            rec->log.event_kind[j] = -1;
-            rec->log.event_time[j] = NAN;
-        }
+        clear_log(&rec->log);
         *INT(6) = hybrid_control_step(PAR(3), &u, ROW(0), ROW(1), (int)*INT(6), ROW(7), c->x[8], (int)c->x[9], c->x[10], s1, co1, s2,
                                       co2, &rec->tally, &rec->log);
     }
@@ -143,10 +149,7 @@ static void k_hybrid_jacobians(call *c)
         leg_record *rec = (leg_record *)c->a[11] + i;
         const leg_drive u = {ROW(2)[0], ROW(2)[1], *ROW(4), *ROW(5)};
         leg_trig(ROW(0), &s1, &co1, &s2, &co2);
-        for (int j = 0; j < LEG_LOG_SIZE; j++) {
-            rec->log.event_kind[j] = -1;
-            rec->log.event_time[j] = NAN;
-        }
+        clear_log(&rec->log);
         int mode = (int)*INT(6);
         *INT(15) = hybrid_control_jacobians(PAR(3), &u, ROW(0), ROW(1), &mode, ROW(7), c->x[8], (int)c->x[9], c->x[10], s1, co1, s2,
                                             co2, (int)c->k[12], &rec->tally, &rec->log, ROW(13), ROW(14), c->a[16] != NULL ? ROW(16) : NULL);

@@ -129,7 +129,8 @@ static void clear_log(leg_log *log)
     }
 }
 
-static void k_hybrid_step(call *c)
+/* hybrid_step's work, and hybrid_jacobians' (the same arguments first, then the derivatives' outputs). */
+static void hybrid_rows(call *c, int jacobians)
 {
     EACH {
         double s1, co1, s2, co2;
@@ -137,25 +138,20 @@ static void k_hybrid_step(call *c)
         const leg_drive u = {ROW(2)[0], ROW(2)[1], *ROW(4), *ROW(5)};
         leg_trig(ROW(0), &s1, &co1, &s2, &co2);
         clear_log(&rec->log);
-        *INT(6) = hybrid_control_step(PAR(3), &u, ROW(0), ROW(1), (int)*INT(6), ROW(7), c->x[8], (int)c->x[9], c->x[10], s1, co1, s2,
-                                      co2, &rec->tally, &rec->log);
-    }
-}
-
-static void k_hybrid_jacobians(call *c)
-{
-    EACH {
-        double s1, co1, s2, co2;
-        leg_record *rec = (leg_record *)c->a[11] + i;
-        const leg_drive u = {ROW(2)[0], ROW(2)[1], *ROW(4), *ROW(5)};
-        leg_trig(ROW(0), &s1, &co1, &s2, &co2);
-        clear_log(&rec->log);
+        if (!jacobians) {
+            *INT(6) = hybrid_control_step(PAR(3), &u, ROW(0), ROW(1), (int)*INT(6), ROW(7), c->x[8], (int)c->x[9], c->x[10], s1, co1,
+                                          s2, co2, &rec->tally, &rec->log);
+            continue;
+        }
         int mode = (int)*INT(6);
         *INT(15) = hybrid_control_jacobians(PAR(3), &u, ROW(0), ROW(1), &mode, ROW(7), c->x[8], (int)c->x[9], c->x[10], s1, co1, s2,
                                             co2, (int)c->k[12], &rec->tally, &rec->log, ROW(13), ROW(14), c->a[16] != NULL ? ROW(16) : NULL);
         *INT(6) = mode;
     }
 }
+
+static void k_hybrid_step(call *c) { hybrid_rows(c, 0); }
+static void k_hybrid_jacobians(call *c) { hybrid_rows(c, 1); }
 
 /* ------------------------------------------------------------------------- the environments (env.c, tasks.c) */
 

@@ -5,7 +5,7 @@ measurement noise: the error of each base parameter, its standard error, and the
 
 The recordings are ``PlanarLegHop-v4`` with ``randomize=True`` under the hopper controller (the first 20 robots of 80
 that hop 500 steps without falling); the fit starts from the nominal robot with the true lengths and gravity. The
-noise is the issue's: 1 mm on the base's position, 0.01 rad on the angles, 0.01 m/s on the base's velocity,
+noise: 1 mm on the base's position, 0.01 rad on the angles, 0.01 m/s on the base's velocity,
 0.1 rad/s on the angular rates, independent at every step. The bars: every mass, inertia and mu within 1% of the
 truth without noise and 2% with it, on every robot, where the trajectory determines it (the base parameters
 ``m, a, b, J1, J2, I_b``; ``mu`` only where the foot slides). Written to ``benchmarks/results/identify.md``.

@@ -30,11 +30,11 @@ DT, SUBSTEPS, MAX_ANGLE = 0.01, 2, 0.02
 REF_CASES = 40  # random (robot, state) pairs per model against the complex-step reference
 REF_RTOL = 1e-12
 REF_RTOL_EVENT = 1e-9  # through an event located to ROOT_TIME (1e-12 s) rather than to the exact root
-FD_RTOL = 1e-6  # the bar on steps without an event
+FD_RTOL = 1e-6  # the bar on steps without an event (relative, Frobenius)
 FD_EPS_X, FD_EPS_TAU = 1e-6, 1e-4  # [m, rad, m/s, rad/s], [N m]
 ROLLOUT_ROBOTS, ROLLOUT_STEPS = 256, 40  # 2 policies x 256 x 40 = 20,480 states of the pinned task
 FLIGHT_CASES = 4096
-FD_RTOL_EVENT = 1e-4  # the bar on steps with an event
+FD_RTOL_EVENT = 1e-4  # the bar on steps with an event
 HYBRID_ROBOTS, HYBRID_STEPS = 64, 200  # per task and controller: 3 tasks x 2 x 64 x 200 = 76,800 states
 
 

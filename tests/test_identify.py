@@ -19,7 +19,7 @@ from leg_env.physics.params import PARAM_NAMES, LegParams
 
 STEPS = 500  # 5 s
 ROBOTS = 3
-NOISE = (1e-3, 1e-3, 0.01, 0.01, 0.01, 0.01, 0.01, 0.1, 0.1, 0.1)  # the issue's: 1 mm, 0.01 rad, 0.01 m/s, 0.1 rad/s
+NOISE = (1e-3, 1e-3, 0.01, 0.01, 0.01, 0.01, 0.01, 0.1, 0.1, 0.1)  # a robot's sensors: 1 mm, 0.01 rad, 0.01 m/s, 0.1 rad/s
 
 
 def recordings(n_robots: int, seed: int = 11):
@@ -86,7 +86,7 @@ def test_clean_recordings_give_the_base_parameters_exactly():
 
 
 def test_noisy_recordings_are_fitted_within_their_standard_errors():
-    """With the issue's noise every base parameter lands within four standard errors of the truth, and the
+    """With a robot's sensor noise (NOISE) every base parameter lands within four standard errors of the truth, and the
     standard errors are small: the total mass and the leg's moment and inertia to 1%, the shank's to 3%."""
     rng = np.random.default_rng(5)
     for truth, mu, q, qd, tau, modes in recordings(ROBOTS, seed=12):

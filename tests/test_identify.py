@@ -82,7 +82,6 @@ def test_clean_recordings_give_the_base_parameters_exactly():
         np.testing.assert_allclose(result.base[:6], true_base[:6], rtol=1e-6, err_msg=str(BASE_NAMES))
         # the raw masses, COMs and inertias are not all determined: the regressor has a null space among them
         assert result.rank <= len(result.fitted) - 2
-        assert result.seconds < 10.0
 
 
 def test_noisy_recordings_are_fitted_within_their_standard_errors():
@@ -100,7 +99,6 @@ def test_noisy_recordings_are_fitted_within_their_standard_errors():
         assert np.all(result.base_std[[0, 1, 3, 5]] <= 0.01 * true_base[[0, 1, 3, 5]])
         assert np.all(result.base_std[[2, 4]] <= 0.03 * true_base[[2, 4]])
         assert 0.7 < result.rms < 1.6
-        assert result.seconds < 10.0
 
 
 def test_bad_input_is_named():

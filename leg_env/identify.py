@@ -39,7 +39,7 @@ import numpy as np
 from . import checks
 from .physics import derivatives
 from .physics.contact import FLIGHT, SLIP_BACKWARD, SLIP_FORWARD, STICK
-from .physics.dynamics import contact_jacobian, foot_position
+from .physics.dynamics import foot_position
 from .physics.integrate import MAX_ANGLE, SUBSTEPS
 from .physics.params import PARAM_NAMES, LegParams
 
@@ -260,7 +260,7 @@ class _Problem:
         z = self.frames.z0.copy()
         r, Jz, Jp = self.system(theta, z)
         cost, lam, it = float((r * r).sum()), 1e-3, 0
-        offsets, sizes = self.frames.offset, self.frames.size
+        sizes = self.frames.size
         for it in range(1, iterations + 1):
             S, s, Hinv_C, Hinv_g, _ = self.blocks(r, Jz, Jp, lam)
             S = S + lam * np.diag(np.diag(S))
@@ -289,7 +289,6 @@ class _Problem:
                 lam *= 10.0
                 if lam > 1e4:
                     break
-        del offsets
         return theta, z, r, Jz, Jp, cost, it
 
 
@@ -315,8 +314,8 @@ def fit(q, qd, tau, dt: float, p0: LegParams, mu0: float, modes=None, *, noise=D
         ``Identification``.
 
     Raises:
-        ValueError: arrays of the wrong shape or not finite, a parameter not in ``FITTED``, a window shorter than 2
-            steps or a trajectory shorter than one window.
+        ValueError: arrays of the wrong shape or not finite, a non-positive ``dt``, a negative ``mu0``, a parameter not
+            in ``FITTED``, a window shorter than 2 steps or a trajectory shorter than one window.
     """
     started = time.perf_counter()
     q = checks.real_array("q", q, "a (T, 5) array")
@@ -328,6 +327,8 @@ def fit(q, qd, tau, dt: float, p0: LegParams, mu0: float, modes=None, *, noise=D
         if not np.all(np.isfinite(a)):
             raise ValueError(f"{name} must be finite")
     window = checks.integer("window", window, 2, 10_000)
+    dt = checks.real("dt", dt, 0.0, math.inf, lo_open=True, hi_open=True, unit="s")
+    mu0 = checks.real("mu0", mu0, 0.0, 1e6)
     if q.shape[0] <= window:
         raise ValueError(f"the trajectory must be longer than one window ({window} steps), got {q.shape[0]} states")
     unknown = [name for name in fitted if name not in FITTED]

@@ -113,5 +113,7 @@ def test_bad_input_is_named():
         fit(q, qd, tau, 0.01, prior(truth), 0.5, modes, fitted=("l1",))
     with pytest.raises(ValueError, match="window"):
         fit(q[:5], qd[:5], tau[:4], 0.01, prior(truth), 0.5, modes[:5])
+    with pytest.raises(ValueError, match="dt"):
+        fit(q, qd, tau, 0.0, prior(truth), 0.5, modes)
     with pytest.raises(TypeError):
         fit(q, qd, tau, 0.01, prior(truth), 0.5, modes, windw=10)

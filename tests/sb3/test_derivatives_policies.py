@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from test_derivatives import FD_RTOL, FD_RTOL_EVENT, hybrid_fd_check, pinned_fd_check

@@ -380,7 +380,7 @@ LEG_INLINE int advance(int mode, const leg_model *M, const leg_drive *u, const d
 }
 
 /* advance() in the mode `mode`, each mode a constant. */
-LEG_INLINE int advance_in(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
+static inline int advance_in(int mode, const leg_model *M, const leg_drive *u, const double *anchor, leg_progress *g,
                           double *w0a, double *w0b, int settled, int events, leg_tally *rec, leg_crossing *c,
                           leg_hybrid_tangent *J)
 {

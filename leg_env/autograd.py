@@ -34,9 +34,8 @@ class _Step(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, x, tau, run):
-        x_next, A, B, extra = run(x.detach().cpu().numpy(), tau.detach().cpu().numpy())
+        x_next, A, B = run(x.detach().cpu().numpy(), tau.detach().cpu().numpy())
         ctx.save_for_backward(torch.from_numpy(A), torch.from_numpy(B))
-        ctx.extra = extra
         return torch.from_numpy(x_next).to(x.device)
 
     @staticmethod
@@ -72,7 +71,7 @@ def hybrid_step(x: torch.Tensor, tau: torch.Tensor, p: LegParams, mu, mode=None,
     def run(x_np, tau_np):
         J = derivatives.hybrid_step_jacobians(x_np[:, :5], x_np[:, 5:], tau_np, p, mu, mode=mode, anchor_x=anchor_x, **step_rule)
         out["step"] = J.step
-        return np.concatenate([J.step.q, J.step.qd], axis=1), J.A, J.B, None
+        return np.concatenate([J.step.q, J.step.qd], axis=1), J.A, J.B
 
     x_next = _Step.apply(x, tau, run)
     return x_next, out["step"]
@@ -87,7 +86,7 @@ def stance_step(x: torch.Tensor, tau: torch.Tensor, p: LegParams, anchor=None, *
     def run(x_np, tau_np):
         J = derivatives.stance_step_jacobians(x_np[:, :5], x_np[:, 5:], tau_np, p, anchor=anchor, **step_rule)
         out["lam"] = J.lam_mean
-        return np.concatenate([J.q, J.qd], axis=1), J.A, J.B, None
+        return np.concatenate([J.q, J.qd], axis=1), J.A, J.B
 
     x_next = _Step.apply(x, tau, run)
     return x_next, out["lam"]

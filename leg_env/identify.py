@@ -123,11 +123,10 @@ class _Windows:
         self.z0 = z
 
     def states(self, z):
-        """``(q, qd, anchor_x, S)``: the windows' start states, contact points and d(q, qd)/dz, (W, 10, 10) (the
+        """``(q, qd, S)``: the windows' start states and d(q, qd)/dz, (W, 10, 10) (the
         columns after a window's size zero)."""
         p, n = self.p, len(self.modes)
         q, qd, S = np.zeros((n, 5)), np.zeros((n, 5)), np.zeros((n, 10, 10))
-        anchor = np.zeros(n)
         for w, mode in enumerate(self.modes):
             zw = z[self.offset[w]:self.offset[w + 1]]
             if mode == FLIGHT:
@@ -159,7 +158,6 @@ class _Windows:
             for i, c in enumerate(r_cols):
                 S[w, 6, c] = (dvy_dw1 if i < 2 else 0.0) + dvy_dw2
             if mode == STICK:  # the base from the contact point, at rest: x_b = anchor - l1 c1 - l2 c2
-                anchor[w] = x_or_anchor
                 q[w, 0] = x_or_anchor - l1 * c1 - l2 * c2
                 qd[w, 0] = l1 * s1 * w1 + l2 * s2 * w2
                 S[w, 0, 6] = 1.0
@@ -171,8 +169,7 @@ class _Windows:
             else:  # slip: the base's x and its rate are free
                 q[w, 0], qd[w, 0] = x_or_anchor, vx
                 S[w, 0, 0] = S[w, 5, 4] = 1.0
-                anchor[w] = foot_position(q[w], p)[0]
-        return q, qd, anchor, S
+        return q, qd, S
 
 
 def _window_starts(low: np.ndarray, length: int) -> np.ndarray:
@@ -207,7 +204,7 @@ class _Problem:
     def simulate(self, theta, z):
         """The windows' simulated states (W, K + 1, 10), d/dz (W, K + 1, 10, 10), d/dparams (W, K + 1, 10, n_p)."""
         p = LegParams(**dict(zip(PARAM_NAMES, theta[:11])))
-        q0, qd0, _, S = self.frames.states(z)
+        q0, qd0, S = self.frames.states(z)
         W, K, columns = len(self.starts), self.K, self.columns
         X = np.zeros((W, K + 1, 10))
         DZ = np.zeros((W, K + 1, 10, 10))

@@ -34,6 +34,18 @@ def substeps_for(qd, dt: float, substeps: int, max_angle: float) -> int:
     return max(substeps, math.ceil(w * dt / max_angle))
 
 
+def rk4(q, qd, h, f):
+    """One classical RK4 step of ``(q, qd)' = (qd, f(q, qd))`` of length ``h``."""
+    k1q, k1v = qd, f(q, qd)
+    k2q = qd + h / 2 * k1v
+    k2v = f(q + h / 2 * k1q, k2q)
+    k3q = qd + h / 2 * k2v
+    k3v = f(q + h / 2 * k2q, k3q)
+    k4q = qd + h * k3v
+    k4v = f(q + h * k3q, k4q)
+    return q + h / 6 * (k1q + 2 * k2q + 2 * k3q + k4q), qd + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+
+
 class ComplexStep:
     """The pinned (``stance=True``) or free control step of a parameter set, in complex arithmetic."""
 
@@ -70,15 +82,7 @@ class ComplexStep:
         n = substeps_for(qd, dt, substeps, max_angle) if n is None else n
         h = dt / n
         for _ in range(n):
-            k1q, k1v = qd, self.accel(q, qd, tau, stance)
-            k2q, k2v = qd + h / 2 * k1v, None
-            k2v = self.accel(q + h / 2 * k1q, k2q, tau, stance)
-            k3q = qd + h / 2 * k2v
-            k3v = self.accel(q + h / 2 * k2q, k3q, tau, stance)
-            k4q = qd + h * k3v
-            k4v = self.accel(q + h * k3q, k4q, tau, stance)
-            q = q + h / 6 * (k1q + 2 * k2q + 2 * k3q + k4q)
-            qd = qd + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+            q, qd = rk4(q, qd, h, lambda q_, qd_: self.accel(q_, qd_, tau, stance))
             if stance:
                 q, qd = self.project(q, qd, anchor)
         return np.concatenate([q, qd])
@@ -163,16 +167,7 @@ class HybridComplexStep(ComplexStep):
         return x[:5], np.array([-sigma * self.mu * x[5], x[5]])
 
     def substep(self, q, qd, tau, h, mode, anchor):
-        f = lambda q_, qd_: self.forces(q_, qd_, tau, mode)[0]  # noqa: E731
-        k1q, k1v = qd, f(q, qd)
-        k2q = qd + h / 2 * k1v
-        k2v = f(q + h / 2 * k1q, k2q)
-        k3q = qd + h / 2 * k2v
-        k3v = f(q + h / 2 * k2q, k3q)
-        k4q = qd + h * k3v
-        k4v = f(q + h * k3q, k4q)
-        q = q + h / 6 * (k1q + 2 * k2q + 2 * k3q + k4q)
-        qd = qd + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        q, qd = rk4(q, qd, h, lambda q_, qd_: self.forces(q_, qd_, tau, mode)[0])
         if mode == STICK:
             q, qd = self.project(q, qd, anchor)
         elif mode != FLIGHT:  # the foot on the ground line, its normal velocity zero

@@ -62,7 +62,9 @@ def test_chunked_update_is_ppo_update(settings, chunk):
         np.testing.assert_allclose(after[name].numpy(), after_ref[name].numpy(), rtol=1e-6, atol=1e-4 * moved, err_msg=name)
     for key in LOGGED:
         got, want = chunked.logger.name_to_value[key], reference.logger.name_to_value[key]
-        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7, err_msg=key)
+        # the losses are means of O(1) terms (normalised advantages times ratios) that can cancel to 1e-5: float32's
+        # round-off of such a mean over a rollout of 512 samples, summed in another order, is about 1e-6
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6, err_msg=key)
     assert chunked._n_updates == reference._n_updates
 
 

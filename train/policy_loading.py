@@ -85,7 +85,13 @@ def _stepping(params, config):
     return SteppingController(params, config)
 
 
-BASELINES = {"lqr": _lqr, "hopper": _hopper, "gated": _gated, "stepping": _stepping}
+def _mpc(params, config):
+    from policies.mpc import HopMPC
+
+    return HopMPC(params, config)
+
+
+BASELINES = {"lqr": _lqr, "hopper": _hopper, "gated": _gated, "stepping": _stepping, "mpc": _mpc}
 """The model-based controllers by name: ``(params, config) -> controller`` with ``predict``."""
 
 
@@ -95,7 +101,7 @@ def load_policy(path, env_kwargs: dict | None = None, env_id: str | None = None)
     A folder written by ``python -m train.rllib``, its ``best/`` or ``last/``, or one of its checkpoints, loads as a
     ``train.rllib.RLlibPolicy`` (needs the ``rllib`` extra).
 
-    A baseline (``BASELINES``: ``"lqr"``, ``"hopper"``, ``"gated"``, ``"stepping"``) is built for the env ``env_id`` made with ``env_kwargs``. For a folder,
+    A baseline (``BASELINES``: ``"lqr"``, ``"hopper"``, ``"gated"``, ``"stepping"``, ``"mpc"``) is built for the env ``env_id`` made with ``env_kwargs``. For a folder,
     ``env_kwargs`` (default: the run's ``eval_env_kwargs``) are kept as the policy's ``env_kwargs``,
     the evaluation env's arguments.
 

@@ -1,0 +1,90 @@
+"""The hop MPC's compute per control step per robot (``policies.mpc.HopMPC``), beside the hopper's, in one run.
+
+    .venv/bin/python benchmarks/bench_mpc.py
+
+On ``PlanarLegHop-v4``, for batches of 1, 10 and 100 robots: the wall-clock time of ``predict`` (one iLQR iteration:
+the rollout with the Jacobians, the backward pass, the line search's rollouts) over 60 control steps from the
+episodes' starts (through the first hop), divided by the batch size; the median over the steps and the slowest step.
+The hopper controller's ``predict`` on the same observations is the reference. One thread (numpy's BLAS and torch
+are held to one). The bar: at most 10 ms per control step per robot on one core. Written to
+``benchmarks/results/mpc.md``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+import datetime  # noqa: E402
+import platform  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+
+import leg_env  # noqa: E402
+from leg_env import __version__  # noqa: E402
+from policies.hopper import HopperController  # noqa: E402
+from policies.mpc import HopMPC  # noqa: E402
+from train.machine import cpu_name  # noqa: E402
+
+RESULTS = ROOT / "benchmarks" / "results" / "mpc.md"
+STEPS = 60
+
+
+def measure(n: int) -> dict:
+    envs = gym.make_vec("leg_env/PlanarLegHop-v4", num_envs=n, vectorization_mode="vector_entry_point")
+    e = envs.unwrapped
+    mpc, hopper = HopMPC(e.params, e.config), HopperController(e.params, e.config)
+    obs, _ = envs.reset(seed=10_000)
+    t_mpc, t_hop = [], []
+    for _ in range(STEPS):
+        t0 = time.perf_counter()
+        action, _ = mpc.predict(obs)
+        t1 = time.perf_counter()
+        hopper.predict(obs)
+        t2 = time.perf_counter()
+        t_mpc.append((t1 - t0) / n)
+        t_hop.append((t2 - t1) / n)
+        obs, *_ = envs.step(action)
+    envs.close()
+    return dict(n=n, horizon=mpc.horizon, mpc=np.median(t_mpc), mpc_max=np.max(t_mpc), hop=np.median(t_hop))
+
+
+def main() -> None:
+    rows = [measure(n) for n in (1, 10, 100)]
+    machine = (f"{cpu_name()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; Python "
+               f"{platform.python_version()}; leg-env {__version__}, numpy {np.__version__}")
+    lines = [
+        "# Hop MPC: compute per control step",
+        "",
+        f"Written by `python benchmarks/bench_mpc.py` on {datetime.date.today().isoformat()}.",
+        "",
+        f"Machine: {machine}; one thread.",
+        "",
+        f"`policies.mpc.HopMPC` with its defaults (a horizon of {rows[0]['horizon']} control steps, one iLQR iteration and "
+        f"its line search per control step), {STEPS} control steps from the episodes' starts of `PlanarLegHop-v4`; the "
+        "time of `predict` divided by the batch size. The hopper's `predict` on the same observations is the reference. "
+        "Bar: at most 10 ms per control step per robot on one core.",
+        "",
+        "| robots per call | MPC, median [ms per robot] | MPC, slowest step [ms per robot] | hopper [ms per robot] | MPC / hopper |",
+        "|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(f"| {r['n']} | {1e3 * r['mpc']:.2f} | {1e3 * r['mpc_max']:.2f} | {1e3 * r['hop']:.3f} | "
+                     f"{r['mpc'] / r['hop']:.0f}x |")
+    text = "\n".join(lines) + "\n"
+    RESULTS.write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

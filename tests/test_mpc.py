@@ -1,0 +1,137 @@
+"""``policies.mpc.HopMPC``: its model is the env's step, its backward pass differentiates the closed loop it rolls
+out, and without iterations it is the hopper it starts from."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import leg_env  # noqa: F401  (registers the tasks)
+from policies.hopper import HopperController
+from policies.mpc import HopMPC
+from train.policy_loading import load_policy
+
+HOP = "leg_env/PlanarLegHop-v4"
+
+
+def _envs(n, seed=60000):
+    envs = gym.make_vec(HOP, num_envs=n, vectorization_mode="vector_entry_point")
+    obs, _ = envs.reset(seed=seed)
+    return envs, obs
+
+
+def test_the_plan_predicts_the_env():
+    """The plan's first state after the step is the env's next state (the observation's float32 aside): the
+    controller's model is the env's own step, through touchdowns and lift-offs."""
+    envs, obs = _envs(3)
+    e = envs.unwrapped
+    mpc = HopMPC(e.params, e.config, horizon=12)
+    modes = set()
+    for _ in range(100):
+        action, _ = mpc.predict(obs)
+        predicted = mpc.planned[:, 1].copy()
+        obs, _, terminated, _, info = envs.step(action)
+        assert not terminated.any()
+        q, qd, mode = mpc.state(obs)
+        modes.update(info["contact_mode"])
+        # the observation's frame: the base relative to its contact point (translation along the ground is free)
+        got = np.concatenate([q, qd], axis=1)
+        np.testing.assert_allclose(got[:, 1:], predicted[:, 1:], atol=2e-5)
+    assert {"stick", "flight"} <= modes  # the check went through lift-offs and touchdowns
+
+
+def test_backward_pass_differentiates_the_closed_loop():
+    """The chain of the closed loop's ``A`` and ``B`` (the step's Jacobians with the hopper's feedback) gives the
+    plan cost's gradient by the corrections that centred differences of the rolled-out cost give."""
+    envs, obs = _envs(4)
+    e = envs.unwrapped
+    mpc = HopMPC(e.params, e.config, horizon=40, steps=(), stance_cost=0.0, fall_cost=0.0, power_weight=1e-4)
+    for _ in range(25):  # into the first stance's push
+        action, _ = mpc.predict(obs)
+        obs, *_ = envs.step(action)
+    q, qd, mode = mpc.state(obs)
+    batch = np.asarray(obs, dtype=np.float64)
+    like = batch[:, :22]
+    target = mpc.y_stand + batch[:, 18]
+    x_ref = mpc.com(np.concatenate([q, qd], axis=1))[0] - batch[:, 19]
+    ground = batch[:, 20]
+    rng = np.random.default_rng(0)
+    V = 0.02 * rng.standard_normal(mpc._plan.shape)
+    roll = mpc._rollout(q, qd, mode, ground, like, x_ref, V, jacobians=True)
+
+    def cost(V):
+        r = mpc._rollout(q, qd, mode, ground, like, x_ref, V)
+        return mpc._cost(r, target, x_ref), r["modes"]
+
+    # the adjoint: half the cost's gradient by the corrections, through A and B
+    flight = mpc._liftoffs(roll["modes"])
+    r = mpc.residuals(roll["X"][:, 1:], flight, target[:, None], x_ref[:, None])
+    Jr = mpc._residual_jacobian(roll["X"][:, 1:], flight, target[:, None], x_ref[:, None])
+    lx = np.einsum("nhri,nhr->nhi", Jr, r)
+    ws = mpc.smooth_weight
+    grad = np.zeros_like(V)
+    lam = np.zeros((4, 10))
+    for t in range(V.shape[1] - 1, -1, -1):
+        lam = lam + lx[:, t]
+        ra, Ju, Jx = mpc.action_residuals(roll["X"][:, t], roll["U"][:, t])
+        Jv, Jx = Ju * roll["D"][:, t, None, :], Ju @ roll["Du"][:, t] + Jx  # through u = clip(pi(x) + v)
+        grad[:, t] = np.einsum("nji,nj->ni", roll["B"][:, t], lam) + np.einsum("nji,nj->ni", Jv, ra) + ws * V[:, t]
+        lam = np.einsum("nji,nj->ni", roll["A"][:, t], lam) + np.einsum("nji,nj->ni", Jx, ra)
+    checked = 0
+    for t in (0, 5, 15, 30):
+        for j in range(2):
+            for h in (1e-5, 1e-6):
+                Vp, Vm = V.copy(), V.copy()
+                Vp[:, t, j] += h
+                Vm[:, t, j] -= h
+                (cp, mp), (cm, mm) = cost(Vp), cost(Vm)
+                fd = (cp - cm) / (4 * h)  # half the cost, as the backward pass
+                same = (mp == roll["modes"]).all(axis=1) & (mm == roll["modes"]).all(axis=1)
+                ok = np.abs(fd - grad[:, t, j]) <= 1e-4 * (1.0 + np.abs(grad[:, t, j]))
+                if (ok | ~same).all():
+                    checked += same.sum()
+                    break
+            else:
+                raise AssertionError(f"step {t}, action {j}: differences {fd}, adjoint {grad[:, t, j]}")
+    assert checked >= 24  # most robots, every step checked with the same events at both sides
+
+
+def test_without_iterations_it_is_the_hopper():
+    """No line-search step: the plan is its hopper's own closed loop, so the actions are that hopper's (the MPC reads
+    the COM's drift from the model where the hopper dead-reckons it)."""
+    envs, obs = _envs(4)
+    e = envs.unwrapped
+    mpc = HopMPC(e.params, e.config, horizon=4, steps=())
+    hopper = HopperController(e.params, e.config, **mpc.hopper_settings)
+    for _ in range(80):
+        a, _ = mpc.predict(obs)
+        b, _ = hopper.predict(obs)
+        np.testing.assert_allclose(a, b, atol=2e-3)
+        obs, *_ = envs.step(b)
+
+
+def test_loads_by_name_and_checks_its_input():
+    policy = load_policy("mpc", env_id=HOP)
+    assert isinstance(policy, HopMPC)
+    envs, obs = _envs(2)
+    policy.horizon = 5
+    policy.reset()
+    action, _ = policy.predict(obs)
+    assert action.shape == (2, 2) and action.dtype == np.float32 and np.all(np.abs(action) <= 1.0)
+    with pytest.raises(ValueError, match="observation must have shape"):
+        policy.predict(obs[:, :20])
+    with pytest.raises(ValueError, match="horizon"):
+        HopMPC(horizon=1)
+    with pytest.raises(ValueError, match="apex_scale"):
+        HopMPC(apex_scale=0.0)
+    with pytest.raises(ValueError, match="charge_apex"):
+        HopMPC(charge_apex="apex")
+    with pytest.raises(TypeError):
+        HopMPC(horizon_steps=10)
+    bad = obs.copy()
+    bad[0, 3] = np.nan
+    plan = policy._plan.copy()
+    with pytest.raises(ValueError, match="observation must be finite: rows \\[0\\]"):
+        policy.predict(bad)
+    np.testing.assert_array_equal(policy._plan, plan)  # nothing changed

@@ -300,11 +300,12 @@ class HopMPC(BatchedController):
 
     _HOPPER_STATE = ("_x0", "_bias", "_apex", "_phase", "_was_flight")
 
-    def _hopper_copy(self, source):
+    def _hopper_copy(self, source, copies: int = 1):
+        """A hopper in ``source``'s state, its robots repeated ``copies`` times (a batch of plans per robot)."""
         h = HopperController(self.params, self.config, **self.hopper_settings)
-        h._n = source._n
+        h._n = source._n * copies
         for name in self._HOPPER_STATE:
-            setattr(h, name, getattr(source, name).copy())
+            setattr(h, name, np.tile(getattr(source, name), copies))
         return h
 
     def _hopper(self, h, x, mode, like, x_ref, derivative: bool):
@@ -331,12 +332,12 @@ class HopMPC(BatchedController):
 
     # ---- the model
 
-    def _rollout(self, q, qd, mode, ground, like, x_ref, V, nominal=None, k=None, K=None, jacobians=False):
+    def _rollout(self, q, qd, mode, ground, like, x_ref, V, nominal=None, k=None, K=None, jacobians=False, copies=1):
         """Roll the hopper plus the corrections ``V`` ``(N, H, 2)`` (or the nominal's plus ``k + K dx``) out on the
         simulator; with ``jacobians`` also the closed loop's ``A``, ``B`` and the action's derivatives."""
         n, H = V.shape[0], self.horizon
         p, mu = self.params, self.config.mu
-        h = self._hopper_copy(self._pilot)
+        h = self._hopper_copy(self._pilot, copies)
         X = np.empty((n, H + 1, _NX))
         X[:, 0, :5], X[:, 0, 5:] = q, qd
         modes = np.empty((n, H + 1), dtype=np.int64)
@@ -440,14 +441,21 @@ class HopMPC(BatchedController):
             best_cost = self._cost(roll, target, x_ref)
             best_V, best_U, best_X = roll["V"], roll["U"], roll["X"]
             k, K = self._backward(roll, target, x_ref)
-            for step in self.steps:
-                trial = self._rollout(q, qd, mode, ground, like, x_ref, roll["V"], nominal=roll["X"], k=step * k, K=K)
-                cost = self._cost(trial, target, x_ref)
-                better = cost < best_cost
-                best_cost = np.where(better, cost, best_cost)
-                best_V = np.where(better[:, None, None], trial["V"], best_V)
-                best_U = np.where(better[:, None, None], trial["U"], best_U)
-                best_X = np.where(better[:, None, None], trial["X"], best_X)
+            if self.steps:  # every step length's plan in one batch, robot-major within each length
+                S = len(self.steps)
+                tile = lambda a: np.tile(a, (S,) + (1,) * (a.ndim - 1))  # noqa: E731
+                scale = np.repeat(np.asarray(self.steps), len(q))[:, None, None]
+                trial = self._rollout(tile(q), tile(qd), tile(mode), tile(ground), tile(like), tile(x_ref), tile(roll["V"]),
+                                      nominal=tile(roll["X"]), k=scale * tile(k), K=tile(K), copies=S)
+                costs = self._cost(trial, tile(target), tile(x_ref)).reshape(S, len(q))
+                for i in range(S):
+                    cost = costs[i]
+                    rows = slice(i * len(q), (i + 1) * len(q))
+                    better = cost < best_cost
+                    best_cost = np.where(better, cost, best_cost)
+                    best_V = np.where(better[:, None, None], trial["V"][rows], best_V)
+                    best_U = np.where(better[:, None, None], trial["U"][rows], best_U)
+                    best_X = np.where(better[:, None, None], trial["X"][rows], best_X)
             V = best_V
         action = best_U[:, 0].copy()
         self._plan[:, :-1] = best_V[:, 1:]

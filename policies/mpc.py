@@ -83,6 +83,9 @@ class HopMPC(BatchedController):
         fall_cost: the cost of a step fallen or too long on the ground; stance_cost: of a step on the ground past
             stance_grace [s].
 
+    After each ``predict``, ``planned`` ``(N, horizon + 1, 10)`` holds the chosen plan's states (the first the robot's
+    now) and ``cost`` ``(N,)`` its cost.
+
     Raises:
         TypeError: an unknown keyword. ValueError: a setting out of its range (the message names it).
     """
@@ -163,19 +166,16 @@ class HopMPC(BatchedController):
 
     def _allocate(self, n: int) -> None:
         self._plan = np.zeros((n, self.horizon, _NU))  # the corrections v added to the hopper's actions
-        self._pilot = HopperController(self.params, self.config, **self.hopper_settings)  # the hopper along the robot's own trajectory
+        # the hopper along the robot's own trajectory, whose state each plan starts from
+        self._pilot = HopperController(self.params, self.config, **self.hopper_settings)
         self._pilot._n = n
         self._pilot._allocate(n)
         self._pilot._start(np.ones(n, dtype=bool))
         self._probe = HopperController(self.params, self.config, **self.hopper_settings)  # for the hopper's derivative
-        self._probe._n = n * (2 * _NX + 1)
-        self._probe._allocate(self._probe._n)
-        self._last = np.zeros((n, _NU))
 
     def _start(self, rows: np.ndarray, batch: np.ndarray | None = None) -> None:
         self._plan[rows] = 0.0
         self._pilot._start(rows)
-        self._last[rows] = 0.0
 
     # ---- the state from the observation
 
@@ -231,7 +231,8 @@ class HopMPC(BatchedController):
             (xc - x_ref) / s["drift"],
             vxc / s["drift_rate"],
             (np.maximum(lo_h + mg - x[..., 3], 0.0) - np.maximum(x[..., 3] - hi_h + mg, 0.0)) / s["limit"],
-            (np.maximum(lo_k + mg - x[..., 4], 0.0) - np.maximum(x[..., 4] - min(hi_k - mg, self.crouch_limit), 0.0)) / s["limit"],
+            (np.maximum(lo_k + mg - x[..., 4], 0.0)
+             - np.maximum(x[..., 4] - min(hi_k - mg, self.crouch_limit), 0.0)) / s["limit"],
         ], axis=-1)
 
     def _residual_jacobian(self, X, flight, target, x_ref, eps=1e-6):
@@ -270,7 +271,8 @@ class HopMPC(BatchedController):
         return r, Ju, Jx
 
     def _liftoffs(self, modes):
-        """The steps ``(N, H)`` that end in flight from contact: a flight's apex is charged once, at its lift-off."""
+        """The steps ``(N, H)`` whose end state's apex is charged: every step that ends in flight (``charge_apex="flight"``)
+        or only those that lift off (``"liftoff"``)."""
         if self.charge_apex == "flight":
             return modes[:, 1:] == _contact.FLIGHT
         return (modes[:, 1:] == _contact.FLIGHT) & (modes[:, :-1] != _contact.FLIGHT)
@@ -461,6 +463,5 @@ class HopMPC(BatchedController):
         self._plan[:, :-1] = best_V[:, 1:]
         self._plan[:, -1] = 0.0
         self._hopper(self._pilot, np.concatenate([q, qd], axis=1), mode, like, x_ref, False)  # the pilot follows the robot
-        self._last = action
         self.cost, self.planned = best_cost, best_X
         return action.astype(np.float32)

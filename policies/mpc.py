@@ -312,25 +312,29 @@ class HopMPC(BatchedController):
 
     def _hopper(self, h, x, mode, like, x_ref, derivative: bool):
         """The hopper's action (unclipped, in action units) at states ``x`` ``(N, 10)``, advancing ``h``; with
-        ``derivative`` also its derivative by the state ``(N, 2, 10)`` (centred differences, its phases held)."""
-        obs = self._observation(x, mode, like)
-        dpi = None
+        ``derivative`` also its derivative by the state ``(N, 2, 10)`` (centred differences, its phases held), from the
+        same call of the hopper's law (the state itself, then each coordinate moved by +-eps)."""
+        n, eps = x.shape[0], 1e-6
+        copies = 2 * _NX + 1 if derivative else 1
+        dx = np.zeros((copies, 1, _NX))
         if derivative:
-            n, eps = x.shape[0], 1e-6
-            probe = self._probe
+            dx[1 + np.arange(_NX), 0, np.arange(_NX)] = eps
+            dx[1 + _NX + np.arange(_NX), 0, np.arange(_NX)] = -eps
+        xs = (x[None] + dx).reshape(-1, _NX)
+        law = h if copies == 1 else self._probe
+        if copies > 1:
             for name in self._HOPPER_STATE:
-                setattr(probe, name, np.tile(getattr(h, name), 2 * _NX))
-            dx = np.zeros((2 * _NX, 1, _NX))
-            dx[np.arange(_NX), 0, np.arange(_NX)] = eps
-            dx[_NX + np.arange(_NX), 0, np.arange(_NX)] = -eps
-            xs = (x[None] + dx).reshape(-1, _NX)
-            probe._x0 = self.com(xs)[0] - np.tile(x_ref, 2 * _NX)
-            tau = probe.torque(self._observation(xs, np.tile(mode, 2 * _NX), np.tile(like, (2 * _NX, 1))))
-            tau = tau.reshape(2 * _NX, n, _NU) / self.torque_limit
-            dpi = np.moveaxis((tau[:_NX] - tau[_NX:]) / (2 * eps), 0, -1)  # (N, 2, 10)
-        h._x0 = self.com(x)[0] - x_ref  # the COM's drift, exact on the model (the hopper dead-reckons it)
-        tau = h.torque(obs)
-        return tau / self.torque_limit, dpi
+                setattr(law, name, np.tile(getattr(h, name), copies))
+        law._x0 = self.com(xs)[0] - np.tile(x_ref, copies)  # the COM's drift, exact on the model (the hopper dead-reckons it)
+        tau = law.torque(self._observation(xs, np.tile(mode, copies), np.tile(like, (copies, 1))))
+        tau = tau.reshape(copies, n, _NU) / self.torque_limit
+        if copies == 1:
+            return tau[0], None
+        for name in self._HOPPER_STATE:  # the hopper advanced by the state's own row
+            setattr(h, name, getattr(law, name)[:n].copy())
+        h._vx = law._vx[:n].copy()
+        dpi = np.moveaxis((tau[1:1 + _NX] - tau[1 + _NX:]) / (2 * eps), 0, -1)  # (N, 2, 10)
+        return tau[0], dpi
 
     # ---- the model
 

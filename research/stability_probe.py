@@ -1,7 +1,8 @@
 """Probe: the hopper's apex-to-apex return map on the hop task, its Jacobian composed from the step's exact ``A``,
 ``B`` and the hopper's derivative, against centred differences of the return map itself.
 
-    .venv/bin/python research/stability_probe.py 0.10     # the command [m]
+    .venv/bin/python research/stability_probe.py 0.10                        # the command [m]
+    .venv/bin/python research/stability_probe.py 0.08 "dict(apex_gain=0.0)"  # and the hopper's settings
 
 The closed loop's state at a section is ``z = (q, qd, bias, apex, x0)``: the robot's and the hopper's continuous state
 (its apex bias, its apex memory, its dead-reckoned drift); its phase is held. The section is the first control step
@@ -22,12 +23,13 @@ aux = HopMPC(p, c)  # for _observation and com
 LIM = np.array(c.torque_limit, float) * np.ones(2)
 SARGS = dict(dt=c.dt, substeps=c.substeps, max_angle=c.max_angle)
 S = ("_bias", "_apex", "_x0")
+GAINS = eval(sys.argv[2]) if len(sys.argv) > 2 else {}
 NZ = 13
 
 def ctl_step(z, phase, was_flight, mode, like):
     """(tau, s') of the hopper at batch of augmented states z (n, 13), its discrete state given."""
     n = z.shape[0]
-    h = HopperController(p, c); h._n = n; h._allocate(n)
+    h = HopperController(p, c, **GAINS); h._n = n; h._allocate(n)
     h._bias, h._apex, h._x0 = z[:, 10].copy(), z[:, 11].copy(), z[:, 12].copy()
     h._phase, h._was_flight = phase.copy(), was_flight.copy()
     obs = aux._observation(z[:, :10], mode, np.broadcast_to(like, (n, like.shape[-1])))
@@ -70,7 +72,7 @@ phase = np.zeros(1, np.int64); was = np.zeros(1, bool)
 def vyc(z): return aux.com(z[:, :10])[3]
 sections = []
 prev_vy = vyc(z)
-for k in range(1500):
+for k in range(3000):
     z, phase, was, mode = step(z, phase, was, mode, like)
     vy = vyc(z)
     if mode[0] == C.FLIGHT and prev_vy[0] >= 0 and vy[0] < 0:

@@ -4,8 +4,8 @@ exact Jacobians of the hybrid step, around the hopper.
 **The plan.** At every control step the controller rebuilds the robot's state from the observation and rolls a plan
 out over ``horizon`` control steps (0.7 s: the rest of a hop and the next one) on the simulator's own step
 (``leg_env.physics.derivatives.hybrid_step_jacobians``: the map the env steps, its touchdowns, impacts, lift-offs and
-stick/slip changes located inside the step). The plan is the hopper (``policies.hopper``: Raibert's servos) in closed
-loop, plus a correction ``v_t`` of its action at every step, ``a_t = clip(pi(x_t) + v_t, -1, 1)``. One iteration of
+stick/slip changes located inside the step). The plan is the hopper (``policies.hopper``: Raibert's servos; a deeper crouch
+than its default) in closed loop, plus a correction ``v_t`` of its action at every step, ``a_t = clip(pi(x_t) + v_t, -1, 1)``. One iteration of
 iLQR improves the corrections:
 
 * the backward pass is Gauss-Newton on the closed loop's Jacobians ``A_cl = A + B D dpi/dx`` and ``B_cl = B D``:
@@ -27,8 +27,8 @@ horizon is a hop whose apex is not charged), crouched deeper and deeper and fell
   own apex (``leg_env.tasks.hop``);
 * ``tilt``, ``tilt_rate``: ``th_b / tilt_scale``, ``th_b' / tilt_rate_scale``: the torso upright and still;
 * ``drift``, ``drift_rate``: ``(x_com - x_com,0) / drift_scale``, ``x_com' / drift_rate_scale``: over the start;
-* ``limit``: how far a joint is inside the last ``limit_margin`` of its range (the knee past ``crouch_limit``: no
-  crouch deeper than the hopper's), over ``limit_scale``;
+* ``limit``: how far a joint is inside the last ``limit_margin`` of its range (the knee past ``crouch_limit``: a crouch
+  too deep to rise from), over ``limit_scale``;
 * ``effort``, ``power``: ``sqrt(effort_weight) a`` and ``sqrt(power_weight) max(0, tau_j q_j')`` per joint (the
   joints' positive power at the step's start [W]); ``smooth_weight |v|^2``: the corrections themselves;
 * without derivative (the line search sees them, the backward pass does not): ``fall_cost`` a step where the plan has

@@ -135,3 +135,20 @@ def test_loads_by_name_and_checks_its_input():
     with pytest.raises(ValueError, match="observation must be finite: rows \\[0\\]"):
         policy.predict(bad)
     np.testing.assert_array_equal(policy._plan, plan)  # nothing changed
+
+
+def test_wild_states_give_bounded_actions():
+    """Far from any gait (tilted, fast, in the air or not), the plans stay finite and the actions within their bounds."""
+    envs, obs = _envs(4, seed=1)
+    e = envs.unwrapped
+    mpc = HopMPC(e.params, e.config)
+    rng = np.random.default_rng(0)
+    for _ in range(8):
+        wild = obs.copy()
+        wild[:, 1] = rng.uniform(0.2, 1.2, 4)  # the base's height
+        wild[:, 2] += rng.uniform(-1.5, 1.5, 4)  # the torso's tilt
+        wild[:, 5:10] += rng.normal(0.0, 30.0, (4, 5))  # the rates
+        wild[:, 15] = rng.integers(0, 2, 4)  # the contact flag
+        action, _ = mpc.predict(wild)
+        assert np.isfinite(action).all() and np.abs(action).max() <= 1.0
+        assert np.isfinite(mpc.planned).all()

@@ -47,6 +47,7 @@ import numpy as np
 
 from leg_env.physics import contact as _contact
 from leg_env.physics.derivatives import hybrid_step_jacobians
+from leg_env.physics.dynamics import com_state, foot_position
 from leg_env.physics.hybrid import hybrid_step
 from leg_env.physics.params import LegParams
 from leg_env.tasks.base import Obs
@@ -145,8 +146,6 @@ class HopMPC(BatchedController):
         self.horizon = int(horizon)
         self.steps = tuple(float(s) for s in steps)
         self.regularisation = float(regularisation)
-        self.m = p.m_b + p.m1 + p.m2
-        self.a, self.b = p.m1 * p.c1 + p.m2 * p.l1, p.m2 * p.c2
         self.y_stand = float(com_position(nominal_state(p, c).q, p)[1])
         self.torque_limit = np.asarray(c.torque_limit, dtype=np.float64) * np.ones(2)
         self.scales = dict(apex=apex_scale, tilt=tilt_scale, tilt_rate=tilt_rate_scale, drift=drift_scale,
@@ -197,7 +196,7 @@ class HopMPC(BatchedController):
         mode[contact & (np.abs(slip) <= 0.5)] = _contact.STICK
         th1, th2 = q[:, 2] + q[:, 3], q[:, 2] + q[:, 3] + q[:, 4]
         w1, w2 = qd[:, 2] + qd[:, 3], qd[:, 2] + qd[:, 3] + qd[:, 4]
-        foot_y = q[:, 1] + p.l1 * np.sin(th1) + p.l2 * np.sin(th2)
+        foot_y = foot_position(q, p)[:, 1]
         q[:, 1] -= np.where(contact, foot_y, np.minimum(foot_y, 0.0))  # on the ground, or not below it
         vfx = qd[:, 0] - p.l1 * np.sin(th1) * w1 - p.l2 * np.sin(th2) * w2
         vfy = qd[:, 1] + p.l1 * np.cos(th1) * w1 + p.l2 * np.cos(th2) * w2
@@ -207,12 +206,8 @@ class HopMPC(BatchedController):
 
     def com(self, x: np.ndarray):
         """The whole-body COM ``(x, y)`` and its velocity ``(x', y')`` of states ``x`` ``(..., 10)``."""
-        m, a, b = self.m, self.a, self.b
-        th1, th2 = x[..., 2] + x[..., 3], x[..., 2] + x[..., 3] + x[..., 4]
-        w1, w2 = x[..., 7] + x[..., 8], x[..., 7] + x[..., 8] + x[..., 9]
-        s1, c1, s2, c2 = np.sin(th1), np.cos(th1), np.sin(th2), np.cos(th2)
-        return (x[..., 0] + (a * c1 + b * c2) / m, x[..., 1] + (a * s1 + b * s2) / m,
-                x[..., 5] - (a * s1 * w1 + b * s2 * w2) / m, x[..., 6] + (a * c1 * w1 + b * c2 * w2) / m)
+        pos, vel = com_state(x[..., :5], x[..., 5:], self.params)
+        return pos[..., 0], pos[..., 1], vel[..., 0], vel[..., 1]
 
     # ---- cost
 
@@ -292,10 +287,9 @@ class HopMPC(BatchedController):
         """The hopper's observation of model states ``x`` (the entries the state does not set as in ``like``)."""
         p = self.params
         obs = np.array(like, dtype=np.float64)
-        th1, th2 = x[..., 2] + x[..., 3], x[..., 2] + x[..., 3] + x[..., 4]
         obs[..., Obs.base_x:Obs.q2 + 1] = x[..., :5]
         obs[..., Obs.vx_b:Obs.w_q2 + 1] = x[..., 5:]
-        obs[..., Obs.foot_height] = x[..., 1] + p.l1 * np.sin(th1) + p.l2 * np.sin(th2)
+        obs[..., Obs.foot_height] = foot_position(x[..., :5], p)[..., 1]
         obs[..., Obs.contact] = mode != _contact.FLIGHT
         obs[..., Obs.slip] = np.where(mode == _contact.SLIP_FORWARD, 1.0, np.where(mode == _contact.SLIP_BACKWARD, -1.0, 0.0))
         return obs

@@ -400,3 +400,16 @@ def test_wrong_shaped_qd_and_tau_raise(name):
             continue
         with pytest.raises(ValueError):
             getattr(dyn, name)(*({**good, **bad}[a] for a in args), p)
+
+
+def test_com_state_is_the_com_and_its_derivative():
+    """``com_state``: the position is ``com_position``'s, the velocity the centred difference of it along ``qd``."""
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        p = random_params(rng)
+        q, qd = rng.normal(size=(4, 5)), rng.normal(size=(4, 5))
+        pos, vel = dyn.com_state(q, qd, p)
+        np.testing.assert_array_equal(pos, dyn.com_position(q, p))
+        h = 1e-6
+        fd = (dyn.com_position(q + h * qd, p) - dyn.com_position(q - h * qd, p)) / (2 * h)
+        np.testing.assert_allclose(vel, fd, rtol=1e-7, atol=1e-8)

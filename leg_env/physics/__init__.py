@@ -30,7 +30,7 @@ _HOMES = {
     "arrays": ("NQ", "NU", "NP", "LOAD_X", "params_array"),
     "params": ("LegParams", "PARAM_NAMES", "PARAM_RANGE", "G_MIN"),
     "dynamics": ("S", "mass_matrix", "bias_forces", "gravity_forces", "contact_jacobian", "contact_jdot_qd", "foot_position",
-                 "contact_inertia", "stance_dynamics", "flight_dynamics", "kinetic_energy", "potential_energy", "com_position",
+                 "contact_inertia", "stance_dynamics", "flight_dynamics", "kinetic_energy", "potential_energy", "com_position", "com_state",
                  "static_equilibrium"),
     "contact": ("STICK", "SLIP_FORWARD", "SLIP_BACKWARD", "FLIGHT", "MODE_NAMES", "REST_SPEED", "slip_dynamics", "impact_map",
                 "contact_mode", "mu_critical", "free_foot_acceleration"),

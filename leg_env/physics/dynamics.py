@@ -57,7 +57,7 @@ from .params import LegParams
 
 __all__ = ["S", "mass_matrix", "bias_forces", "gravity_forces", "contact_jacobian", "contact_jdot_qd",
            "foot_position", "contact_inertia", "stance_dynamics", "flight_dynamics", "kinetic_energy",
-           "potential_energy", "com_position", "static_equilibrium"]
+           "potential_energy", "com_position", "com_state", "static_equilibrium"]
 
 S = np.array([[0.0, 0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0]])
 S.setflags(write=False)
@@ -101,6 +101,14 @@ def com_position(q, p: LegParams) -> np.ndarray:
     out = np.empty((qf.shape[0], 2))
     kernels.com(qf, qf, core_params(p), out, np.empty((qf.shape[0], 2)))
     return out.reshape(lead + (2,))
+
+
+def com_state(q, qd, p: LegParams) -> tuple[np.ndarray, np.ndarray]:
+    """Whole-body centre of mass and its velocity in the world frame, each of shape ``(..., 2)``."""
+    lead, (qf, qdf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")))
+    pos, vel = np.empty((qf.shape[0], 2)), np.empty((qf.shape[0], 2))
+    kernels.com(qf, qdf, core_params(p), pos, vel)
+    return pos.reshape(lead + (2,)), vel.reshape(lead + (2,))
 
 
 def contact_jacobian(q, p: LegParams) -> np.ndarray:

@@ -111,6 +111,10 @@ def _docstring_block(doc: str) -> str:
     return "```text\n" + doc + "\n```"
 
 
+STABILITY = {"leg_env/PlanarLegHop-v4": ROOT / "benchmarks" / "results" / "stability"}
+"""The gait stability results (``python -m train.stability``) shown on a task's page: the path without suffix."""
+
+
 def _task_page(env_id: str, task: str, kwargs: dict, gif: Path | None) -> str:
     """The page of one id: its spaces and reward terms read from the environment, its task's docstring."""
     import importlib
@@ -168,6 +172,14 @@ def _task_page(env_id: str, task: str, kwargs: dict, gif: Path | None) -> str:
                 copy = GENERATED / "tasks" / f"{name}-{plot}"
                 shutil.copyfile(gif.parent / plot, copy)
                 lines += [f"![{caption}]({copy.name})", "", f"*{caption[0].upper() + caption[1:]}.*", ""]
+    analysis = STABILITY.get(env_id)
+    if analysis is not None and analysis.with_suffix(".md").is_file():
+        copy = GENERATED / "tasks" / f"{name}-stability.png"
+        shutil.copyfile(analysis.with_suffix(".png"), copy)
+        table = analysis.with_suffix(".md").read_text().split("\n", 1)[1]  # without its title
+        lines += ["## Gait stability", "", "The return map of the hop cycle, composed from the step's exact Jacobians "
+                  "([gait stability](../../stability.md)):", table,
+                  f"![growth per hop and Floquet multipliers]({copy.name})", ""]
     lines += ["## The task", "", f"From the docstring of `leg_env.tasks.{task}`:", "", _docstring_block(module.__doc__), ""]
     return "\n".join(lines)
 

@@ -293,9 +293,13 @@ class HopperController(BatchedController):
         action[rows] = hop_action[rows]
 
     def act(self, batch: np.ndarray) -> np.ndarray:
+        return self.exact_actions(batch).astype(np.float32)
+
+    def exact_actions(self, batch: np.ndarray) -> np.ndarray:
+        """``act``'s actions in float64, before their rounding to float32 (for the closed loop's derivatives)."""
         tau = self.torque(batch)
         self._x0 += self._vx * self.config.dt  # dead reckoning of the COM's x: the foot's x is not observed
-        return np.clip(tau / self.torque_limit, -1.0, 1.0).astype(np.float32)
+        return np.clip(tau / self.torque_limit, -1.0, 1.0)
 
 
 def _wrap(angle):

@@ -85,7 +85,10 @@ class HopMPC(BatchedController):
             stance_grace [s].
 
     After each ``predict``, ``planned`` ``(N, horizon + 1, 10)`` holds the chosen plan's states (the first the robot's
-    now) and ``cost`` ``(N,)`` its cost.
+    now), ``cost`` ``(N,)`` its cost and ``pick`` ``(N,)`` the line search's choice of the last iteration (the index of
+    its step length in ``steps``, -1: the plan it started from). Setting ``hold_pick`` (an ``(N,)`` int array, or None)
+    makes the line search take those choices whatever the costs: the derivative of the controller along one branch
+    of its choice, as the step's derivative holds the step's events (``train.stability``).
 
     Raises:
         TypeError: an unknown keyword. ValueError: a setting out of its range (the message names it).
@@ -160,6 +163,8 @@ class HopMPC(BatchedController):
         self.hopper_settings = dict(crouch=(0.05, 0.5)) if hopper is None else dict(hopper)
         HopperController(p, c, **self.hopper_settings)  # checks them
         self._step_args = dict(dt=c.dt, substeps=c.substeps, max_angle=c.max_angle)
+        self.hold_pick: np.ndarray | None = None
+        self.pick = np.full(0, -1)
 
     # ---- per-robot state
 
@@ -425,6 +430,10 @@ class HopMPC(BatchedController):
         return k, K
 
     def act(self, batch: np.ndarray) -> np.ndarray:
+        return self.exact_actions(batch).astype(np.float32)
+
+    def exact_actions(self, batch: np.ndarray) -> np.ndarray:
+        """``act``'s actions in float64, before their rounding to float32 (for the closed loop's derivatives)."""
         bad = ~np.isfinite(batch).all(axis=1)
         if bad.any():
             raise ValueError(f"observation must be finite: rows {np.flatnonzero(bad)[:5].tolist()} are not")
@@ -448,18 +457,21 @@ class HopMPC(BatchedController):
                 trial = self._rollout(tile(q), tile(qd), tile(mode), tile(ground), tile(like), tile(x_ref), tile(roll["V"]),
                                       nominal=tile(roll["X"]), k=scale * tile(k), K=tile(K), copies=S)
                 costs = self._cost(trial, tile(target), tile(x_ref)).reshape(S, len(q))
+                pick = np.full(len(q), -1)
                 for i in range(S):
                     cost = costs[i]
                     rows = slice(i * len(q), (i + 1) * len(q))
-                    better = cost < best_cost
+                    better = cost < best_cost if self.hold_pick is None else self.hold_pick == i
+                    pick[better] = i
                     best_cost = np.where(better, cost, best_cost)
                     best_V = np.where(better[:, None, None], trial["V"][rows], best_V)
                     best_U = np.where(better[:, None, None], trial["U"][rows], best_U)
                     best_X = np.where(better[:, None, None], trial["X"][rows], best_X)
             V = best_V
+            self.pick = pick if self.steps else np.full(len(q), -1)
         action = best_U[:, 0].copy()
         self._plan[:, :-1] = best_V[:, 1:]
         self._plan[:, -1] = 0.0
         self._hopper(self._pilot, np.concatenate([q, qd], axis=1), mode, like, x_ref, False)  # the pilot follows the robot
         self.cost, self.planned = best_cost, best_X
-        return action.astype(np.float32)
+        return action

@@ -48,5 +48,5 @@ class CommandGains(BaseFeaturesExtractor):
         self.command = command
 
     def forward(self, observations: th.Tensor) -> th.Tensor:
-        x = observations.float()
+        x = observations if observations.is_floating_point() else observations.float()  # float64 kept (derivatives)
         return th.cat([x, x * x[:, self.command : self.command + 1]], dim=1)

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from test_stability import loop_against_env
 from train.policy_loading import load_policy
 from train.stability import HopLoop, analyse, hop_maps, map_error, return_map_fd
 
@@ -18,20 +19,8 @@ POLICY = Path(__file__).resolve().parents[2] / "policies" / "ppo_hop_v4"
 def test_the_loop_is_the_env():
     """The loop's observation is the env's (rounded to float32) along the policy's own episode; its gait amplifies
     the float32 rounding, so the horizon is 100 steps."""
-    loop = HopLoop(str(POLICY), 0.10)
-    z, d = loop.start(0)
-    obs, _ = loop.env.reset(seed=0)
-    policy = load_policy(POLICY)
-    worst, hopped = 0.0, False
-    for _ in range(100):
-        worst = max(worst, float(np.max(np.abs(loop.observe(z, d)[0] - obs) / np.maximum(1.0, np.abs(obs)))))
-        action, _ = policy.predict(obs)
-        z, d, u, _ = loop.step(z, d)
-        assert np.abs(u[0] - action).max() < 1e-4
-        obs, _, terminated, _, _ = loop.env.step(action)
-        assert not terminated
-        hopped |= obs[15] == 0.0  # in flight
-    assert worst < 1e-4 and hopped
+    worst, flew = loop_against_env(str(POLICY), load_policy(POLICY), 100)
+    assert worst < 1e-4 and flew
 
 
 def test_the_policys_hop_maps_are_their_differences():

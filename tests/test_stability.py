@@ -123,3 +123,25 @@ def test_the_mpcs_step_derivative_holds_its_line_search_choice():
         else:
             z, d, _, _ = loop.step(z, d)
     assert smooth >= 1
+
+
+def test_results_round_trip_through_their_json(tmp_path):
+    """``--merge`` rewrites the table and the plot from earlier runs' JSON files: the same rows, in the order given."""
+    from train.stability import Stability, write_results
+
+    def row(name, locked):
+        w = np.array([0.7 + 0.1j, 0.7 - 0.1j, 0.3]) if locked else np.zeros(0)
+        return Stability(name, 0.08, (65, 65), np.array([-0.35, -0.4, -np.inf]), locked, 1e-12 if locked else np.nan, w,
+                         w + 1e-8, 3e-9, True, False, ("x_b",), 0.0, 0.7, 0.69)
+
+    run = dict(seconds=1.0, seed=0, settle=10.0, hops=30, machine="test", date="2026-01-01")
+    write_results([row("a", 1)], tmp_path / "a", run)
+    write_results([row("b", 0)], tmp_path / "b", run)
+    assert main(["x", "--merge", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "--out", str(tmp_path / "m")]) == 0
+    table = (tmp_path / "m.md").read_text()
+    assert table.index("| a |") < table.index("| b |") and "0.700 +- 0.100i, 0.300" in table and "in 2 s" in table
+    assert (tmp_path / "m.png").stat().st_size > 0
+    import json
+
+    rows = json.loads((tmp_path / "m.json").read_text())["results"]
+    assert [r["controller"] for r in rows] == ["a", "b"] and rows[0]["multipliers"][0] == [0.7, 0.1]

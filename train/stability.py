@@ -330,9 +330,7 @@ class HopLoop:
         docstring); the controller's choice (``choice``) is held in its derivative."""
         nz = self.nz
         z_new, d_new, u, r = self.step(z, d, hold)
-        choice = self.choice
-        du, ds = self._law_derivative(z, d, choice)
-        self.choice = choice
+        du, ds = self._law_derivative(z, d, self.choice)  # the law's differences call the controller, not step
         inside = (np.abs(u[0]) < 1.0).astype(float)
         du = du * inside[:, None]  # the clip's derivative
         tau = u * self.limit

@@ -11,7 +11,9 @@ iLQR improves the corrections:
 * the backward pass is Gauss-Newton on the closed loop's Jacobians ``A_cl = A + B D dpi/dx`` and ``B_cl = B D``:
   ``A``, ``B`` the step's, each with the saltation of the events it located (so the pass sees how a torque in the push
   moves the lift-off and with it the apex), ``dpi/dx`` the hopper's derivative (centred differences, its phases held),
-  ``D`` the clip's;
+  ``D`` the clip's, faded to 0 over the last ``clip_smoothing`` before the limit (``clip_derivative``: the hopper's
+  push puts a torque exactly on its limit, where the clip's own derivative is 0 or 1 by a rounding, and the law
+  jumped with it);
 * the line search rolls the corrected plans out on the simulator, with the feedback ``K dx`` of the backward pass,
   at step lengths ``steps``, and every robot keeps the plan of least cost (the uncorrected one among them).
 
@@ -83,6 +85,10 @@ class HopMPC(BatchedController):
             RMS, the apex error and the power alike).
         fall_cost: the cost of a step fallen or too long on the ground; stance_cost: of a step on the ground past
             stance_grace [s].
+        clip_smoothing: the width of the band inside the action's bounds over which the backward pass's clip
+            derivative fades from 1 to 0 (``clip_derivative``; 0: the clip's own 0 or 1) [action units].
+        law_step: the step of the centred differences of the hopper's law inside the plan [m, rad, m/s, rad/s]: at
+            1e-6 their rounding alone made the MPC's law disagree with itself under a change of the state of 1e-6.
 
     After each ``predict``, ``planned`` ``(N, horizon + 1, 10)`` holds the chosen plan's states (the first the robot's
     now), ``cost`` ``(N,)`` its cost and ``pick`` ``(N,)`` the line search's choice of the last iteration (the index of
@@ -122,6 +128,8 @@ class HopMPC(BatchedController):
         warm_start: bool = False,
         iterations: int = 1,
         hopper: dict | None = None,
+        clip_smoothing: float = 0.05,
+        law_step: float = 1e-5,
     ):
         from leg_env.physics.dynamics import com_position
         from leg_env.tasks.base import nominal_state
@@ -135,11 +143,12 @@ class HopMPC(BatchedController):
             raise ValueError(f"iterations must be at least 1, got {iterations}")
         if charge_apex not in ("flight", "liftoff"):
             raise ValueError(f"charge_apex must be 'flight' or 'liftoff', got {charge_apex!r}")
-        positive = dict(apex_scale=apex_scale, tilt_scale=tilt_scale, tilt_rate_scale=tilt_rate_scale, drift_scale=drift_scale,
+        positive = dict(law_step=law_step, apex_scale=apex_scale, tilt_scale=tilt_scale, tilt_rate_scale=tilt_rate_scale, drift_scale=drift_scale,
                         drift_rate_scale=drift_rate_scale, limit_scale=limit_scale)
         nonnegative = dict(regularisation=regularisation, effort_weight=effort_weight, power_weight=power_weight,
                            smooth_weight=smooth_weight, limit_margin=limit_margin, fall_cost=fall_cost,
-                           terminal_weight=terminal_weight, stance_grace=stance_grace, stance_cost=stance_cost)
+                           terminal_weight=terminal_weight, stance_grace=stance_grace, stance_cost=stance_cost,
+                           clip_smoothing=clip_smoothing)
         for name, value in positive.items():
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive and finite, got {value}")
@@ -160,6 +169,7 @@ class HopMPC(BatchedController):
         self.stance_grace, self.stance_cost = float(stance_grace), float(stance_cost)
         self.crouch_limit, self.charge_apex = float(crouch_limit), charge_apex
         self.warm_start, self.iterations = bool(warm_start), int(iterations)
+        self.clip_smoothing, self.law_step = float(clip_smoothing), float(law_step)
         self.hopper_settings = dict(crouch=(0.05, 0.5)) if hopper is None else dict(hopper)
         HopperController(p, c, **self.hopper_settings)  # checks them
         self._step_args = dict(dt=c.dt, substeps=c.substeps, max_angle=c.max_angle)
@@ -313,7 +323,7 @@ class HopMPC(BatchedController):
         """The hopper's action (unclipped, in action units) at states ``x`` ``(N, 10)``, advancing ``h``; with
         ``derivative`` also its derivative by the state ``(N, 2, 10)`` (centred differences, its phases held), from the
         same call of the hopper's law (the state itself, then each coordinate moved by +-eps)."""
-        n, eps = x.shape[0], 1e-6
+        n, eps = x.shape[0], self.law_step
         copies = 2 * _NX + 1 if derivative else 1
         dx = np.zeros((copies, 1, _NX))
         if derivative:
@@ -334,6 +344,21 @@ class HopMPC(BatchedController):
         h._vx = law._vx[:n].copy()
         dpi = np.moveaxis((tau[1:1 + _NX] - tau[1 + _NX:]) / (2 * eps), 0, -1)  # (N, 2, 10)
         return tau[0], dpi
+
+    def clip_derivative(self, z: np.ndarray) -> np.ndarray:
+        """The backward pass's derivative of ``clip(z, -1, 1)``: 1 where ``|z| <= 1 - w``, 0 where ``|z| >= 1``, a
+        smoothstep between (``w = clip_smoothing``; 0: the clip's own 0 or 1).
+
+        The hopper's push saturates a joint exactly (its torques scaled onto the limit), where the clip's derivative is
+        1 on one side and 0 on the other: a rounding decided which, and with it the plan's gains, so that the law
+        jumped under any perturbation of the state. The band gives a step at the limit no authority (a correction
+        cannot raise a saturated torque) and fades it in continuously inside.
+        """
+        w = self.clip_smoothing
+        if w == 0.0:
+            return (np.abs(z) < 1.0).astype(np.float64)
+        s = np.clip((1.0 - np.abs(z)) / w, 0.0, 1.0)
+        return s * s * (3.0 - 2.0 * s)
 
     # ---- the model
 
@@ -369,7 +394,7 @@ class HopMPC(BatchedController):
                 J = hybrid_step_jacobians(X[:, t, :5], X[:, t, 5:], tau, p, mu, mode, None, **self._step_args)
                 r = J.step
                 bad = (J.undefined != 0)[:, None, None]
-                D = (np.abs(pi + v) < 1.0).astype(np.float64)  # the clip's derivative
+                D = self.clip_derivative(pi + v)
                 Bt = np.where(bad, 0.0, J.B * self.torque_limit) * D[:, None, :]
                 out["A"][:, t] = np.where(bad, np.eye(_NX), J.A) + Bt @ dpi
                 out["B"][:, t] = Bt

@@ -46,7 +46,8 @@ def test_backward_pass_differentiates_the_closed_loop():
     plan cost's gradient by the corrections that centred differences of the rolled-out cost give."""
     envs, obs = _envs(4)
     e = envs.unwrapped
-    mpc = HopMPC(e.params, e.config, horizon=40, steps=(), stance_cost=0.0, fall_cost=0.0, power_weight=1e-4)
+    mpc = HopMPC(e.params, e.config, horizon=40, steps=(), stance_cost=0.0, fall_cost=0.0, power_weight=1e-4,
+                 clip_smoothing=0.0)  # the clip's own derivative: the chain is the rolled-out cost's exact gradient
     for _ in range(25):  # into the first stance's push
         action, _ = mpc.predict(obs)
         obs, *_ = envs.step(action)
@@ -97,6 +98,41 @@ def test_backward_pass_differentiates_the_closed_loop():
     assert checked >= 24  # most robots, every step checked with the same events at both sides
 
 
+def test_the_clip_derivative_fades_to_zero_at_the_limit():
+    """The backward pass's clip derivative: 1 inside ``1 - w``, 0 at the limit and beyond, a continuously
+    differentiable smoothstep between; the clip's own 0 or 1 with ``clip_smoothing=0``."""
+    mpc, hard = HopMPC(clip_smoothing=0.05), HopMPC(clip_smoothing=0.0)
+    z = np.linspace(-1.2, 1.2, 24001)
+    D = mpc.clip_derivative(z)
+    assert np.all(D[np.abs(z) <= 0.95] == 1.0) and np.all(D[np.abs(z) >= 1.0] == 0.0)
+    assert np.all((D >= 0.0) & (D <= 1.0)) and np.max(np.abs(np.diff(D))) < 1e-2  # continuous
+    slope = np.diff(D) / np.diff(z)
+    assert np.max(np.abs(np.diff(slope))) < 1.0  # and its derivative too (its largest slope 30, steps of 1e-4)
+    assert np.array_equal(hard.clip_derivative(z), (np.abs(z) < 1.0).astype(float))
+
+
+@pytest.mark.parametrize("smooth", [True, False])
+def test_the_law_is_continuous_where_the_push_saturates(smooth):
+    """The hopper's push scales its torques onto the limit, so the clip's derivative at those plan steps is 0 or 1 by
+    a rounding: with the clip's own derivative and differences of the hopper at 1e-6 the MPC's law jumps under
+    perturbations of the state of 1e-6 at nearly every step of the push (its one-sided difference quotients
+    disagree: the gains change with the perturbation); with the defaults at most at the steps where a phase switch
+    of the hopper inside the plan moves by a plan step (one of these ten)."""
+    from train.stability import HopLoop
+
+    settings = None if smooth else dict(clip_smoothing=0.0, law_step=1e-6)
+    loop = HopLoop("mpc", 0.12, None, settings)
+    z, d = loop.start(0)
+    jumps = 0
+    for k in range(55):
+        if k >= 36 and k % 2 == 0:  # the first push, ten steps (a knee at its limit in every plan)
+            held = loop.jumps
+            loop.jacobian(z, d)
+            jumps += loop.jumps > held
+        z, d, _, _ = loop.step(z, d)
+    assert (jumps <= 2) if smooth else (jumps >= 8)
+
+
 def test_without_iterations_it_is_the_hopper():
     """No line-search step: the plan is its hopper's own closed loop, so the actions are that hopper's (the MPC reads
     the COM's drift from the model where the hopper dead-reckons it)."""
@@ -127,6 +163,10 @@ def test_loads_by_name_and_checks_its_input():
         HopMPC(apex_scale=0.0)
     with pytest.raises(ValueError, match="charge_apex"):
         HopMPC(charge_apex="apex")
+    with pytest.raises(ValueError, match="clip_smoothing"):
+        HopMPC(clip_smoothing=-0.1)
+    with pytest.raises(ValueError, match="law_step"):
+        HopMPC(law_step=float("nan"))
     with pytest.raises(TypeError):
         HopMPC(horizon_steps=10)
     bad = obs.copy()

@@ -400,6 +400,32 @@ def test_wrong_shapes_raise(stepper):
             dyn.stance_step(q, np.zeros(5), tau, p, anchor=np.zeros(3))
 
 
+@pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf])
+@pytest.mark.parametrize("lead", [(), (3,)], ids=["one robot", "batch"])
+@pytest.mark.parametrize("stepper", ["stance_step", "flight_step"])
+def test_non_finite_input_is_named_and_nothing_changes(stepper, lead, value):
+    """A NaN or inf in the state, the torques or the anchor: a ValueError naming the argument, the inputs as they
+    were (the one robot's fast path and the batched path alike); a step that only sums past the largest float (finite
+    entries) is taken."""
+    p = LegParams()
+    q0, tau0, _ = dyn.static_equilibrium(p)
+    names = ["q", "qd", "tau"] + (["anchor"] if stepper == "stance_step" else [])
+    clean = {"q": q0, "qd": np.zeros(5), "tau": tau0, "anchor": dyn.foot_position(q0, p)}
+    for bad in names:
+        args = {k: np.array(np.broadcast_to(v, lead + v.shape)) for k, v in clean.items()}
+        args[bad][..., -1] = value
+        kept = {k: v.copy() for k, v in args.items()}
+        extra = {"anchor": args["anchor"]} if stepper == "stance_step" else {}
+        with pytest.raises(ValueError, match=f"^{bad} must be finite"):
+            getattr(dyn, stepper)(args["q"], args["qd"], args["tau"], p, **extra)
+        for k in args:
+            assert np.array_equal(args[k], kept[k], equal_nan=True)
+    far = q0.copy()
+    far[0] = 1e308  # the base's x, which nothing depends on: with the anchor's the sum overflows, every entry finite
+    q_next, *_ = dyn.stance_step(far, np.zeros(5), tau0, p)
+    assert q_next[0] == 1e308
+
+
 def test_single_robot_inputs_of_any_layout_agree():
     """Lists, strided views and contiguous arrays take different entry paths; results agree."""
     p = LegParams()

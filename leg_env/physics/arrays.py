@@ -12,7 +12,8 @@ import numpy as np
 from .. import checks
 from .params import PARAM_RANGE, LegParams
 
-__all__ = ["NQ", "NU", "NP", "LOAD_X", "params_array", "as_params", "core_params", "single_robot", "vec", "batched"]
+__all__ = ["NQ", "NU", "NP", "LOAD_X", "params_array", "as_params", "core_params", "single_robot", "vec", "batched",
+           "finite_rows"]
 
 _LOAD_MAX = 1.0e12  # bound of a horizontal load [N]: far beyond any use, far below overflow
 NQ = 5  # generalized coordinates
@@ -130,3 +131,11 @@ def batched(*named):
             a = np.broadcast_to(a, lead + a.shape[-1:])
         flat.append(np.require(a.reshape(-1, a.shape[-1]), requirements=("C", "A")))  # C order, aligned: what the core reads
     return lead, flat
+
+
+def finite_rows(*named: tuple[str, np.ndarray]) -> None:
+    """``ValueError`` naming the first of the ``(name, rows (N, n))`` arrays that holds NaN or inf, with its first such
+    rows: a state or torque the step cannot integrate (nothing is changed)."""
+    for name, a in named:
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be finite, got {checks.shown(a[~np.isfinite(a).all(axis=-1)][:3])}")

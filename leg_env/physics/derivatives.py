@@ -43,7 +43,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._core import kernels
-from .arrays import NQ, NU, batched, core_params, vec
+from .arrays import NQ, NU, batched, core_params, finite_rows, vec
 from .dynamics import foot_position
 from .hybrid import HybridStep, prepared_call
 from .integrate import DT, MAX_ANGLE, SUBSTEPS, checked_steps
@@ -100,9 +100,7 @@ def _rk4_jacobians(q, qd, tau, p, anchor, dt, substeps, max_angle, stance: bool,
         anchor = np.zeros(2)
     lead, (qf, qdf, tf, af) = batched(("q", q), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")), ("anchor", anchor))
     qf, qdf = qf.copy(), qdf.copy()
-    for name, a in (("q", qf), ("qd", qdf), ("tau", tf), ("anchor", af)):
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"{name} must be finite")
+    finite_rows(("q", qf), ("qd", qdf), ("tau", tf), ("anchor", af))
     n = qf.shape[0]
     lam, A, B = np.empty((n, 2)), np.empty((n, NX * NX)), np.empty((n, NX * NU))
     P = np.empty((n, NX * NPD)) if params else None

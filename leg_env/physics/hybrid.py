@@ -64,7 +64,7 @@ import numpy as np
 
 from .. import checks
 from .._core import kernels
-from .arrays import NQ, NU, batched, core_params, vec
+from .arrays import NQ, NU, batched, core_params, finite_rows, vec
 from .contact import FLIGHT, SLIP_BACKWARD, SLIP_FORWARD, STICK, checked_mu, scalar_field, contact_mode
 from .dynamics import foot_position
 from .integrate import DT, MAX_ANGLE, SUBSTEPS, checked_steps
@@ -187,9 +187,7 @@ def prepared_call(q, qd, tau, p: LegParams, mu, mode, anchor_x, dt, substeps, ma
     dt, substeps, max_angle = checked_steps(dt, substeps, max_angle)
     lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
     qf, qdf = qf.copy(), qdf.copy()
-    for name, a in (("q", qf), ("qd", qdf), ("tau", tf)):
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"{name} must be finite, got {checks.shown(a[~np.isfinite(a).all(axis=1)][:3])}")
+    finite_rows(("q", qf), ("qd", qdf), ("tau", tf))
     n = qf.shape[0]
     mu_f = checked_mu(mu, lead)
     foot = foot_position(qf, p)

@@ -34,7 +34,7 @@ import numpy as np
 
 from .. import checks
 from .._core import kernels
-from .arrays import F64, LOAD_X, NP, NQ, NU, batched, core_params, params_array, single_robot, vec
+from .arrays import F64, LOAD_X, NP, NQ, NU, batched, core_params, finite_rows, params_array, single_robot, vec
 from .dynamics import contact_jacobian, foot_position
 from .params import LegParams
 
@@ -98,6 +98,10 @@ def stance_step(
 
     Returns:
         ``(q_next, qd_next, lam_mean)``: the new state and the mean contact force over the step.
+
+    Raises:
+        ValueError: an array of the wrong shape, or holding NaN or inf, or a setting of the step rule out of range
+            (the message names it; nothing is changed).
     """
     dt, substeps, max_angle = checked_steps(dt, substeps, max_angle)
     if single_robot(q, qd, tau):
@@ -105,6 +109,9 @@ def stance_step(
         if anchor is None:
             anchor = foot_position(q, p)
         if type(anchor) is np.ndarray and anchor.shape == (2,) and anchor.dtype is F64 and anchor.flags.c_contiguous and anchor.flags.aligned:
+            if not math.isfinite(sum(q.tolist()) + sum(qd.tolist()) + sum(tau.tolist()) + sum(anchor.tolist())):
+                # one test for the fast path (a sum that overflows finite entries: finite_rows passes them)
+                finite_rows(("q", q[None]), ("qd", qd[None]), ("tau", tau[None]), ("anchor", anchor[None]))
             q1, qd1, lam = q.reshape(1, NQ).copy(), qd.reshape(1, NQ).copy(), np.empty((1, 2))
             step_inplace(q1, qd1, tau.reshape(1, NU), core_params(p), anchor.reshape(1, 2), dt, substeps, max_angle,
                          True, lam)
@@ -112,6 +119,7 @@ def stance_step(
     q = vec(q, NQ, "q")
     anchor = foot_position(q, p) if anchor is None else vec(anchor, 2, "anchor")
     lead, (qf, qdf, tf, af) = batched(("q", q), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")), ("anchor", anchor))
+    finite_rows(("q", qf), ("qd", qdf), ("tau", tf), ("anchor", af))
     qf, qdf = qf.copy(), qdf.copy()
     lam = np.empty((qf.shape[0], 2))
     step_inplace(qf, qdf, tf, core_params(p), af, dt, substeps, max_angle, True, lam)
@@ -119,9 +127,14 @@ def stance_step(
 
 
 def flight_step(q, qd, tau, p: LegParams, dt: float = DT, substeps: int = SUBSTEPS, max_angle: float = MAX_ANGLE):
-    """One flight control step (no contact) of RK4, stepped as in ``stance_step``. Returns ``(q_next, qd_next)``."""
+    """One flight control step (no contact) of RK4, stepped as in ``stance_step``. Returns ``(q_next, qd_next)``.
+
+    Raises:
+        ValueError: as ``stance_step``.
+    """
     dt, substeps, max_angle = checked_steps(dt, substeps, max_angle)
     lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
+    finite_rows(("q", qf), ("qd", qdf), ("tau", tf))
     qf, qdf = qf.copy(), qdf.copy()
     lam = np.empty((qf.shape[0], 2))
     step_inplace(qf, qdf, tf, core_params(p), np.zeros((qf.shape[0], 2)), dt, substeps, max_angle, False, lam)

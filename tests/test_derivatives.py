@@ -220,7 +220,7 @@ def unilateral_rollout_states(env_id: str, controller):
     out = []
     for _ in range(HYBRID_STEPS):
         q, qd, anchor = env.state
-        mode = env._state["mode"].astype(np.int64)
+        mode = env.contact_mode
         action = rng.uniform(-1.0, 1.0, (HYBRID_ROBOTS, 2)) if controller is None else controller.predict(obs, deterministic=True)[0]
         obs, _, _, _, info = envs.step(action)
         load = info.get("push_force", np.zeros(HYBRID_ROBOTS))

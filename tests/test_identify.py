@@ -36,7 +36,7 @@ def recordings(n_robots: int, seed: int = 11):
         state = env.state
         q.append(state[0])
         qd.append(state[1])
-        modes.append(env._state["mode"].astype(np.int64))
+        modes.append(env.contact_mode)
         obs, _, terminated, truncated, info = envs.step(controller.predict(obs, deterministic=True)[0])
         tau.append(info["torque"].copy())
         ended.append(terminated | truncated)

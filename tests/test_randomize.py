@@ -91,7 +91,7 @@ def test_each_sub_env_runs_leg_env_dynamics_with_its_drawn_parameters(contact):
     env = envs.unwrapped
     obs, info = envs.reset(seed=5)
     q0, qd0, anchor0 = env.state
-    mode0 = env._state["mode"].copy()
+    mode0 = env.contact_mode
     actions = np.random.default_rng(0).uniform(-1, 1, (N, 2))
     envs.step(actions)
     q1, qd1, _ = env.state

@@ -432,3 +432,40 @@ def test_info_names_each_contact_mode_and_refuses_a_corrupt_one_without_writing_
             kernels.info_columns(bad, out, state, *blocks)
         assert all(np.array_equal(x, y, equal_nan=True) for x, y in zip(blocks, before))
     envs.close()
+
+
+def test_contact_mode_is_the_mode_hybrid_step_takes():
+    """``contact_mode``: each robot's mode as ``hybrid_step`` takes it (a copy); from the state, the torques and it the
+    physics API's step gives the env's next state and mode; ``info`` names the same mode; a single env gives the
+    vector's first robot's; the pinned foot sticks."""
+    from leg_env.physics.contact import FLIGHT, MODE_NAMES, STICK
+    from leg_env.physics.hybrid import hybrid_step
+    from policies.hopper import HopperController
+
+    envs = gym.make_vec("leg_env/PlanarLegHop-v4", num_envs=3, vectorization_mode="vector_entry_point")
+    single = gym.make("leg_env/PlanarLegHop-v4").unwrapped
+    e, hopper = envs.unwrapped, HopperController()
+    obs, _ = envs.reset(seed=7)
+    single.reset(seed=7)
+    seen = set()
+    for _ in range(120):
+        q, qd, anchor = e.state
+        mode = e.contact_mode
+        mode[:] = -1  # a copy: the env's own is untouched
+        mode = e.contact_mode
+        assert mode.dtype == np.int64 and single.contact_mode == mode[0]
+        action = hopper.predict(obs)[0]
+        obs, _, terminated, truncated, info = envs.step(action)
+        single.step(action[0])
+        assert not (terminated | truncated).any()
+        r = hybrid_step(q, qd, info["torque"], e.params, e.config.mu, mode, anchor[:, 0], dt=e.config.dt,
+                        substeps=e.config.substeps, max_angle=e.config.max_angle)
+        np.testing.assert_array_equal(r.q, e.state[0])
+        np.testing.assert_array_equal(r.mode, e.contact_mode)
+        assert [MODE_NAMES[m] for m in e.contact_mode] == list(info["contact_mode"])
+        seen |= set(e.contact_mode.tolist())
+    assert {STICK, FLIGHT} <= seen
+    envs.close()
+    pinned = gym.make_vec("leg_env/PlanarLegStance-v0", num_envs=2, vectorization_mode="vector_entry_point")
+    pinned.reset(seed=0)
+    assert (pinned.unwrapped.contact_mode == STICK).all()

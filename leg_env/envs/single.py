@@ -201,6 +201,12 @@ class LegEnv(gym.Env):
         """Copies of ``(q, qd, anchor)``: configuration, velocity and the foot's contact point."""
         return self._q[0].copy(), self._qd[0].copy(), self._anchor[0].copy()
 
+    @property
+    def contact_mode(self) -> int:
+        """The contact mode now, as ``leg_env.physics.hybrid.hybrid_step`` takes it: ``leg_env.physics.contact``'s
+        ``STICK``, ``SLIP_FORWARD``, ``SLIP_BACKWARD`` or ``FLIGHT`` (the pinned foot: ``STICK``)."""
+        return int(self._state["mode"][0])
+
     def _robot_mu(self) -> float:
         return float(self._robots["mu"][0])
 

@@ -326,6 +326,13 @@ class LegVectorEnv(VectorEnv):
         return self._q.copy(), self._qd.copy(), self._anchor.copy()
 
     @property
+    def contact_mode(self) -> np.ndarray:
+        """Each robot's contact mode now, as ``leg_env.physics.hybrid.hybrid_step`` takes it: int64 ``(num_envs,)`` of
+        ``leg_env.physics.contact``'s ``STICK``, ``SLIP_FORWARD``, ``SLIP_BACKWARD``, ``FLIGHT`` (the pinned foot:
+        ``STICK``). ``info["contact_mode"]`` names it without the slip's direction."""
+        return self._state["mode"].astype(np.int64)
+
+    @property
     def np_random_seed(self) -> tuple[int | None, ...]:
         """Each sub-env's seed, as ``SyncVectorEnv`` gives them: the seed its generator was made from at its last
         seeded reset (an entropy-drawn one after ``reset(seed=None)``). Before a sub-env's first reset, as a single

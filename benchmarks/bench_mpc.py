@@ -6,8 +6,9 @@ On ``PlanarLegHop-v4``, for batches of 1, 10 and 100 robots: the wall-clock time
 the rollout with the Jacobians, the backward pass, the line search's rollouts) over 60 control steps from the
 episodes' starts (through the first hop), divided by the batch size; the median over the steps and the slowest step.
 The hopper controller's ``predict`` on the same observations is the reference. One thread (numpy's BLAS and torch
-are held to one). The bar: at most 10 ms per control step per robot on one core. Written to
-``benchmarks/results/mpc.md``.
+are held to one). The bar: at most 10 ms per control step per robot on one core. Also, for one robot, the cost of
+each call a control step makes in sequence (the step, the step with its Jacobians, the hopper's law on 21 and on 3
+rows: 70 of each pair), the floor the plan's Python loop puts under it. Written to ``benchmarks/results/mpc.md``.
 """
 
 from __future__ import annotations
@@ -59,8 +60,49 @@ def measure(n: int) -> dict:
     return dict(n=n, horizon=mpc.horizon, mpc=np.median(t_mpc), mpc_max=np.max(t_mpc), hop=np.median(t_hop))
 
 
+def per_call() -> dict:
+    """Median microseconds of each call a control step makes for one robot (70 of the first two, 70 of the last two)."""
+    from leg_env.physics.derivatives import hybrid_step_jacobians
+    from leg_env.physics.hybrid import hybrid_step
+
+    envs = gym.make_vec("leg_env/PlanarLegHop-v4", num_envs=1, vectorization_mode="vector_entry_point")
+    e = envs.unwrapped
+    obs, _ = envs.reset(seed=10_000)
+    mpc = HopMPC(e.params, e.config)
+    q, qd, mode = mpc.state(np.asarray(obs, dtype=np.float64))
+    tau, c = np.zeros((1, 2)), e.config
+    step_args = (q, qd, tau, e.params, c.mu, mode, None)
+    rule = dict(dt=c.dt, substeps=c.substeps, max_angle=c.max_angle)
+    laws = {}
+    for rows in (21, 3):
+        law = HopperController(e.params, e.config)
+        law._n = rows
+        law._allocate(rows)
+        law._start(np.ones(rows, dtype=bool))
+        laws[rows] = (law, np.repeat(np.asarray(obs, dtype=np.float64), rows, axis=0))
+    calls = {
+        "the step with its Jacobians (`hybrid_step_jacobians`)": lambda: hybrid_step_jacobians(*step_args, **rule),
+        "the hopper's law on 21 rows (the state and its differences)": lambda: laws[21][0].torque(laws[21][1]),
+        "the step (`hybrid_step`)": lambda: hybrid_step(*step_args, **rule),
+        "the hopper's law on 3 rows (the line search's plans)": lambda: laws[3][0].torque(laws[3][1]),
+    }
+    out = {}
+    for name, call in calls.items():
+        call()
+        times = []
+        for _ in range(15):
+            t0 = time.perf_counter()
+            for _ in range(100):
+                call()
+            times.append((time.perf_counter() - t0) / 100)
+        out[name] = float(np.median(times))
+    envs.close()
+    return out
+
+
 def main() -> None:
     rows = [measure(n) for n in (1, 10, 100)]
+    calls = per_call()
     machine = (f"{cpu_name()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; Python "
                f"{platform.python_version()}; leg-env {__version__}, numpy {np.__version__}")
     lines = [
@@ -81,6 +123,16 @@ def main() -> None:
     for r in rows:
         lines.append(f"| {r['n']} | {1e3 * r['mpc']:.2f} | {1e3 * r['mpc_max']:.2f} | {1e3 * r['hop']:.3f} | "
                      f"{r['mpc'] / r['hop']:.0f}x |")
+    lines += [
+        "",
+        "The calls a control step makes in sequence for one robot (70 of each: the rollout with the Jacobians, then the "
+        "line search's), whatever else it does:",
+        "",
+        "| call | [us] |",
+        "|---|---:|",
+    ]
+    lines += [f"| {name} | {1e6 * t:.1f} |" for name, t in calls.items()]
+    lines.append(f"| 70 of each, a control step's floor | {70e3 * sum(calls.values()):.1f} ms |")
     text = "\n".join(lines) + "\n"
     RESULTS.write_text(text)
     print(text)

@@ -143,6 +143,11 @@ class HopperController(BatchedController):
     # own dead reckoning and apex estimate and hops all the time
     widths, task, dtype = (22, 24), "PlanarLegHop-v4: 24 entries, 22 without observe_action", np.float64
 
+    continuous_state = ("_bias", "_apex", "_x0")
+    """The per-robot state that moves with the robot: the apex bias, the last flight's apex, the dead-reckoned drift."""
+    discrete_state = ("_phase", "_was_flight")
+    """The per-robot state that changes only at thresholds: the stance phase, whether the last step was in flight."""
+
     def _allocate(self, n: int) -> None:
         self._x0, self._bias, self._apex = np.zeros(n), np.zeros(n), np.zeros(n)
         self._phase, self._was_flight = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)

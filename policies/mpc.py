@@ -143,8 +143,8 @@ class HopMPC(BatchedController):
             raise ValueError(f"iterations must be at least 1, got {iterations}")
         if charge_apex not in ("flight", "liftoff"):
             raise ValueError(f"charge_apex must be 'flight' or 'liftoff', got {charge_apex!r}")
-        positive = dict(law_step=law_step, apex_scale=apex_scale, tilt_scale=tilt_scale, tilt_rate_scale=tilt_rate_scale, drift_scale=drift_scale,
-                        drift_rate_scale=drift_rate_scale, limit_scale=limit_scale)
+        positive = dict(law_step=law_step, apex_scale=apex_scale, tilt_scale=tilt_scale, tilt_rate_scale=tilt_rate_scale,
+                        drift_scale=drift_scale, drift_rate_scale=drift_rate_scale, limit_scale=limit_scale)
         nonnegative = dict(regularisation=regularisation, effort_weight=effort_weight, power_weight=power_weight,
                            smooth_weight=smooth_weight, limit_margin=limit_margin, fall_cost=fall_cost,
                            terminal_weight=terminal_weight, stance_grace=stance_grace, stance_cost=stance_cost,
@@ -309,7 +309,7 @@ class HopMPC(BatchedController):
         obs[..., Obs.slip] = np.where(mode == _contact.SLIP_FORWARD, 1.0, np.where(mode == _contact.SLIP_BACKWARD, -1.0, 0.0))
         return obs
 
-    _HOPPER_STATE = ("_x0", "_bias", "_apex", "_phase", "_was_flight")
+    _HOPPER_STATE = HopperController.continuous_state + HopperController.discrete_state
 
     def _hopper_copy(self, source, copies: int = 1):
         """A hopper in ``source``'s state, its robots repeated ``copies`` times (a batch of plans per robot)."""
@@ -471,6 +471,7 @@ class HopMPC(BatchedController):
             self._plan[:] = 0.0
         V = self._plan
         for _ in range(self.iterations):
+            pick = np.full(len(q), -1)  # the line search's choice (-1: the plan it started from)
             roll = self._rollout(q, qd, mode, ground, like, x_ref, V, jacobians=True)
             best_cost = self._cost(roll, target, x_ref)
             best_V, best_U, best_X = roll["V"], roll["U"], roll["X"]
@@ -482,7 +483,6 @@ class HopMPC(BatchedController):
                 trial = self._rollout(tile(q), tile(qd), tile(mode), tile(ground), tile(like), tile(x_ref), tile(roll["V"]),
                                       nominal=tile(roll["X"]), k=scale * tile(k), K=tile(K), copies=S)
                 costs = self._cost(trial, tile(target), tile(x_ref)).reshape(S, len(q))
-                pick = np.full(len(q), -1)
                 for i in range(S):
                     cost = costs[i]
                     rows = slice(i * len(q), (i + 1) * len(q))
@@ -493,7 +493,7 @@ class HopMPC(BatchedController):
                     best_U = np.where(better[:, None, None], trial["U"][rows], best_U)
                     best_X = np.where(better[:, None, None], trial["X"][rows], best_X)
             V = best_V
-            self.pick = pick if self.steps else np.full(len(q), -1)
+            self.pick = pick
         action = best_U[:, 0].copy()
         self._plan[:, :-1] = best_V[:, 1:]
         self._plan[:, -1] = 0.0

@@ -149,11 +149,11 @@ def controller_for(name_or_path, params, config, settings: dict | None = None):
 
     if settings and name_or_path not in ("hopper", "mpc"):
         raise TypeError(f"settings are for the controllers 'hopper' and 'mpc', not a trained policy: got {settings}")
+    state = HopperController.continuous_state, HopperController.discrete_state  # the MPC's: its inner hopper's
     if name_or_path == "hopper":
-        return _Model(HopperController(params, config, **(settings or {})), ("_bias", "_apex", "_x0"), ("_phase", "_was_flight"), lambda c: c)
+        return _Model(HopperController(params, config, **(settings or {})), *state, lambda c: c)
     if name_or_path == "mpc":
-        mpc = HopMPC(params, config, **(settings or {}))
-        return _Model(mpc, ("_bias", "_apex", "_x0"), ("_phase", "_was_flight"), lambda c: c._pilot)
+        return _Model(HopMPC(params, config, **(settings or {})), *state, lambda c: c._pilot)
     from train.policy_loading import TrainedPolicy, load_policy
 
     trained = load_policy(Path(name_or_path))

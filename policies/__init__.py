@@ -2,8 +2,9 @@
 
 The model-based controllers: ``policies.lqr.LQRController`` (balancing; stateless), ``policies.hopper.HopperController``
 (hopping), ``policies.gated.GatedController`` (a backward hop before the LQR for the unilateral balance task's
-starts that need one) and ``policies.stepping.SteppingController`` (the LQR, and a quick hop after a large push).
-The stateful ones share ``policies.base.BatchedController``: one ``predict`` for one observation or a batch, the
+starts that need one), ``policies.stepping.SteppingController`` (the LQR, and a quick hop after a large push), and
+the model-predictive controllers ``policies.mpc.HopMPC`` and ``policies.push_mpc.PushMPC`` (iLQR on the step's exact
+Jacobians around the hopper and the stepping controller, ``policies.ilqr``). The stateful ones share ``policies.base.BatchedController``: one ``predict`` for one observation or a batch, the
 per-robot state, SB3's ``episode_start``; all read the observation by the task's named columns
 (``leg_env.tasks.base.Obs``).
 

@@ -40,6 +40,7 @@ import numpy as np
 from leg_env.physics.params import LegParams
 from leg_env.tasks.base import Obs
 from policies.base import BatchedController
+from policies.hopper import HopperController
 from policies.recovery import com_from_observation, lqr_and_hopper
 
 __all__ = ["SteppingController", "STEP_GAINS"]
@@ -121,9 +122,22 @@ class SteppingController(BatchedController):
         self._cool[rows] = 0
         self._run[rows] = -1  # the reset's observation counts for nothing: its force is not under a step's torque
 
-    def act(self, batch: np.ndarray) -> np.ndarray:
+    continuous_state = ("_v", "_lam_x", "push_estimate") + tuple("hopper." + n for n in HopperController.continuous_state)
+    """The per-robot state that moves with the robot: the observer's last COM velocity and ground force, its push
+    estimate, and the hopper's."""
+    discrete_state = ("hopping", "_age", "_landed_at", "_flew", "_cool", "_run") + tuple(
+        "hopper." + n for n in HopperController.discrete_state)
+    """The per-robot state that changes only at thresholds: the hop's flags and counters, the observer's run of
+    sticking observations, and the hopper's."""
 
-        # 1. the push observer, between two sticking observations (``_run``: sticking observations in a row)
+    def act(self, batch: np.ndarray) -> np.ndarray:
+        contact = self.observe(batch)
+        start = self.gate(contact)
+        return self.follow(batch, contact, start)
+
+    def observe(self, batch: np.ndarray) -> np.ndarray:
+        """1. The push observer, between two sticking observations (``_run``: sticking observations in a row): sets
+        ``push_estimate``; returns which robots' feet are on the ground."""
         _, _, v = com_from_observation(batch, self.params)
         lam_x = batch[:, Obs.lam_x].astype(np.float64) * self.weight
         contact = batch[:, Obs.contact] > 0.5
@@ -132,20 +146,29 @@ class SteppingController(BatchedController):
             self._run >= 2, self.mass * (v - self._v) / self.config.dt - 0.5 * (lam_x + self._lam_x), 0.0
         )
         self._v, self._lam_x = v, lam_x
+        return contact
 
-        # 2. the gate; 4. the hand-over
+    def gate(self, contact: np.ndarray) -> np.ndarray:
+        """2. The gate: the robots whose hop starts now (``(N,)`` bool)."""
         start = ~self.hopping & contact & (self._cool <= 0) & (np.abs(self.push_estimate) > self.force_threshold)
         self.hopping |= start
         self._age[start], self._landed_at[start], self._flew[start] = 0, -1, False
+        return start
+
+    def hand_over(self, contact: np.ndarray, vy_b: np.ndarray) -> None:
+        """4. The hand-over: a hop ends ``settle_steps`` after its touchdown once the base sinks slower than
+        ``exit_sink_speed``, or after ``max_hop_steps``."""
         self._flew |= self.hopping & ~contact
         touchdown = self.hopping & contact & self._flew & (self._landed_at < 0)
         self._landed_at[touchdown] = self._age[touchdown]
-        settled = (self._landed_at >= 0) & (self._age - self._landed_at >= self.settle_steps) & (batch[:, Obs.vy_b] > -self.exit_sink_speed)
+        settled = (self._landed_at >= 0) & (self._age - self._landed_at >= self.settle_steps) & (vy_b > -self.exit_sink_speed)
         done = self.hopping & (settled | (self._age >= self.max_hop_steps))
         self.hopping &= ~done
         self._cool[done] = self.cooldown
 
-        # 3. the hop, or the LQR
+    def follow(self, batch: np.ndarray, contact: np.ndarray, start: np.ndarray) -> np.ndarray:
+        """4. and 3.: the hand-over, then the hop or the LQR: actions ``(N, 2)`` float32."""
+        self.hand_over(contact, batch[:, Obs.vy_b])
         action, _ = self.lqr.predict(batch)
         if self.hopping.any():
             self.hopper.act_on(batch, self.hop_command, start, self.hopping, action)

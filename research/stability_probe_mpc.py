@@ -31,7 +31,7 @@ def run(x, mode, ground, pilot, steps, n):
     mpc.reset()
     # first call allocates and starts; then overwrite the pilot state
     mpc._n = n; mpc._allocate(n)
-    for name in mpc._HOPPER_STATE: setattr(mpc._pilot, name, np.repeat(pilot[name], n) if pilot[name].shape[0] == 1 else pilot[name].copy())
+    for name in mpc.pilot_state: setattr(mpc._pilot, name, np.repeat(pilot[name], n) if pilot[name].shape[0] == 1 else pilot[name].copy())
     vys = []
     for k in range(steps):
         o = observe(x, mode, ground, n)
@@ -54,7 +54,7 @@ for k in range(1500):
     ground = np.where(mode == C.FLIGHT, 0.0, ground + c.dt)
     vy = mpc.com(x)[3]
     if mode[0] == C.FLIGHT and prev[0] >= 0 and vy[0] < 0:
-        sections.append((k + 1, x.copy(), mode.copy(), ground.copy(), {nm: getattr(mpc._pilot, nm).copy() for nm in mpc._HOPPER_STATE}))
+        sections.append((k + 1, x.copy(), mode.copy(), ground.copy(), {nm: getattr(mpc._pilot, nm).copy() for nm in mpc.pilot_state}))
     prev = vy
 ks = [s_[0] for s_ in sections]
 print("hops", len(sections), "periods", np.diff(ks)[-8:])

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import leg_env  # noqa: F401  (registers the tasks)
+from ilqr_checks import checked_gradients
 from policies.hopper import HopperController
 from policies.mpc import HopMPC
 from train.policy_loading import load_policy
@@ -57,44 +58,8 @@ def test_backward_pass_differentiates_the_closed_loop():
     target = mpc.y_stand + batch[:, 18]
     x_ref = mpc.com(np.concatenate([q, qd], axis=1))[0] - batch[:, 19]
     ground = batch[:, 20]
-    rng = np.random.default_rng(0)
-    V = 0.02 * rng.standard_normal(mpc._plan.shape)
-    roll = mpc._rollout(q, qd, mode, ground, like, x_ref, V, jacobians=True)
-
-    def cost(V):
-        r = mpc._rollout(q, qd, mode, ground, like, x_ref, V)
-        return mpc._cost(r, target, x_ref), r["modes"]
-
-    # the adjoint: half the cost's gradient by the corrections, through A and B
-    flight = mpc._liftoffs(roll["modes"])
-    r = mpc.residuals(roll["X"][:, 1:], flight, target[:, None], x_ref[:, None])
-    Jr = mpc._residual_jacobian(roll["X"][:, 1:], flight, target[:, None], x_ref[:, None])
-    lx = np.einsum("nhri,nhr->nhi", Jr, r)
-    ws = mpc.smooth_weight
-    grad = np.zeros_like(V)
-    lam = np.zeros((4, 10))
-    for t in range(V.shape[1] - 1, -1, -1):
-        lam = lam + lx[:, t]
-        ra, Ju, Jx = mpc.action_residuals(roll["X"][:, t], roll["U"][:, t])
-        Jv, Jx = Ju * roll["D"][:, t, None, :], Ju @ roll["Du"][:, t] + Jx  # through u = clip(pi(x) + v)
-        grad[:, t] = np.einsum("nji,nj->ni", roll["B"][:, t], lam) + np.einsum("nji,nj->ni", Jv, ra) + ws * V[:, t]
-        lam = np.einsum("nji,nj->ni", roll["A"][:, t], lam) + np.einsum("nji,nj->ni", Jx, ra)
-    checked = 0
-    for t in (0, 5, 15, 30):
-        for j in range(2):
-            for h in (1e-5, 1e-6):
-                Vp, Vm = V.copy(), V.copy()
-                Vp[:, t, j] += h
-                Vm[:, t, j] -= h
-                (cp, mp), (cm, mm) = cost(Vp), cost(Vm)
-                fd = (cp - cm) / (4 * h)  # half the cost, as the backward pass
-                same = (mp == roll["modes"]).all(axis=1) & (mm == roll["modes"]).all(axis=1)
-                ok = np.abs(fd - grad[:, t, j]) <= 1e-4 * (1.0 + np.abs(grad[:, t, j]))
-                if (ok | ~same).all():
-                    checked += same.sum()
-                    break
-            else:
-                raise AssertionError(f"step {t}, action {j}: differences {fd}, adjoint {grad[:, t, j]}")
+    ctx = dict(like=like, target=target, x_ref=x_ref, ground=ground)
+    checked = checked_gradients(mpc, mpc._pilot, q, qd, mode, ctx)
     assert checked >= 24  # most robots, every step checked with the same events at both sides
 
 

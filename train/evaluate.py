@@ -348,7 +348,8 @@ class EvalArgs:
     policy: str = "lqr"
     """Run or policy folder (with model.zip and vecnormalize.pkl), a train.rllib run folder or checkpoint, or
     a model-based controller: 'lqr' (balance, push), 'stepping' (push: the LQR, a hop for large pushes), 'hopper' (hop),
-    'mpc' (hop: iLQR around the hopper) or 'gated' (the backward hop then the LQR, PlanarLegBalance-v1)."""
+    'mpc' (hop: iLQR around the hopper; push: iLQR around the stepping controller while it recovers) or 'gated' (the
+    backward hop then the LQR, PlanarLegBalance-v1)."""
     baseline: list[str] = field(default_factory=list)
     """Also evaluate these controllers ('lqr', 'hopper', 'mpc', 'gated', 'stepping' or a folder; one or several) on the
     same seeds and print them side by side with the policy."""

@@ -86,9 +86,11 @@ def _stepping(params, config):
 
 
 def _mpc(params, config):
+    from leg_env.tasks.push import PushConfig
     from policies.mpc import HopMPC
+    from policies.push_mpc import PushMPC
 
-    return HopMPC(params, config)
+    return PushMPC(params, config) if isinstance(config, PushConfig) else HopMPC(params, config)
 
 
 BASELINES = {"lqr": _lqr, "hopper": _hopper, "gated": _gated, "stepping": _stepping, "mpc": _mpc}

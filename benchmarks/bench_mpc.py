@@ -1,4 +1,5 @@
-"""The hop MPC's compute per control step per robot (``policies.mpc.HopMPC``), beside the hopper's, in one run.
+"""The MPCs' compute per control step per robot (``policies.mpc.HopMPC``, ``policies.push_mpc.PushMPC``), beside the
+hopper's and the stepping controller's, in one run.
 
     .venv/bin/python benchmarks/bench_mpc.py
 
@@ -8,7 +9,12 @@ episodes' starts (through the first hop), divided by the batch size; the median 
 The hopper controller's ``predict`` on the same observations is the reference. One thread (numpy's BLAS and torch
 are held to one). The bar: at most 10 ms per control step per robot on one core. Also, for one robot, the cost of
 each call a control step makes in sequence (the step, the step with its Jacobians, the hopper's law on 21 and on 3
-rows: 70 of each pair), the floor the plan's Python loop puts under it. Written to ``benchmarks/results/mpc.md``.
+rows: 70 of each pair), the floor the plan's Python loop puts under it.
+
+On ``PlanarLegPush-v2``, the push MPC plans only while a robot recovers from a push: every robot of a batch of 1, 10
+and 100 is pushed at once (60 N, at 1 s), and the time of ``predict`` at the control steps where robots plan is
+divided by the number planning; the stepping controller's ``predict`` on the same observations is the reference.
+Written to ``benchmarks/results/mpc.md``.
 """
 
 from __future__ import annotations
@@ -35,6 +41,8 @@ import leg_env  # noqa: E402
 from leg_env import __version__  # noqa: E402
 from policies.hopper import HopperController  # noqa: E402
 from policies.mpc import HopMPC  # noqa: E402
+from policies.push_mpc import PushMPC  # noqa: E402
+from policies.stepping import SteppingController  # noqa: E402
 from train.machine import cpu_name  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results" / "mpc.md"
@@ -58,6 +66,29 @@ def measure(n: int) -> dict:
         obs, *_ = envs.step(action)
     envs.close()
     return dict(n=n, horizon=mpc.horizon, mpc=np.median(t_mpc), mpc_max=np.max(t_mpc), hop=np.median(t_hop))
+
+
+def measure_push(n: int) -> dict:
+    envs = gym.make_vec("leg_env/PlanarLegPush-v2", num_envs=n, vectorization_mode="vector_entry_point",
+                        push_force=(60.0, 60.0), first_push=(1.0, 1.0))
+    e = envs.unwrapped
+    mpc, stepping = PushMPC(e.params, e.config), SteppingController(e.params, e.config)
+    obs, _ = envs.reset(seed=10_000)
+    t_mpc, t_step, planning = [], [], 0
+    for _ in range(200):  # the push at 1 s, the recovery within 1 s
+        t0 = time.perf_counter()
+        action, _ = mpc.predict(obs)
+        t1 = time.perf_counter()
+        stepping.predict(obs)
+        t2 = time.perf_counter()
+        if mpc.planning.any():
+            planning += 1
+            t_mpc.append((t1 - t0) / mpc.planning.sum())
+            t_step.append((t2 - t1) / n)
+        obs, *_ = envs.step(action)
+    envs.close()
+    return dict(n=n, horizon=mpc.horizon, steps=planning, mpc=np.median(t_mpc), mpc_max=np.max(t_mpc),
+                stepping=np.median(t_step))
 
 
 def per_call() -> dict:
@@ -103,10 +134,11 @@ def per_call() -> dict:
 def main() -> None:
     rows = [measure(n) for n in (1, 10, 100)]
     calls = per_call()
+    pushes = [measure_push(n) for n in (1, 10, 100)]
     machine = (f"{cpu_name()}, {os.cpu_count()} cores, {platform.system()} {platform.release()}; Python "
                f"{platform.python_version()}; leg-env {__version__}, numpy {np.__version__}")
     lines = [
-        "# Hop MPC: compute per control step",
+        "# MPC: compute per control step",
         "",
         f"Written by `python benchmarks/bench_mpc.py` on {datetime.date.today().isoformat()}.",
         "",
@@ -133,6 +165,20 @@ def main() -> None:
     ]
     lines += [f"| {name} | {1e6 * t:.1f} |" for name, t in calls.items()]
     lines.append(f"| 70 of each, a control step's floor | {70e3 * sum(calls.values()):.1f} ms |")
+    lines += [
+        "",
+        f"`policies.push_mpc.PushMPC` with its defaults (a horizon of {pushes[0]['horizon']} control steps, one iLQR "
+        "iteration), on `PlanarLegPush-v2` with every robot pushed at once (60 N at 1 s): the time of `predict` at the "
+        "control steps where robots plan, divided by the number planning (elsewhere it is the stepping controller). The "
+        "stepping controller's `predict` on the same observations is the reference.",
+        "",
+        "| robots per call | control steps planned | push MPC, median [ms per robot planning] | slowest step | "
+        "stepping controller [ms per robot] | MPC / stepping |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in pushes:
+        lines.append(f"| {r['n']} | {r['steps']} | {1e3 * r['mpc']:.2f} | {1e3 * r['mpc_max']:.2f} | "
+                     f"{1e3 * r['stepping']:.3f} | {r['mpc'] / r['stepping']:.0f}x |")
     text = "\n".join(lines) + "\n"
     RESULTS.write_text(text)
     print(text)

@@ -89,9 +89,12 @@ class PilotILQR(BatchedController):
     n_residuals = 0
 
     def _setup(self, params: LegParams, config, horizon, steps, iterations, warm_start, regularisation, effort_weight,
-               power_weight, smooth_weight, clip_smoothing, law_step, positive: dict, nonnegative: dict) -> None:
+               power_weight, smooth_weight, clip_smoothing, law_step, positive: dict, nonnegative: dict,
+               replan_every: int = 1) -> None:
         if int(horizon) < 2:
             raise ValueError(f"horizon must be at least 2, got {horizon}")
+        if not 1 <= int(replan_every) <= int(horizon):
+            raise ValueError(f"replan_every must be from 1 to the horizon ({horizon}), got {replan_every}")
         if int(iterations) < 1:
             raise ValueError(f"iterations must be at least 1, got {iterations}")
         check_settings(dict(law_step=law_step, **positive),
@@ -99,6 +102,7 @@ class PilotILQR(BatchedController):
                             smooth_weight=smooth_weight, clip_smoothing=clip_smoothing, **nonnegative))
         self.params, self.config = params, config
         self.horizon, self.iterations, self.warm_start = int(horizon), int(iterations), bool(warm_start)
+        self.replan_every = int(replan_every)
         self.steps = tuple(float(s) for s in steps)
         self.regularisation = float(regularisation)
         self.torque_limit = np.asarray(config.torque_limit, dtype=np.float64) * np.ones(2)
@@ -378,7 +382,7 @@ class PilotILQR(BatchedController):
             pick = np.full(n, -1)  # the line search's choice (-1: the plan it started from)
             roll = self._rollout(source, q, qd, mode, ctx, plan, jacobians=True)
             best_cost = self._cost(roll, ctx)
-            best_V, best_U, best_X = roll["V"], roll["U"], roll["X"]
+            best_V, best_U, best_X, best_M = roll["V"], roll["U"], roll["X"], roll["modes"]
             k, K = self._backward(roll, ctx)
             if self.steps:  # every step length's plan in one batch, robot-major within each length
                 S = len(self.steps)
@@ -397,12 +401,60 @@ class PilotILQR(BatchedController):
                     best_V = np.where(better[:, None, None], trial["V"][rows], best_V)
                     best_U = np.where(better[:, None, None], trial["U"][rows], best_U)
                     best_X = np.where(better[:, None, None], trial["X"][rows], best_X)
+                    best_M = np.where(better[:, None], trial["modes"][rows], best_M)
             plan = best_V
             self.pick = pick
         V[:, :-1] = best_V[:, 1:]
         V[:, -1] = 0.0
         self.cost, self.planned = best_cost, best_X
+        self._chosen = dict(V=best_V, X=best_X, K=K, modes=best_M)
         return best_U[:, 0].copy()
+
+    # ---- replanning every few control steps
+
+    def _allocate_held(self, n: int) -> None:
+        """The plans held between replans (``replan_every``): the corrections, states and feedback gains."""
+        H = self.horizon
+        self._since = np.full(n, self.replan_every)  # control steps since each robot's plan (at least replan_every: plan now)
+        self.plans = 0  # plans made (a robot each)
+        self._held = dict(V=np.zeros((n, H, NU)), X=np.zeros((n, H + 1, NX)), K=np.zeros((n, H, NU, NX)),
+                          modes=np.zeros((n, H + 1), dtype=np.int64))
+
+    def _due(self, mode: np.ndarray) -> np.ndarray:
+        """The robots that plan at this control step: ``replan_every`` steps after their last plan, or sooner where
+        the contact mode is not the plan's (an event came at another step than planned)."""
+        due = self._since + 1 >= self.replan_every
+        if self.replan_every > 1:
+            j = np.minimum(self._since + 1, self.horizon)
+            due |= mode != self._held["modes"][np.arange(len(mode)), j]
+        self.plans += int(due.sum())
+        return due
+
+    def _hold(self, rows: np.ndarray) -> None:
+        """Keep the plans just made for ``rows`` (``_plan_actions``' chosen ones)."""
+        if self.replan_every > 1 and rows.any():
+            for name, value in self._chosen.items():
+                self._held[name][rows] = value
+        self._since[rows] = 0
+
+    def _follow_held(self, rows: np.ndarray, x: np.ndarray, pi: np.ndarray) -> np.ndarray:
+        """Actions of the robots ``rows`` between their plans, at states ``x`` ``(n, 10)`` with the pilot's actions
+        ``pi`` there: the held plan's correction at this step plus its feedback on the state's departure from it,
+        ``clip(pi + v_j + K_j (x - x_j), -1, 1)`` (the base's ``x`` left out: its frame moves with the contact point)."""
+        r = np.flatnonzero(rows)
+        j = self._since[r] + 1
+        dx = x - self._held["X"][r, j]
+        dx[:, 0] = 0.0
+        v = self._held["V"][r, j] + np.einsum("nij,nj->ni", self._held["K"][r, j], dx)
+        self._since[r] = j
+        return np.clip(pi + v, -1.0, 1.0)
+
+    def _pilot_rows(self, source, rows: np.ndarray):
+        """A pilot in ``source``'s state at ``rows`` only."""
+        pilot = self._new_pilot(int(rows.sum()))
+        for name in self.pilot_state:
+            _set(pilot, name, np.array(_get(source, name)[rows]))
+        return pilot
 
     def act(self, batch: np.ndarray) -> np.ndarray:
         return self.exact_actions(batch).astype(np.float32)

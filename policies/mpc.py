@@ -85,6 +85,9 @@ class HopMPC(PilotILQR):
             derivative fades from 1 to 0 (``clip_derivative``; 0: the clip's own 0 or 1) [action units].
         law_step: the step of the centred differences of the hopper's law inside the plan [m, rad, m/s, rad/s]: at
             1e-6 their rounding alone made the MPC's law disagree with itself under a change of the state of 1e-6.
+        replan_every: plan at every this many control steps (1: every step), and sooner where the contact mode is
+            not the plan's; in between, the hopper's action plus the last plan's correction at that step and the backward
+            pass's feedback on the state's departure from the plan (``policies.ilqr.PilotILQR._follow_held``).
 
     After each ``predict``, ``planned`` ``(N, horizon + 1, 10)`` holds the chosen plan's states (the first the robot's
     now), ``cost`` ``(N,)`` its cost and ``pick`` ``(N,)`` the line search's choice of the last iteration (the index of
@@ -126,6 +129,7 @@ class HopMPC(PilotILQR):
         hopper: dict | None = None,
         clip_smoothing: float = 0.05,
         law_step: float = 1e-5,
+        replan_every: int = 1,
     ):
         from leg_env.physics.dynamics import com_position
         from leg_env.tasks.base import nominal_state
@@ -140,7 +144,8 @@ class HopMPC(PilotILQR):
                     positive=dict(apex_scale=apex_scale, tilt_scale=tilt_scale, tilt_rate_scale=tilt_rate_scale,
                                   drift_scale=drift_scale, drift_rate_scale=drift_rate_scale, limit_scale=limit_scale),
                     nonnegative=dict(limit_margin=limit_margin, fall_cost=fall_cost, terminal_weight=terminal_weight,
-                                     stance_grace=stance_grace, stance_cost=stance_cost))
+                                     stance_grace=stance_grace, stance_cost=stance_cost),
+                    replan_every=replan_every)
         self.y_stand = float(com_position(nominal_state(p, c).q, p)[1])
         self.scales = dict(apex=apex_scale, tilt=tilt_scale, tilt_rate=tilt_rate_scale, drift=drift_scale,
                            drift_rate=drift_rate_scale, limit=limit_scale)
@@ -169,10 +174,12 @@ class HopMPC(PilotILQR):
         self._pilot._allocate(n)
         self._pilot._start(np.ones(n, dtype=bool))
         self._probe = HopperController(self.params, self.config, **self.hopper_settings)  # for the hopper's derivative
+        self._allocate_held(n)
 
     def _start(self, rows: np.ndarray, batch: np.ndarray | None = None) -> None:
         self._plan[rows] = 0.0
         self._pilot._start(rows)
+        self._since[rows] = self.replan_every
 
     # ---- cost
 
@@ -242,9 +249,21 @@ class HopMPC(PilotILQR):
         """``act``'s actions in float64, before their rounding to float32 (for the closed loop's derivatives)."""
         self._check_finite(batch)
         q, qd, mode = self.state(batch)
+        x = np.concatenate([q, qd], axis=1)
         ctx = dict(like=np.array(batch[:, :22], dtype=np.float64), target=self.y_stand + batch[:, Obs.command],
-                   x_ref=self.com(np.concatenate([q, qd], axis=1))[0] - batch[:, Obs.com_drift],
+                   x_ref=self.com(x)[0] - batch[:, Obs.com_drift],
                    ground=np.array(batch[:, Obs.ground_time], dtype=np.float64))
-        action = self._plan_actions(self._pilot, q, qd, mode, ctx, self._plan)
-        self._law(self._pilot, np.concatenate([q, qd], axis=1), mode, ctx)  # the pilot follows the robot
+        due = self._due(mode)
+        action = np.empty((len(q), 2))
+        if due.all():
+            action[:] = self._plan_actions(self._pilot, q, qd, mode, ctx, self._plan)
+        elif due.any():
+            V = self._plan[due]
+            action[due] = self._plan_actions(self._pilot_rows(self._pilot, due), q[due], qd[due], mode[due],
+                                             {name: value[due] for name, value in ctx.items()}, V)
+            self._plan[due] = V
+        pi = self._law(self._pilot, x, mode, ctx) / self.torque_limit  # the pilot follows the robot
+        if not due.all():
+            action[~due] = self._follow_held(~due, x[~due], pi[~due])
+        self._hold(due)
         return action

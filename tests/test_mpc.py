@@ -112,6 +112,32 @@ def test_without_iterations_it_is_the_hopper():
         obs, *_ = envs.step(b)
 
 
+def test_replans_every_few_steps_and_follows_the_plan_between():
+    """With ``replan_every=8`` each robot plans at every eighth control step and in between follows the held plan:
+    its state stays on the plan's states (the observation's float32 aside); a contact mode other than the plan's
+    makes that robot plan at once."""
+    envs, obs = _envs(3)
+    e = envs.unwrapped
+    mpc = HopMPC(e.params, e.config, replan_every=8)
+    for t in range(40):
+        action, _ = mpc.predict(obs)
+        assert np.all(mpc._since == t % 8)
+        if t % 8:
+            q, qd, _ = mpc.state(obs)
+            held = mpc._held["X"][:, t % 8]
+            np.testing.assert_allclose(np.concatenate([q, qd], axis=1)[:, 1:], held[:, 1:], atol=2e-4)
+        obs, *_ = envs.step(action)
+    assert mpc._since[0] == 7  # the next call plans
+    obs = obs.copy()
+    mpc._since[:] = 2  # mid-plan; robot 0's contact flag (the plan's stance) flipped
+    planned_mode = mpc._held["modes"][:, 3].copy()
+    obs[0, 15] = 1.0 - obs[0, 15]
+    mpc.predict(obs)
+    assert mpc._since[0] == 0 and np.all(mpc._since[1:] == 3), (mpc._since, planned_mode)
+    with pytest.raises(ValueError, match="replan_every"):
+        HopMPC(horizon=10, replan_every=11)
+
+
 def test_loads_by_name_and_checks_its_input():
     policy = load_policy("mpc", env_id=HOP)
     assert isinstance(policy, HopMPC)

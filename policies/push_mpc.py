@@ -146,17 +146,13 @@ class PushMPC(PilotILQR):
     def _snapshot(self, rows: np.ndarray, start: np.ndarray):
         """The pilot's state at ``rows`` as the step's law finds it (its gate passed; the hopper of a hop starting now
         started): a plan's source."""
-        pilot, n = self._pilot, int(rows.sum())
-        source = self._new_pilot(n)
-        hopper = pilot.hopper
-        if hopper._n != pilot._n:  # no robot has hopped yet: the hopper as it is made
-            hopper = copy.copy(pilot.hopper)
-            hopper._allocate(pilot._n)
-            hopper._start(np.ones(pilot._n, dtype=bool))
-        for name in self.pilot_state:
-            holder = hopper if name.startswith("hopper.") else pilot
-            setattr(source.hopper if holder is hopper else source, name.split(".")[-1],
-                    np.array(getattr(holder, name.split(".")[-1])[rows]))
+        pilot = self._pilot
+        if pilot.hopper._n != pilot._n:  # no robot has hopped yet: the hopper as it is made
+            pilot = copy.copy(pilot)
+            pilot.hopper = copy.copy(pilot.hopper)
+            pilot.hopper._allocate(pilot._n)
+            pilot.hopper._start(np.ones(pilot._n, dtype=bool))
+        source = self._pilot_rows(pilot, rows)
         source.hopper._start(start[rows])
         return source
 
@@ -243,6 +239,8 @@ class PushMPC(PilotILQR):
             V = self._plan[rows]
             action[rows] = self._plan_actions(source, q, qd, mode, ctx, V)
             self._plan[rows] = V
+        else:  # nobody planned
+            self.planned, self.cost, self.pick = np.zeros((0, self.horizon + 1, 10)), np.zeros(0), np.zeros(0, dtype=np.int64)
         self._plan[~rows] = 0.0
         self._push_left = np.maximum(self._push_left - 1, 0)
         return action

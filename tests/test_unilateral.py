@@ -157,6 +157,52 @@ def test_batched_hybrid_step_equals_stacked_singles_bitwise():
 # ---------------------------------------------------------------- the env option
 
 
+def test_the_controllers_calls_take_the_same_step_through_fewer_checks():
+    """The calls a controller's loop makes (float64 ``(N, 5)`` states and ``(N, 2)`` torques, int64 modes, a number
+    ``mu``, a number or ``(N,)`` load) skip the argument conversions but not their outcome: the step and its Jacobians
+    equal those of the same arguments given as lists (the full checks) bit for bit, over rollout states through every
+    mode; and such arrays holding what the checks refuse get the checks' errors, nothing changed."""
+    from leg_env.physics.derivatives import hybrid_step_jacobians
+    from leg_env.physics.hybrid import _fast_call
+
+    p, mu = LegParams(), 0.5
+    envs = gym.make_vec("leg_env/PlanarLegHop-v4", num_envs=32, vectorization_mode="vector_entry_point")
+    envs.reset(seed=3)
+    rng = np.random.default_rng(0)
+    seen = set()
+    for _ in range(40):
+        e = envs.unwrapped
+        (q, qd, _), mode = e.state, e.contact_mode
+        seen.update(mode.tolist())
+        tau = rng.uniform(-50.0, 50.0, (32, 2))
+        for load in (0.0, rng.uniform(-60.0, 60.0, 32)):
+            assert _fast_call(q, qd, tau, p, mu, mode, None, 0.01, 2, 0.02, load) is not None
+            listed = dict(load_x=load if np.isscalar(load) else load.tolist())
+            a, b = hybrid_step(q, qd, tau, p, mu, mode, load_x=load), hybrid_step(q, qd, tau, p, mu, mode.tolist(), **listed)
+            assert all(np.array_equal(x, y, equal_nan=True) for x, y in zip(a, b))
+            ja = hybrid_step_jacobians(q, qd, tau, p, mu, mode, load_x=load)
+            jb = hybrid_step_jacobians(q, qd, tau, p, mu, mode.tolist(), **listed)
+            assert np.array_equal(ja.A, jb.A, equal_nan=True) and np.array_equal(ja.B, jb.B, equal_nan=True)
+        envs.step(rng.uniform(-1.0, 1.0, (32, 2)))
+    assert {0, 3} <= seen  # stick and flight
+    q0, qd0, tau0, mode0 = q.copy(), qd.copy(), tau.copy(), mode.copy()
+    bad_q, bad_tau, bad_mode = q.copy(), tau.copy(), mode.copy()
+    bad_q[1, 2], bad_tau[0, 1], bad_mode[2] = np.nan, np.inf, 7
+    low = q.copy()
+    low[0, 1] -= 2.0  # the foot a metre and more below the ground
+    for args, message in (((bad_q, qd, tau, p, mu, mode), "q must be finite"),
+                          ((q, qd, bad_tau, p, mu, mode), "tau must be finite"),
+                          ((q, qd, tau, p, mu, bad_mode), "mode must be one of"),
+                          ((q, qd, tau, p, float("nan"), mode), "mu must be"),
+                          ((low, qd, tau, p, mu, mode), "below the ground")):
+        with pytest.raises(ValueError, match=message):
+            hybrid_step(*args)
+        with pytest.raises(ValueError, match="load_x must be finite"):
+            hybrid_step(q, qd, tau, p, mu, mode, load_x=np.full(32, np.inf))
+    for before, now in ((q0, q), (qd0, qd), (tau0, tau), (mode0, mode)):
+        np.testing.assert_array_equal(now, before)
+
+
 def test_default_is_pinned_and_unilateral_changes_spaces_and_mu():
     pinned = gym.make(leg_env.ENV_ID).unwrapped
     uni = gym.make(leg_env.ENV_ID, **UNI).unwrapped

@@ -58,13 +58,14 @@ broadcasts and validates the arrays around it.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 
 from .. import checks
 from .._core import kernels
-from .arrays import NQ, NU, batched, core_params, finite_rows, vec
+from .arrays import F64, NQ, NU, batched, core_params, finite_rows, vec
 from .contact import FLIGHT, SLIP_BACKWARD, SLIP_FORWARD, STICK, checked_mu, scalar_field, contact_mode
 from .dynamics import foot_position
 from .integrate import DT, MAX_ANGLE, SUBSTEPS, checked_steps
@@ -182,8 +183,48 @@ class PreparedCall(NamedTuple):
         )
 
 
+def _plain(a, n: int, width: int) -> bool:
+    """``a`` is already what the core reads: a float64, C-ordered, aligned ``(n, width)`` array."""
+    return (type(a) is np.ndarray and a.dtype is F64 and a.shape == (n, width) and a.flags.c_contiguous
+            and a.flags.aligned)
+
+
+def _fast_call(q, qd, tau, p, mu, mode, anchor_x, dt, substeps, max_angle, load_x) -> PreparedCall | None:
+    """``prepared_call`` of the calls a controller's loop makes (``(N, 5)`` float64 states and ``(N, 2)`` torques
+    as the core reads them, a robot's ``LegParams``, a number ``mu``, ``(N,)`` int64 modes, the anchors the feet's, a
+    number or ``(N,)`` float64 load, the step rule's defaults), with one test each for what the full checks would
+    refuse; None for any other call (the full checks then make it, or name what is wrong)."""
+    n = q.shape[0] if type(q) is np.ndarray and q.ndim == 2 else -1
+    if not (_plain(q, n, NQ) and _plain(qd, n, NQ) and _plain(tau, n, NU) and type(p) is LegParams and anchor_x is None
+            and type(mode) is np.ndarray and mode.dtype == np.int64 and mode.shape == (n,)
+            and type(mu) in (float, np.float64) and dt == DT and substeps == SUBSTEPS and max_angle == MAX_ANGLE):
+        return None
+    if type(load_x) in (float, np.float64):
+        load = np.full(n, load_x)
+    elif type(load_x) is np.ndarray and load_x.dtype is F64 and load_x.shape == (n,):
+        load = load_x.copy()
+    else:
+        return None
+    if n == 0 or not (math.isfinite(mu) and mu >= 0.0 and math.isfinite(float(q.sum() + qd.sum() + tau.sum() + load.sum()))
+                      and int(mode.min()) >= 0 and int(mode.max()) <= 3):
+        return None
+    foot = np.empty((n, 2))
+    kernels.foot(q, p.array, foot)
+    if foot[:, 1].min() < -GROUND_TOL:
+        return None
+    anchor = np.zeros((n, 2))
+    anchor[:, 0] = foot[:, 0]
+    record = np.empty(n, dtype=RECORD)
+    arguments = (q.copy(), qd.copy(), tau, p.array, load, np.full(n, float(mu)), mode.copy(), anchor, float(dt),
+                 int(substeps), float(max_angle), record)
+    return PreparedCall((n,), arguments, float(dt))
+
+
 def prepared_call(q, qd, tau, p: LegParams, mu, mode, anchor_x, dt, substeps, max_angle, load_x) -> PreparedCall:
     """``hybrid_step``'s arguments checked (an error names the argument) and laid out for the compiled core."""
+    fast = _fast_call(q, qd, tau, p, mu, mode, anchor_x, dt, substeps, max_angle, load_x)
+    if fast is not None:
+        return fast
     dt, substeps, max_angle = checked_steps(dt, substeps, max_angle)
     lead, (qf, qdf, tf) = batched(("q", vec(q, NQ, "q")), ("qd", vec(qd, NQ, "qd")), ("tau", vec(tau, NU, "tau")))
     qf, qdf = qf.copy(), qdf.copy()

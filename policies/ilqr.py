@@ -19,7 +19,10 @@ The controller applies the plan's first action. The cost is the sum over the pla
 state residuals, ``residuals``), the action's ``effort_weight |a|^2`` and joints' positive power
 ``power_weight max(0, tau_j q_j')^2`` [W^2], ``smooth_weight |v|^2`` of the corrections and a penalty without
 derivative (``_penalty``: a fall; the line search sees it, the backward pass does not). A subclass names its pilot
-(``_new_pilot``, ``pilot_state``, ``_law``), its residuals, penalty and per-robot context (``_context``).
+(``_new_pilot``, ``pilot_state``, ``_law``), its residuals (``residuals``, ``_charged``) and penalty, what the plan
+tracks or pushes (``_track``, ``_load``), and in ``exact_actions`` the per-robot context ``ctx`` (a dict of ``(n, ...)``
+arrays) its law and residuals read. ``replan_every > 1`` holds a plan between replans (``_due``, ``_hold``,
+``_follow_held``).
 """
 
 from __future__ import annotations

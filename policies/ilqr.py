@@ -83,7 +83,8 @@ class PilotILQR(BatchedController):
     After each ``predict``, ``planned`` ``(N, horizon + 1, 10)`` holds the planned robots' chosen plans (the first
     state the robot's now), ``cost`` ``(N,)`` their cost and ``pick`` ``(N,)`` the line search's choice of the last
     iteration (the index of its step length in ``steps``, -1: the plan it started from). Setting ``hold_pick`` (an
-    ``(N,)`` int array, or None) makes the line search take those choices whatever the costs.
+    ``(N,)`` int array, or None) makes the line search take those choices whatever the costs. With ``replan_every``
+    (``HopMPC``), ``plans`` counts the plans made, a robot each.
     """
 
     dtype = np.float64

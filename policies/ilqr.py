@@ -120,7 +120,7 @@ class PilotILQR(BatchedController):
     # ---- what a subclass names
 
     def _new_pilot(self, n: int):
-        """A pilot controller for ``n`` robots, its per-robot arrays allocated."""
+        """A pilot controller for ``n`` robots, cheap to make (its per-robot ``pilot_state`` is set by the caller)."""
         raise NotImplementedError
 
     def _law(self, pilot, x: np.ndarray, mode: np.ndarray, ctx: dict) -> np.ndarray:

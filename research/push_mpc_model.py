@@ -3,6 +3,8 @@
     .venv/bin/python research/push_mpc_model.py 10000 50 own        # seeds 10000..10049, planning on the drawn robot
     .venv/bin/python research/push_mpc_model.py 10050 50 own        # and 10050..10099, beside it
     .venv/bin/python research/push_mpc_model.py 10000 50 nominal    # planning on the nominal robot, as shipped
+    .venv/bin/python research/push_mpc_model.py 10000 50 body       # its own masses, inertias and COMs only
+    .venv/bin/python research/push_mpc_model.py 10000 50 contact    # its own mu and torque limits only
 
 Each episode is ``PlanarLegPush-v2`` with ``randomize=True`` and every push at 34 N (3.4 N s), the same robots and
 pushes as ``policies/baselines/mpc_push/robots`` (seeds 10000..10099); the MPC is made for that episode with the
@@ -33,13 +35,12 @@ t0 = time.time()
 for seed in range(first, first + n):
     env = gym.make("leg_env/PlanarLegPush-v2", push_force=(34.0, 34.0), randomize=True)
     obs, info = env.reset(seed=seed)
-    if model == "own":
-        p = dict(info["params"])
-        config = dataclasses.replace(env.unwrapped.config, mu=p.pop("mu"),
+    p = dict(info["params"])
+    own_config = dataclasses.replace(env.unwrapped.config, mu=p.pop("mu"),
                                      torque_limit=(p.pop("hip_torque_limit"), p.pop("knee_torque_limit")))
-        mpc = PushMPC(LegParams(**p), config)
-    else:
-        mpc = PushMPC(LegParams(), PushConfig(push_force=(34.0, 34.0)))
+    nominal_config = PushConfig(push_force=(34.0, 34.0))
+    body = LegParams(**p) if model in ("own", "body") else LegParams()
+    mpc = PushMPC(body, own_config if model in ("own", "contact") else nominal_config)
     ok = True
     for _ in range(1000):
         action, _ = mpc.predict(obs)

@@ -207,16 +207,16 @@ class PushMPC(PilotILQR):
         s._cool = s._cool - 1
         return tau
 
-    def _context(self, batch: np.ndarray, rows: np.ndarray, source) -> dict:
-        """The plans' context for the robots ``rows`` (``source``: their pilot, ``_snapshot``): the stepping
-        controller's observation's entries that the state does not set (``like``, with the hop's command), the
-        push held and its steps left, and where the COM was when the hop began (``x_hop``, the plan's frame)."""
+    def _context(self, batch: np.ndarray, rows: np.ndarray, source, x: np.ndarray) -> dict:
+        """The plans' context for the robots ``rows`` (``source``: their pilot, ``_snapshot``; ``x``: their states,
+        ``state``'s): the stepping controller's observation's entries that the state does not set (``like``, with the
+        hop's command), the push held and its steps left, and where the COM was when the hop began (``x_hop``, the
+        plan's frame)."""
         like = np.zeros((int(rows.sum()), OBS_DIM_UNILATERAL + 4))
         like[:, :OBS_DIM_UNILATERAL] = batch[rows, :OBS_DIM_UNILATERAL]
         like[:, Obs.command] = self._pilot.hop_command
         left = self._push_left[rows] if self.model_push else np.zeros(len(like), dtype=np.int64)
-        q, qd, _ = self.state(batch[rows])
-        x_hop = self.com(np.concatenate([q, qd], axis=1))[0] - source.hopper._x0
+        x_hop = self.com(x)[0] - source.hopper._x0
         return dict(like=like, push=self._push_force[rows].copy(), push_left=left.copy(), x_hop=x_hop)
 
     def exact_actions(self, batch: np.ndarray) -> np.ndarray:
@@ -235,7 +235,7 @@ class PushMPC(PilotILQR):
         self.planning = rows
         if source is not None:
             q, qd, mode = self.state(batch[rows])
-            ctx = self._context(batch, rows, source)
+            ctx = self._context(batch, rows, source, np.concatenate([q, qd], axis=1))
             V = self._plan[rows]
             action[rows] = self._plan_actions(source, q, qd, mode, ctx, V)
             self._plan[rows] = V

@@ -83,7 +83,7 @@ def test_backward_pass_differentiates_the_closed_loop():
     rows = mpc.planning
     source = mpc._snapshot(rows, np.zeros_like(rows))
     q, qd, mode = mpc.state(obs[rows])
-    checked = checked_gradients(mpc, source, q, qd, mode, mpc._context(obs, rows, source))
+    checked = checked_gradients(mpc, source, q, qd, mode, mpc._context(obs, rows, source, np.concatenate([q, qd], axis=1)))
     assert checked >= 24
 
 

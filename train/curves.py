@@ -381,7 +381,7 @@ def _curves(histories: dict[int, list[dict]]) -> dict:
 
 
 def _plot(curves: dict, path: Path, x_key: str, x_label: str, title: str) -> None:
-    from train.plots import pyplot
+    from train.plots import pyplot, save_figure
 
     plt = pyplot()
     fig, axes = plt.subplots(1, len(METRICS), figsize=(10.0, 3.6), dpi=100)
@@ -399,10 +399,8 @@ def _plot(curves: dict, path: Path, x_key: str, x_label: str, title: str) -> Non
         ax.grid(alpha=0.3)
     axes[0].legend(loc="lower right", fontsize=8)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 _COLUMNS = {  # a held-out score's column: its heading and how its value is written

@@ -16,6 +16,22 @@ def pyplot():
     return plt
 
 
+def save_figure(fig, path: Path, rect=None, dpi=None) -> Path:
+    """Lay ``fig`` out (inside ``rect`` of the figure, if given), write it to ``path`` (at ``dpi``, if given) and close
+    it."""
+    fig.tight_layout() if rect is None else fig.tight_layout(rect=rect)
+    fig.savefig(path) if dpi is None else fig.savefig(path, dpi=dpi)
+    pyplot().close(fig)
+    return Path(path)
+
+
+def _grid_and_legend(axes) -> None:
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:  # a panel with nothing drawn has no legend
+            ax.legend(fontsize=7, loc="upper right", ncol=2)
+
+
 def plot_learning_curve(history: list[dict], path: Path, title: str = "", reference: dict | None = None) -> Path:
     """Evaluation return (+- std), survival rate and RMS base drift against environment steps, as a PNG.
 
@@ -54,10 +70,7 @@ def plot_learning_curve(history: list[dict], path: Path, title: str = "", refere
         minutes = history[-1]["time"] / 60.0
         title = f"{title}  ({steps[-1]:,} steps, {minutes:.1f} min)" if title else f"{minutes:.1f} min"
     ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path)
 
 
 def plot_time_series(series: dict[str, dict], path: Path, dt: float, torque_limit=(50.0, 50.0)) -> Path:
@@ -90,13 +103,8 @@ def plot_time_series(series: dict[str, dict], path: Path, dt: float, torque_limi
     axes[3].axhline(0.0, color="r", lw=0.8)
     axes[4].set_ylabel("lam_x / mg")
     axes[4].set_xlabel("time [s]")
-    for ax in axes:
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right", ncol=2)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
+    _grid_and_legend(axes)
+    return save_figure(fig, path)
 
 
 _MODE_LEVEL = {"flight": 0, "slip": 1, "stick": 2}
@@ -123,20 +131,16 @@ def plot_hops(series: dict[str, dict], path: Path, dt: float, seconds: float = 3
         axes[2].plot(t, lam[:, 0], color=color, ls=":", label=f"{label}: lam_x")
         impulse = np.asarray(s["impulse"][:n])
         hits = np.flatnonzero(np.hypot(impulse[:, 0], impulse[:, 1]) > 0)
-        axes[3].stem(t[hits], impulse[hits, 1], linefmt=color, basefmt=" ", label=f"{label}: P_y")
+        if hits.size:  # a robot that never lands in the window (it stands, or falls first) has no stem to draw
+            axes[3].stem(t[hits], impulse[hits, 1], linefmt=color, basefmt=" ", label=f"{label}: P_y")
     axes[0].set_ylabel("COM height [cm]")
     axes[1].set_yticks([0, 1, 2], ["flight", "slip", "stick"])
     axes[1].set_ylabel("mode")
     axes[2].set_ylabel("force / mg")
     axes[3].set_ylabel("impact impulse [N s]")
     axes[3].set_xlabel("time [s]")
-    for ax in axes:
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right", ncol=2)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
+    _grid_and_legend(axes)
+    return save_figure(fig, path)
 
 
 def plot_push_curve(curves: dict[str, list], best: dict[str, float], path: Path) -> Path:
@@ -154,10 +158,7 @@ def plot_push_curve(curves: dict[str, list], best: dict[str, float], path: Path)
     ax.set_ylim(-5, 105)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path)
 
 
 _MOTION_PANELS = (
@@ -205,7 +206,4 @@ def plot_motion(results: dict[str, dict], path: Path) -> Path:
     keys = [Patch(facecolor="w", edgecolor="k", hatch="//" if j else None, label=case) for j, (case, _) in enumerate(cases)]
     keys.append(Line2D([], [], color="k", marker="_", ls="", ms=10, mew=2, label="peak normal force: largest of the episodes"))
     fig.legend(handles=keys, loc="lower center", ncol=len(keys), fontsize=7, frameon=False)
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path, rect=(0, 0.07, 1, 1))

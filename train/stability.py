@@ -719,11 +719,9 @@ def write_results(results: list, out: Path, run: dict) -> None:
 
 
 def _plot(results: list, path: Path) -> None:
-    import matplotlib
+    from train.plots import pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.6))
     names = list(dict.fromkeys(r.controller for r in results))
     colours = dict(zip(names, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
@@ -755,9 +753,7 @@ def _plot(results: list, path: Path) -> None:
     unique = dict(zip(labels, handles))
     if unique:
         bx.legend(unique.values(), unique.keys(), fontsize=7, loc="lower left")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from contact_ref import lcp_matrices as lcp_matrix  # the planar Coulomb LCP w = A z + b, z = (lam_y, lam+, lam-, beta)
 from test_dynamics_reference import sympy_reference
 
 STICK, SLIP_FORWARD, SLIP_BACKWARD, FLIGHT = 0, 1, 2, 3
@@ -131,26 +132,6 @@ class StepRecord:
 # ----------------------------------------------------------------------------------------------
 
 
-def lcp_matrix(Lam, a0, mu):
-    """The planar Coulomb LCP ``w = A z + b``, ``0 <= z ⊥ w >= 0`` with ``z = (lam_y, lam+, lam-, beta)``.
-
-    ``lam_x = lam+ - lam-``; ``w = (y_f'', beta + x_f'', beta - x_f'', mu lam_y - lam+ - lam-)``
-    with ``(x_f'', y_f'') = a0 + Lam lam``. ``lam+ > 0`` forces ``x_f'' = -beta <= 0`` (friction
-    opposing the motion), ``beta > 0`` forces the force onto the cone's edge.
-    """
-    Lxx, Lxy, Lyx, Lyy = Lam[0, 0], Lam[0, 1], Lam[1, 0], Lam[1, 1]
-    A = np.array(
-        [
-            [Lyy, Lyx, -Lyx, 0.0],
-            [Lxy, Lxx, -Lxx, 1.0],
-            [-Lxy, -Lxx, Lxx, 1.0],
-            [mu, -1.0, -1.0, 0.0],
-        ]
-    )
-    b = np.array([a0[1], a0[0], -a0[0], 0.0])
-    return A, b
-
-
 def lcp_solutions(Lam, a0, mu, tol=1e-10):
     """Every solution of the contact LCP, by enumerating the 16 complementary index sets.
 
@@ -216,11 +197,13 @@ def closed_form_candidates(Lam, a0, mu):
 
 
 class Reference:
-    """Event-driven reference for parameters ``p`` and friction coefficient ``mu``."""
+    """Event-driven reference for parameters ``p`` and friction coefficient ``mu``, with a constant horizontal force
+    ``load`` [N] on the base (the push task's; the generalised force ``(load, 0, 0, 0, 0)``)."""
 
-    def __init__(self, p, mu: float):
+    def __init__(self, p, mu: float, load: float = 0.0):
         self.p = p
         self.mu = float(mu)
+        self.load = float(load)
         self._f = sympy_reference()
 
     # ---- terms --------------------------------------------------------------------------------
@@ -238,18 +221,21 @@ class Reference:
         M, J = r["M"], r["Jc"]
         MinvJt = np.linalg.solve(M, J.T)
         Lam = J @ MinvJt
-        a0 = J @ np.linalg.solve(M, S_T @ tau - r["h"]) + r["Jcdot_qd"]
+        a0 = J @ np.linalg.solve(M, self.forces(r, tau)) + r["Jcdot_qd"]
         return Lam, a0, r
+
+    def forces(self, r, tau):
+        """The right-hand side without the contact: ``S^T tau - h + (load, 0, 0, 0, 0)``."""
+        return S_T @ tau - r["h"] + np.array([self.load, 0.0, 0.0, 0.0, 0.0])
 
     # ---- mode dynamics (KKT solves) -------------------------------------------------------------
 
-    @staticmethod
-    def stick_kkt(r, tau):
+    def stick_kkt(self, r, tau):
         A = np.zeros((7, 7))
         A[:5, :5] = r["M"]
         A[:5, 5:] = -r["Jc"].T
         A[5:, :5] = r["Jc"]
-        rhs = np.concatenate([S_T @ tau - r["h"], -r["Jcdot_qd"]])
+        rhs = np.concatenate([self.forces(r, tau), -r["Jcdot_qd"]])
         x = np.linalg.solve(A, rhs)
         return x[:5], x[5:]
 
@@ -259,13 +245,12 @@ class Reference:
         A[:5, :5] = r["M"]
         A[:5, 5] = -(J[1] - sigma * self.mu * J[0])
         A[5, :5] = J[1]
-        rhs = np.concatenate([S_T @ tau - r["h"], [-r["Jcdot_qd"][1]]])
+        rhs = np.concatenate([self.forces(r, tau), [-r["Jcdot_qd"][1]]])
         x = np.linalg.solve(A, rhs)
         return x[:5], x[5] * np.array([-sigma * self.mu, 1.0])
 
-    @staticmethod
-    def flight_qdd(r, tau):
-        return np.linalg.solve(r["M"], S_T @ tau - r["h"])
+    def flight_qdd(self, r, tau):
+        return np.linalg.solve(r["M"], self.forces(r, tau))
 
     def dynamics(self, q, qd, tau, mode):
         """``(qdd, lam)`` of ``mode`` at a full state (no consistency checks)."""

@@ -100,38 +100,6 @@ def _flight(q, qd, tau, pl):
     return qdd[0]
 
 
-class LoadedReference(H.Reference):
-    """``tests/hybrid_ref.py``'s reference with ``Q = (F, 0, 0, 0, 0)`` on every mode's right-hand side."""
-
-    def __init__(self, p, mu, load):
-        super().__init__(p, mu)
-        self.load = float(load)
-
-    def contact_terms(self, q, qd, tau):
-        Lam, a0, r = super().contact_terms(q, qd, tau)
-        return Lam, a0 + r["Jc"] @ np.linalg.solve(r["M"], Q(self.load)), r
-
-    def stick_kkt(self, r, tau):
-        A = np.zeros((7, 7))
-        A[:5, :5] = r["M"]
-        A[:5, 5:] = -r["Jc"].T
-        A[5:, :5] = r["Jc"]
-        x = np.linalg.solve(A, np.concatenate([H.S_T @ tau - r["h"] + Q(self.load), -r["Jcdot_qd"]]))
-        return x[:5], x[5:]
-
-    def slip_kkt(self, r, tau, sigma):
-        J = r["Jc"]
-        A = np.zeros((6, 6))
-        A[:5, :5] = r["M"]
-        A[:5, 5] = -(J[1] - sigma * self.mu * J[0])
-        A[5, :5] = J[1]
-        x = np.linalg.solve(A, np.concatenate([H.S_T @ tau - r["h"] + Q(self.load), [-r["Jcdot_qd"][1]]]))
-        return x[:5], x[5] * np.array([-sigma * self.mu, 1.0])
-
-    def flight_qdd(self, r, tau):
-        return np.linalg.solve(r["M"], H.S_T @ tau - r["h"] + Q(self.load))
-
-
 def _scenario(name):
     p = LegParams()
     q_nom, tau_hold, _ = dyn.static_equilibrium(p)
@@ -154,7 +122,7 @@ SCENARIOS = ("push_slip", "push_stick", "push_flight")
 @functools.lru_cache(maxsize=None)
 def _runs(name):
     p, mu, F, st, taus = _scenario(name)
-    ref = LoadedReference(p, mu, F)
+    ref = H.Reference(p, mu, load=F)
     recs = ref.run(st, taus, DT)
     steps = []
     for r in recs:

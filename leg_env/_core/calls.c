@@ -77,6 +77,14 @@ static void k_impact(call *c)
     }
 }
 
+/* ------------------------------------------------------------------------- the hopping controller (policies.hopper) */
+
+static void k_hopper_torque(call *c)
+{
+    EACH hopper_torque_one(PAR(2), (const double *)c->a[3], ROW(0), *ROW(1), ROW(4), ROW(5), INT(6),
+                           (unsigned char *)c->a[7] + i * c->step[7], ROW(8), ROW(9));
+}
+
 static void k_contact_mode(call *c) { EACH *INT(5) = contact_mode_one(PAR(4), ROW(0), ROW(1), ROW(2)[0], ROW(2)[1], *ROW(3)); }
 
 static void k_response(call *c)

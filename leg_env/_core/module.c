@@ -34,6 +34,7 @@
 #include "env.c"
 #include "tasks.c"
 #include "draws.c"
+#include "hopper.c"
 #include "calls.c"
 
 typedef char leg_params_is_eleven_doubles[sizeof(leg_params) == LEG_N_PARAMS * sizeof(double) ? 1 : -1];
@@ -134,6 +135,12 @@ static const entry ENTRIES[] = {
                       "with it.", k_rk4_jacobians, NULL, RELEASED,
      {INOUT(q, 5), INOUT(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), IN(anchor, 2), STEP_RULE, FLAG(stance), FLAG(follow),
       OUT(lam_mean, 2), OUT(A, 100), OUT(B, 20), {"P", 'd', 'N', 'o', 120, ANY, OPT_NONE}}},
+    {"hopper_torque", "The hopping controller's torques tau (N, 2) and COM speed vx_com (N,) from its reading obs (N, 11) of the "
+                      "observation and the dead-reckoned drift x0, advancing bias, apex, phase and was_flight (policies.hopper).",
+     k_hopper_torque, NULL, RELEASED,
+     {IN(obs, HOPPER_INPUTS), IN(x0, 1), PARAMS, {"gains", 'd', '1', 'i', HOPPER_GAINS, ANY, 0}, INOUT(bias, 1), INOUT(apex, 1),
+      {"phase", 'q', 'N', 'u', 1, HOP_CROUCH, HOP_RELEASE, 0}, {"was_flight", '?', 'N', 'u', 1, ANY, 0}, OUT(tau, 2),
+      OUT(vx_com, 1)}},
     {"start", "Robots put on their contact (at the nominal posture plus noise, or where the state has them if noise is None) and "
               "evaluated by the task.", k_start, check_start, HELD,
      {TASK, ENV_ARRAYS, {"noise", 'd', 'N', 'i', 6, ANY, OPT_NONE}, REAL(scale, 0.0, DBL_MAX, 0)}},

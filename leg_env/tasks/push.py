@@ -87,7 +87,7 @@ LQR (``policies/lqr.py``) survives 90% of the episodes up to 2.25 N s; the stepp
 (``policies/stepping.py``: the LQR, and one quick hop for a push it cannot stand) up to 4.5 N s, and 3% of
 the episodes with the task's own 20-150 N; the push MPC (``policies/push_mpc.py``: iLQR on the step's exact
 Jacobians around the stepping controller while it recovers) up to 7.0 N s, within every bar below but the
-randomised robots' (73%). The range's upper end is beyond both: most of it tells a
+randomised robots' (72%). The range's upper end is beyond both: most of it tells a
 recovering policy from a falling one only in how long it lasts.
 
 How a policy moves has bars of its own (``train.bars``, which ``train.evaluate`` and the learning pages check): the

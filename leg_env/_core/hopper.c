@@ -54,7 +54,7 @@ static inline double hop_wrap(double angle)
 {
     const double period = 2.0 * M_PI;
     double r = fmod(angle + M_PI, period);
-    if (r != 0.0 && r < 0.0)
+    if (r < 0.0)
         r += period;
     return r - M_PI;
 }

@@ -166,8 +166,15 @@ class HopperController(BatchedController):
 
     def torque(self, obs: np.ndarray) -> np.ndarray:
         """Joint torques [N m] for observations ``(N, 22)``; advances the per-robot phase and apex bias (the law of the
-        module docstring, compiled: ``leg_env._core.kernels.hopper_torque``)."""
+        module docstring, compiled: ``leg_env._core.kernels.hopper_torque``).
+
+        Raises:
+            ValueError: a NaN or inf in an entry the law reads (nothing is advanced).
+        """
         reading = np.ascontiguousarray(obs[:, LAW_COLUMNS], dtype=np.float64)
+        if not np.isfinite(reading).all():
+            bad = np.flatnonzero(~np.isfinite(reading).all(axis=1))
+            raise ValueError(f"observation must be finite in the entries the hopper reads: rows {bad[:5].tolist()} are not")
         n = reading.shape[0]
         tau, self._vx = np.empty((n, 2)), np.empty(n)
         kernels.hopper_torque(reading, self._x0, self.params.array, self._gains, self._bias, self._apex, self._phase,

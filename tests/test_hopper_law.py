@@ -80,3 +80,20 @@ def test_compiled_law_is_the_reference_at_perturbed_states_in_every_phase():
     h._x0[:] = rng.normal(0.0, 0.3, n)
     _, diff = _compare(h, o)
     assert diff < 1e-12, diff
+
+
+def test_a_non_finite_reading_is_refused_and_nothing_advances():
+    envs = gym.make_vec("leg_env/PlanarLegHop-v4", num_envs=3, vectorization_mode="vector_entry_point")
+    h = _hopper(envs, 3, {})
+    obs, _ = envs.reset(seed=3)
+    envs.close()
+    o = np.asarray(obs, dtype=np.float64).copy()
+    o[1, Obs.w_q2] = np.nan
+    before = {name: getattr(h, name).copy() for name in STATE}
+    with pytest.raises(ValueError, match=r"observation must be finite .* rows \[1\]"):
+        h.torque(o)
+    for name in STATE:
+        np.testing.assert_array_equal(getattr(h, name), before[name], err_msg=name)
+    o[1, Obs.w_q2] = 0.0
+    o[2, Obs.com_drift] = np.nan  # an entry the law does not read
+    assert np.isfinite(h.torque(o)).all()

@@ -82,7 +82,7 @@ __all__ = ["HopperController", "LAW_COLUMNS"]
 LAW_COLUMNS = [Obs.th_b, Obs.q1, Obs.q2, Obs.vx_b, Obs.vy_b, Obs.w_b, Obs.w_q1, Obs.w_q2, Obs.base_y, Obs.contact, Obs.command]
 """The observation's entries the law reads, in the compiled law's order (``hopper.c``, ``HO_*``)."""
 
-_CROUCH, _PUSH, _RELEASE = 0, 1, 2  # stance phases
+_CROUCH = 0  # the stance phase a touchdown or a start begins (hopper.c's HOP_CROUCH; then HOP_PUSH 1, HOP_RELEASE 2)
 
 
 class HopperController(BatchedController):

@@ -11,7 +11,7 @@ from setuptools.command.build_ext import build_ext
 
 CORE = "leg_env/_core"
 HEADERS = [f"{CORE}/{name}" for name in ("structs.def", "fields.h", "robot.h", "env.h", "dynamics.c", "contact.c", "integrate.c",
-                                        "hybrid.c", "tangent.c", "env.c", "tasks.c", "draws.c", "hopper.c", "calls.c", "objects.c")]
+                                        "hybrid.c", "tangent.c", "env.c", "tasks.c", "draws.c", "hopper.c", "plan.c", "calls.c", "objects.c")]
 
 FLAGS = {
     "unix": ["-O3", "-std=c99", "-ffp-contract=off", "-fno-fast-math", "-fno-strict-aliasing", "-Wall", "-Wno-unused-function"],

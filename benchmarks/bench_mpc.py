@@ -8,9 +8,9 @@ the rollout with the Jacobians, the backward pass, the line search's rollouts) o
 episodes' starts (through the first hop), divided by the batch size; the median over the steps and the slowest step.
 The hopper controller's ``predict`` on the same observations is the reference. One thread (numpy's BLAS and torch
 are held to one). The bar: at most 10 ms per control step per robot on one core. One robot planning at every 8th
-control step (``replan_every=8``) over 120 steps: its mean time a control step. Also, for one robot, the cost of
-each call a control step makes in sequence (the step, the step with its Jacobians, the hopper's law on 21 and on 3
-rows: 70 of each pair), the floor the plan's Python loop puts under it.
+control step (``replan_every=8``) over 120 steps: its mean time a control step. Also, for one robot, the time of
+each part of a control step: the plan with its Jacobians and the line search's plans (compiled), the backward pass,
+the cost.
 
 On ``PlanarLegPush-v2``, the push MPC plans only while a robot recovers from a push: every robot of a batch of 1, 10
 and 100 is pushed at once (60 N, at 1 s), and the time of ``predict`` at the control steps where robots plan is
@@ -94,30 +94,33 @@ def measure_push(n: int) -> dict:
 
 
 def per_call() -> dict:
-    """Median microseconds of each call a control step makes for one robot (70 of the first two, 70 of the last two)."""
-    from leg_env.physics.derivatives import hybrid_step_jacobians
-    from leg_env.physics.hybrid import hybrid_step
-
+    """Median microseconds of each part of one robot's control step, at the 30th control step of an episode (its
+    first stance): the plan with its Jacobians, the line search's plans, the backward pass, the cost of a plan."""
     envs = gym.make_vec("leg_env/PlanarLegHop-v4", num_envs=1, vectorization_mode="vector_entry_point")
     e = envs.unwrapped
-    obs, _ = envs.reset(seed=10_000)
     mpc = HopMPC(e.params, e.config)
-    q, qd, mode = mpc.state(np.asarray(obs, dtype=np.float64))
-    tau, c = np.zeros((1, 2)), e.config
-    step_args = (q, qd, tau, e.params, c.mu, mode, None)
-    rule = dict(dt=c.dt, substeps=c.substeps, max_angle=c.max_angle)
-    laws = {}
-    for rows in (21, 3):
-        law = HopperController(e.params, e.config)
-        law._n = rows
-        law._allocate(rows)
-        law._start(np.ones(rows, dtype=bool))
-        laws[rows] = (law, np.repeat(np.asarray(obs, dtype=np.float64), rows, axis=0))
+    obs, _ = envs.reset(seed=10_000)
+    for _ in range(30):
+        action, _ = mpc.predict(obs)
+        obs, *_ = envs.step(action)
+    batch = np.asarray(obs, dtype=np.float64)
+    q, qd, mode = mpc.state(batch)
+    x_ref = mpc.com(np.concatenate([q, qd], axis=1))[0] - batch[:, 19]
+    ctx = dict(like=batch[:, :22], target=mpc.y_stand + batch[:, 18], x_ref=x_ref, ground=batch[:, 20])
+    V = np.zeros((1, mpc.horizon, 2))
+    roll = mpc._rollout(mpc._pilot, q, qd, mode, ctx, V, jacobians=True)
+    k, K = mpc._backward(roll, ctx)
+    S = len(mpc.steps)
+    tiled = {name: np.tile(value, (S,) + (1,) * (value.ndim - 1)) for name, value in ctx.items()}
+    trial = (np.tile(q, (S, 1)), np.tile(qd, (S, 1)), np.tile(mode, S), tiled, np.tile(V, (S, 1, 1)))
     calls = {
-        "the step with its Jacobians (`hybrid_step_jacobians`)": lambda: hybrid_step_jacobians(*step_args, **rule),
-        "the hopper's law on 21 rows (the state and its differences)": lambda: laws[21][0].torque(laws[21][1]),
-        "the step (`hybrid_step`)": lambda: hybrid_step(*step_args, **rule),
-        "the hopper's law on 3 rows (the line search's plans)": lambda: laws[3][0].torque(laws[3][1]),
+        f"the plan with its Jacobians (`kernels.hop_rollout`, {mpc.horizon} steps)":
+            lambda: mpc._rollout(mpc._pilot, q, qd, mode, ctx, V, jacobians=True),
+        f"the line search's {S} plans (`kernels.hop_rollout`)":
+            lambda: mpc._rollout(mpc._pilot, *trial, nominal=np.tile(roll["X"], (S, 1, 1)), k=np.tile(k, (S, 1, 1)),
+                                 K=np.tile(K, (S, 1, 1, 1)), copies=S),
+        "the backward pass (the residuals' derivatives in numpy, `kernels.ilqr_backward`)": lambda: mpc._backward(roll, ctx),
+        "the cost of a plan (numpy)": lambda: mpc._cost(roll, ctx),
     }
     out = {}
     for name, call in calls.items():
@@ -125,9 +128,9 @@ def per_call() -> dict:
         times = []
         for _ in range(15):
             t0 = time.perf_counter()
-            for _ in range(100):
+            for _ in range(20):
                 call()
-            times.append((time.perf_counter() - t0) / 100)
+            times.append((time.perf_counter() - t0) / 20)
         out[name] = float(np.median(times))
     envs.close()
     return out
@@ -167,14 +170,12 @@ def main() -> None:
     ]
     lines += [
         "",
-        "The calls a control step makes in sequence for one robot (70 of each: the rollout with the Jacobians, then the "
-        "line search's), whatever else it does:",
+        "The parts of one robot's control step (at its first stance; the cost is computed for each of the four plans):",
         "",
-        "| call | [us] |",
+        "| part | [ms] |",
         "|---|---:|",
     ]
-    lines += [f"| {name} | {1e6 * t:.1f} |" for name, t in calls.items()]
-    lines.append(f"| 70 of each, a control step's floor | {70e3 * sum(calls.values()):.1f} ms |")
+    lines += [f"| {name} | {1e3 * t:.2f} |" for name, t in calls.items()]
     lines += [
         "",
         f"`policies.push_mpc.PushMPC` with its defaults (a horizon of {pushes[0]['horizon']} control steps, one iLQR "

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from leg_env._core import kernels
 from leg_env.physics import contact as _contact
 from leg_env.physics.derivatives import hybrid_step_jacobians
 from leg_env.physics.dynamics import com_state, foot_position
@@ -140,8 +141,9 @@ class PilotILQR(BatchedController):
         """The penalty ``(n, H)`` of the plan's steps (no derivative)."""
         raise NotImplementedError
 
-    def _track(self, roll: dict, t: int, result, ctx: dict) -> None:
-        """Bookkeeping after the plan's step ``t`` (``result``: the step's ``HybridStep``); nothing by default."""
+    def _track(self, roll: dict, ctx: dict) -> None:
+        """Bookkeeping of a rolled-out plan (its ``modes`` and each step's ``flight_time``) that the cost reads;
+        nothing by default."""
 
     def _load(self, t: int, ctx: dict):
         """The horizontal force on the torso over the plan's step ``t`` (``hybrid_step``'s ``load_x``): none."""
@@ -304,11 +306,10 @@ class PilotILQR(BatchedController):
         modes = np.empty((n, H + 1), dtype=np.int64)
         modes[:, 0] = mode
         U, Vt = np.empty_like(V), np.empty_like(V)
-        out = dict(X=X, modes=modes, U=U, V=Vt)
+        out = dict(X=X, modes=modes, U=U, V=Vt, flight_time=np.empty((n, H)))
         if jacobians:
             out.update(A=np.empty((n, H, NX, NX)), B=np.empty((n, H, NX, NU)), Du=np.empty((n, H, NU, NX)),
                        D=np.empty((n, H, NU)))
-        self._track(out, -1, None, ctx)
         for t in range(H):
             v = V[:, t]
             if k is not None:
@@ -332,47 +333,35 @@ class PilotILQR(BatchedController):
                 r = hybrid_step(X[:, t, :5], X[:, t, 5:], tau, p, mu, mode, None, load_x=load, **self._step_args)
             X[:, t + 1, :5], X[:, t + 1, 5:] = r.q, r.qd
             mode = modes[:, t + 1] = r.mode
-            self._track(out, t, r, ctx)
+            out["flight_time"][:, t] = r.flight_time
+        self._track(out, ctx)
         return out
 
     # ---- iLQR
 
     def _backward(self, roll, ctx):
         """Gains ``k`` ``(n, H, 2)``, ``K`` ``(n, H, 2, 10)`` of one Gauss-Newton iLQR backward pass on the
-        corrections (the pilot's feedback inside ``A``)."""
-        X, U, V = roll["X"], roll["U"], roll["V"]
+        corrections (the pilot's feedback inside ``A``; compiled: ``leg_env._core.kernels.ilqr_backward``).
+
+        At each step from the last, with ``V_x``, ``V_xx`` the cost-to-go's expansion after it and ``l_x``,
+        ``l_xx`` the state residuals' (``J_r^T r``, ``J_r^T J_r``) at the state it reaches, the action's residuals
+        ``r_a`` with their derivatives through ``u = clip(pi(x) + v)`` (``J_v = J_u D``, ``J_x = J_u D dpi/dx + J_ax``):
+        ``Q_x = A^T v_x + J_x^T r_a``, ``Q_v = B^T v_x + J_v^T r_a + w_s v``, ``Q_xx = A^T v_xx A + J_x^T J_x``,
+        ``Q_vv = B^T v_xx B + J_v^T J_v + (w_s + regularisation) I``, ``Q_vx = B^T v_xx A + J_v^T J_x``
+        (``v_x = l_x + V_x``, ``v_xx = l_xx + V_xx``); ``k = -Q_vv^-1 Q_v``, ``K = -Q_vv^-1 Q_vx`` (solved); then
+        ``V_x = Q_x + K^T (Q_vv k + Q_v) + Q_vx^T k``, ``V_xx = Q_xx + K^T Q_vv K + K^T Q_vx + Q_vx^T K``, symmetrised.
+        """
+        V = roll["V"]
         n, H = V.shape[:2]
         r, Jr = self._state_residuals(roll, ctx, jacobian=True)
         lx = np.einsum("nhri,nhr->nhi", Jr, r)  # half the cost's derivatives, of the state after each step
         lxx = np.einsum("nhri,nhrj->nhij", Jr, Jr)
-        ws = self.smooth_weight
-        D, Du = roll["D"], roll["Du"]  # u = clip(pi(x) + v): du/dv = D, du/dx = D dpi/dx
-        Vx = np.zeros((n, NX))
-        Vxx = np.zeros((n, NX, NX))
-        k = np.zeros((n, H, NU))
-        K = np.zeros((n, H, NU, NX))
-        eye = np.eye(NU)
-        for t in range(H - 1, -1, -1):
-            vx = lx[:, t] + Vx
-            vxx = lxx[:, t] + Vxx
-            At, Bt, Dt, Dxt, ut = roll["A"][:, t], roll["B"][:, t], D[:, t], Du[:, t], U[:, t]
-            ra, Jau, Jax = self.action_residuals(X[:, t], ut)
-            Jv = Jau * Dt[:, None, :]  # through u = clip(pi(x) + v)
-            Jx = Jau @ Dxt + Jax
-            JvT, JxT = np.swapaxes(Jv, 1, 2), np.swapaxes(Jx, 1, 2)
-            Qx = np.einsum("nji,nj->ni", At, vx) + np.einsum("nij,nj->ni", JxT, ra)
-            Qu = np.einsum("nji,nj->ni", Bt, vx) + np.einsum("nij,nj->ni", JvT, ra) + ws * V[:, t]
-            VB = vxx @ Bt
-            Qxx = np.swapaxes(At, 1, 2) @ vxx @ At + JxT @ Jx
-            Quu = np.swapaxes(Bt, 1, 2) @ VB + JvT @ Jv + (ws + self.regularisation) * eye
-            Qux = np.swapaxes(VB, 1, 2) @ At + JvT @ Jx
-            kt = -np.linalg.solve(Quu, Qu[..., None])[..., 0]
-            Kt = -np.linalg.solve(Quu, Qux)
-            k[:, t], K[:, t] = kt, Kt
-            KtT = np.swapaxes(Kt, 1, 2)
-            Vx = Qx + np.einsum("nij,nj->ni", KtT, np.einsum("nij,nj->ni", Quu, kt) + Qu) + np.einsum("nji,nj->ni", Qux, kt)
-            Vxx = Qxx + KtT @ Quu @ Kt + KtT @ Qux + np.swapaxes(Qux, 1, 2) @ Kt
-            Vxx = 0.5 * (Vxx + np.swapaxes(Vxx, 1, 2))
+        k, K = np.empty((n, H, NU)), np.empty((n, H, NU, NX))
+        flat = lambda a: np.ascontiguousarray(a, dtype=np.float64).reshape(n, -1)  # noqa: E731
+        kernels.ilqr_backward(flat(lx), flat(lxx), flat(roll["A"]), flat(roll["B"]), flat(roll["D"]), flat(roll["Du"]),
+                              flat(roll["X"]), flat(roll["U"]), flat(V), self.effort_weight, self.power_weight,
+                              self.smooth_weight, self.regularisation, self.torque_limit[None], k.reshape(n, -1),
+                              K.reshape(n, -1))
         return k, K
 
     def _plan_actions(self, source, q, qd, mode, ctx, V):

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from leg_env._core import kernels
 from leg_env.physics import contact as _contact
 from leg_env.physics.params import LegParams
 from leg_env.tasks.base import Obs
@@ -221,23 +222,53 @@ class HopMPC(PilotILQR):
         fallen = (x[..., 1] < c.min_base_height) | (x[..., 1] < knee_y) | (np.abs(x[..., 2]) > c.max_torso_angle)
         return self.fall_cost * (fallen | (ground > c.max_ground_time)) + self.stance_cost * (stance > self.stance_grace)
 
-    def _track(self, roll, t, result, ctx) -> None:
-        """The plan's time on the ground since its last hop (``ground``) and in its current stance (``stance``)."""
-        H, modes = self.horizon, roll["modes"]
-        if result is None:
-            n = modes.shape[0]
-            roll["ground"], roll["stance"] = np.empty((n, H + 1)), np.empty((n, H + 1))
-            roll["ground"][:, 0] = ctx["ground"]
-            roll["stance"][:, 0] = np.where(modes[:, 0] == _contact.FLIGHT, 0.0, ctx["ground"])
-            roll["flight_run"] = np.zeros(n)
-            return
-        dt, flying = self.config.dt, result.mode == _contact.FLIGHT
-        roll["flight_run"] = np.where(flying, roll["flight_run"] + result.flight_time, 0.0)
-        hopped = flying & (roll["flight_run"] >= self.config.min_flight)
-        roll["ground"][:, t + 1] = np.where(hopped, 0.0, roll["ground"][:, t] + dt)
-        roll["stance"][:, t + 1] = np.where(flying, 0.0, roll["stance"][:, t] + dt)
+    def _track(self, roll, ctx) -> None:
+        """The plan's time on the ground since its last hop (``ground``) and in its current stance (``stance``), from
+        its modes and each step's time in flight: a hop is a flight of at least the task's ``min_flight`` (counted
+        from the plan's start)."""
+        c, modes, flight_time = self.config, roll["modes"], roll["flight_time"]
+        n, H = flight_time.shape
+        steps = np.arange(H)
+        flying = modes[:, 1:] == _contact.FLIGHT  # whether step t ends in flight
+        flown = np.cumsum(np.where(flying, flight_time, 0.0), axis=1)
+        run = flown - np.maximum.accumulate(np.where(flying, 0.0, flown), axis=1)  # the flight so far, at a step in flight
+        hopped = flying & (run >= c.min_flight)
+        since = np.concatenate([[0.0], np.cumsum(np.full(H, c.dt))])  # m steps of dt, summed as the clock sums them
+
+        def clock(start, reset):
+            """start + dt per step, from 0 again after each step where ``reset``."""
+            last = np.maximum.accumulate(np.where(reset, steps, -1), axis=1)
+            out = np.cumsum(np.concatenate([start[:, None], np.full((n, H), c.dt)], axis=1), axis=1)
+            out[:, 1:] = np.where(last >= 0, since[steps - last], out[:, 1:])
+            return out
+
+        ground = np.asarray(ctx["ground"], dtype=np.float64)
+        roll["ground"] = clock(ground, hopped)
+        roll["stance"] = clock(np.where(modes[:, 0] == _contact.FLIGHT, 0.0, ground), flying)
 
     # ---- the hopper inside the plan
+
+    def _rollout(self, source, q, qd, mode, ctx, V, nominal=None, k=None, K=None, jacobians=False, copies=1):
+        """``PilotILQR._rollout`` compiled (``leg_env._core.kernels.hop_rollout``: the hopper's law, its derivative
+        and the step inside one call per batch of plans), the same plans to rounding."""
+        n, H = V.shape[0], self.horizon
+        tile = lambda a: np.tile(a, copies) if copies > 1 else a  # noqa: E731
+        flat = lambda a: None if a is None else np.ascontiguousarray(a, dtype=np.float64).reshape(n, -1)  # noqa: E731
+        X, modes = np.empty((n, H + 1, 10)), np.empty((n, H + 1), dtype=np.int64)
+        out = dict(X=X, modes=modes, U=np.empty((n, H, 2)), V=np.empty((n, H, 2)), flight_time=np.empty((n, H)))
+        if jacobians:
+            out.update(A=np.empty((n, H, 10, 10)), B=np.empty((n, H, 10, 2)), Du=np.empty((n, H, 2, 10)),
+                       D=np.empty((n, H, 2)))
+        c = self.config
+        kernels.hop_rollout(
+            np.ascontiguousarray(q, dtype=np.float64), np.ascontiguousarray(qd, dtype=np.float64), mode.astype(np.int64),
+            tile(source._bias), tile(source._apex), tile(source._phase), tile(source._was_flight),
+            np.ascontiguousarray(ctx["like"][:, Obs.command]), np.ascontiguousarray(ctx["x_ref"], dtype=np.float64),
+            self.params.array, source._gains[None], flat(V), flat(k), flat(K), flat(nominal), c.dt, c.substeps,
+            c.max_angle, c.mu, self.law_step, self.clip_smoothing, X.reshape(n, -1), modes, out["U"].reshape(n, -1),
+            out["V"].reshape(n, -1), out["flight_time"], *(flat(out[name]) if jacobians else None for name in ("A", "B", "Du", "D")))
+        self._track(out, ctx)
+        return out
 
     def _law(self, h, x, mode, ctx) -> np.ndarray:
         """The hopper's torques at model states ``x`` (the COM's drift exact on the model, where the hopper

@@ -54,3 +54,17 @@ def checked_gradients(mpc, source, q, qd, mode, ctx, seed: int = 0) -> int:
             else:
                 raise AssertionError(f"step {t}, action {j}: differences {fd}, adjoint {grad[:, t, j]}")
     return checked
+
+
+def checked_backward(mpc, source, q, qd, mode, ctx, seed: int = 0) -> float:
+    """The compiled backward pass (``PilotILQR._backward``, ``kernels.ilqr_backward``) against the numpy pass of
+    ``tests/ilqr_ref.py`` on a plan with random corrections: the largest difference of the gains ``k`` and ``K``,
+    relative to each's largest entry."""
+    from ilqr_ref import backward
+
+    V = 0.05 * np.random.default_rng(seed).standard_normal((len(q), mpc.horizon, 2))
+    roll = mpc._rollout(source, q, qd, mode, ctx, V, jacobians=True)
+    k, K = mpc._backward(roll, ctx)
+    k_ref, K_ref = backward(mpc, roll, ctx)
+    assert np.isfinite(k_ref).all() and np.abs(k_ref).max() > 0.0
+    return max(float(np.abs(k - k_ref).max() / np.abs(k_ref).max()), float(np.abs(K - K_ref).max() / np.abs(K_ref).max()))

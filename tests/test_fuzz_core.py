@@ -435,8 +435,17 @@ MAKERS = {
 }
 
 
+PLAN_STEPS = 3
+PLAN_COLUMNS = {  # a plan's arrays (hop_rollout, ilqr_backward): their columns for a plan of PLAN_STEPS steps
+    name: per_step * PLAN_STEPS + extra for name, (per_step, extra) in {
+        "corrections": (2, 0), "k": (2, 0), "K": (20, 0), "nominal": (10, 10), "X": (10, 10), "modes": (1, 1), "U": (2, 0),
+        "V": (2, 0), "flight_time": (1, 0), "A": (100, 0), "B": (20, 0), "Du": (20, 0), "D": (2, 0), "lx": (10, 0),
+        "lxx": (100, 0)}.items()}
+
+
 def _generic(arg):
-    """The valid value of an argument that MAKERS does not name, from its dtype, shape rule and range."""
+    """The valid value of an argument that MAKERS does not name, from its dtype, shape rule and range (a plan's array
+    with the columns of a plan of PLAN_STEPS steps)."""
     sig = arg.sig
 
     def make(n, ctx):
@@ -450,7 +459,7 @@ def _generic(arg):
         if arg.kind == "g":
             return ctx.generators()
         rows = {"N": n, "1": 1, "*": 3, "M": 1, "T": 2}.get(arg.rows, 1)
-        shape = (rows,) if arg.width == 1 else (rows, arg.width or 3)
+        shape = (rows,) if arg.width == 1 else (rows, arg.width or PLAN_COLUMNS.get(arg.name, 3))
         if arg.rows == "T":
             shape = (rows, n) + ((arg.width,) if arg.width > 1 else ())
         dtype = {"d": np.float64, "q": np.int64, "?": np.bool_}.get(arg.kind)

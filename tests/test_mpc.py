@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 import leg_env  # noqa: F401  (registers the tasks)
-from ilqr_checks import checked_gradients
+from ilqr_checks import checked_backward, checked_gradients
+from ilqr_ref import clocks
+from policies.ilqr import PilotILQR
 from policies.hopper import HopperController
 from policies.mpc import HopMPC
 from train.policy_loading import load_policy
@@ -59,8 +61,83 @@ def test_backward_pass_differentiates_the_closed_loop():
     x_ref = mpc.com(np.concatenate([q, qd], axis=1))[0] - batch[:, 19]
     ground = batch[:, 20]
     ctx = dict(like=like, target=target, x_ref=x_ref, ground=ground)
+    assert checked_backward(mpc, mpc._pilot, q, qd, mode, ctx) < 1e-10  # the compiled pass is the numpy one
     checked = checked_gradients(mpc, mpc._pilot, q, qd, mode, ctx)
     assert checked >= 24  # most robots, every step checked with the same events at both sides
+
+
+def _context(mpc, obs):
+    """The plan's start and context at observations ``obs``, as ``HopMPC.exact_actions`` makes them."""
+    q, qd, mode = mpc.state(obs)
+    batch = np.asarray(obs, dtype=np.float64)
+    x_ref = mpc.com(np.concatenate([q, qd], axis=1))[0] - batch[:, 19]
+    return q, qd, mode, dict(like=batch[:, :22], target=mpc.y_stand + batch[:, 18], x_ref=x_ref, ground=batch[:, 20])
+
+
+def test_the_compiled_plan_is_the_numpy_rollout():
+    """``HopMPC._rollout`` (``kernels.hop_rollout``: the hopper's law, its derivative and the step in one call) makes
+    the plans ``PilotILQR._rollout`` makes in numpy around the same hopper: the same states, modes, actions and clocks
+    to the bit, the closed loop's Jacobians to rounding; with the line search's feedback, to rounding. At states along
+    hopping episodes in every phase, with the plans of several robots in one call and tiled as the line search tiles
+    them; the clocks are those counted step by step."""
+    n = 4
+    envs, obs = _envs(n, seed=2025)
+    e = envs.unwrapped
+    mpc = HopMPC(e.params, e.config, horizon=40)
+    rng = np.random.default_rng(0)
+    phases, modes = set(), set()
+    for step in range(90):
+        action, _ = mpc.predict(obs)
+        obs, *_ = envs.step(action)
+        if step % 6:
+            continue
+        q, qd, mode, ctx = _context(mpc, obs)
+        phases.update(mpc._pilot._phase.tolist())
+        V = 0.1 * rng.standard_normal((n, mpc.horizon, 2))
+        for jacobians in (True, False):
+            got = mpc._rollout(mpc._pilot, q, qd, mode, ctx, V, jacobians=jacobians)
+            want = PilotILQR._rollout(mpc, mpc._pilot, q, qd, mode, ctx, V, jacobians=jacobians)
+            assert set(got) == set(want)
+            for name in ("X", "modes", "U", "V", "flight_time", "ground", "stance"):
+                np.testing.assert_array_equal(got[name], want[name], err_msg=name)
+            for name in ("A", "B", "Du", "D") if jacobians else ():
+                np.testing.assert_allclose(got[name], want[name], rtol=1e-12, atol=1e-12 * np.abs(want[name]).max(), err_msg=name)
+            modes.update(got["modes"].ravel().tolist())
+            counted = clocks(e.config.min_flight, e.config.dt, got["modes"], got["flight_time"], ctx["ground"])
+            np.testing.assert_array_equal(got["ground"], counted[0])
+            np.testing.assert_array_equal(got["stance"], counted[1])
+        # the line search's plans: two step lengths' copies, feedback about a nominal plan
+        k, K = 0.05 * rng.standard_normal((2 * n, mpc.horizon, 2)), 0.5 * rng.standard_normal((2 * n, mpc.horizon, 2, 10))
+        nominal = np.tile(want["X"], (2, 1, 1)) + 1e-3 * rng.standard_normal((2 * n, mpc.horizon + 1, 10))
+        tiled = {name: np.tile(value, (2,) + (1,) * (value.ndim - 1)) for name, value in ctx.items()}
+        args = (np.tile(q, (2, 1)), np.tile(qd, (2, 1)), np.tile(mode, 2), tiled, np.tile(V, (2, 1, 1)))
+        got = mpc._rollout(mpc._pilot, *args, nominal=nominal, k=k, K=K, copies=2)
+        want = PilotILQR._rollout(mpc, mpc._pilot, *args, nominal=nominal, k=k, K=K, copies=2)
+        np.testing.assert_array_equal(got["modes"], want["modes"])
+        np.testing.assert_allclose(got["X"], want["X"], rtol=0.0, atol=1e-9)
+        np.testing.assert_allclose(got["U"], want["U"], rtol=0.0, atol=1e-9)
+    envs.close()
+    assert phases == {0, 1, 2} and {0, 3} <= modes  # crouch, push, release; stick and flight
+
+
+def test_the_plans_clocks_are_counted_step_by_step():
+    """``HopMPC._track``'s clocks (time on the ground since the last hop, time in the current stance), vectorised over
+    the plan, are the clocks counted step by step (``tests/ilqr_ref.py``), to the bit, on random sequences of stance
+    and flight with partial flights (and on hopping robots' plans: ``test_the_compiled_plan_is_the_numpy_rollout``)."""
+    mpc = HopMPC()
+    c = mpc.config
+    rng = np.random.default_rng(1)
+    for _ in range(300):
+        n, H = 3, 50
+        modes = np.repeat(np.where(rng.random((n, H // 5 + 1)) < 0.5, 3, rng.integers(0, 3, (n, H // 5 + 1))), 5, axis=1)[:, :H + 1]
+        flight_time = np.where(modes[:, 1:] == 3, np.where(rng.random((n, H)) < 0.7, c.dt, c.dt * rng.random((n, H))),
+                               c.dt * rng.random((n, H)) * (rng.random((n, H)) < 0.2))
+        ground = rng.uniform(0.0, 0.5, n)
+        roll = dict(modes=modes, flight_time=flight_time)
+        mpc._track(roll, dict(ground=ground))
+        want = clocks(c.min_flight, c.dt, modes, flight_time, ground)
+        np.testing.assert_array_equal(roll["ground"], want[0])
+        np.testing.assert_array_equal(roll["stance"], want[1])
 
 
 def test_the_clip_derivative_fades_to_zero_at_the_limit():

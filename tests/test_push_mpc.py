@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import leg_env  # noqa: F401  (registers the tasks)
-from ilqr_checks import checked_gradients
+from ilqr_checks import checked_backward, checked_gradients
 from policies.push_mpc import PushMPC
 from policies.stepping import SteppingController
 from train.policy_loading import load_policy
@@ -83,7 +83,9 @@ def test_backward_pass_differentiates_the_closed_loop():
     rows = mpc.planning
     source = mpc._snapshot(rows, np.zeros_like(rows))
     q, qd, mode = mpc.state(obs[rows])
-    checked = checked_gradients(mpc, source, q, qd, mode, mpc._context(obs, rows, source, np.concatenate([q, qd], axis=1)))
+    ctx = mpc._context(obs, rows, source, np.concatenate([q, qd], axis=1))
+    assert checked_backward(mpc, source, q, qd, mode, ctx) < 1e-10  # the compiled pass is the numpy one
+    checked = checked_gradients(mpc, source, q, qd, mode, ctx)
     assert checked >= 24
 
 

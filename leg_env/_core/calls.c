@@ -9,7 +9,7 @@
 
 #include "env.h"
 
-#define MAX_ARGS 18 /* arguments of an entry point, at most */
+#define MAX_ARGS 32 /* arguments of an entry point, at most */
 
 /* One call's arguments, in its entry's order: an array's data, rows, values per row and row stride (0 for one
  * row shared by every robot); a scalar's value; an integer or flag; an object. */
@@ -27,6 +27,7 @@ typedef struct {
 #define ROW(j) ((double *)c->a[j] + i * c->step[j] * c->cols[j]) /* robot i's row of array argument j */
 #define PAR(j) ((const leg_params *)c->a[j] + i * c->step[j])
 #define INT(j) ((int64_t *)c->a[j] + i * c->step[j])
+#define INT_ROW(j) ((int64_t *)c->a[j] + i * c->step[j] * c->cols[j]) /* robot i's row of int64 array argument j */
 
 /* ------------------------------------------------------------------------- the dynamics (leg_env.physics) */
 
@@ -83,6 +84,43 @@ static void k_hopper_torque(call *c)
 {
     EACH hopper_torque_one(PAR(2), (const double *)c->a[3], ROW(0), *ROW(1), ROW(4), ROW(5), INT(6),
                            (unsigned char *)c->a[7] + i * c->step[7], ROW(8), ROW(9));
+}
+
+/* ------------------------------------------------------------------------- the model-predictive plan (policies.ilqr) */
+
+/* The argument indices of hop_rollout (its row of module.c's table). */
+enum {
+    RO_Q, RO_QD, RO_MODE, RO_BIAS, RO_APEX, RO_PHASE, RO_WAS_FLIGHT, RO_COMMAND, RO_X_REF, RO_P, RO_GAINS, RO_CORRECTIONS, RO_K,
+    RO_KK, RO_NOMINAL, RO_DT, RO_SUBSTEPS, RO_MAX_ANGLE, RO_MU, RO_LAW_STEP, RO_CLIP_SMOOTHING, RO_X, RO_MODES, RO_U, RO_V,
+    RO_FLIGHT_TIME, RO_A, RO_B, RO_DU, RO_D
+};
+
+#define OPTIONAL_ROW(j) (c->a[j] != NULL ? ROW(j) : NULL)
+
+static void k_hop_rollout(call *c)
+{
+    const int H = (int)(c->cols[RO_CORRECTIONS] / PLAN_NU);
+    const plan_settings S = {c->x[RO_DT], c->x[RO_MAX_ANGLE], c->x[RO_MU], c->x[RO_LAW_STEP], c->x[RO_CLIP_SMOOTHING],
+                             (int)c->x[RO_SUBSTEPS]};
+    EACH {
+        const plan_pilot h = {*ROW(RO_BIAS), *ROW(RO_APEX), *INT(RO_PHASE), *((unsigned char *)c->a[RO_WAS_FLIGHT] + i)};
+        hop_plan_one(PAR(RO_P), (const double *)c->a[RO_GAINS], &S, H, ROW(RO_Q), ROW(RO_QD), (int)*INT(RO_MODE), h, *ROW(RO_COMMAND),
+                     *ROW(RO_X_REF), ROW(RO_CORRECTIONS), OPTIONAL_ROW(RO_K), OPTIONAL_ROW(RO_KK), OPTIONAL_ROW(RO_NOMINAL), ROW(RO_X),
+                     INT_ROW(RO_MODES), ROW(RO_U), ROW(RO_V), ROW(RO_FLIGHT_TIME), OPTIONAL_ROW(RO_A), OPTIONAL_ROW(RO_B),
+                     OPTIONAL_ROW(RO_DU), OPTIONAL_ROW(RO_D));
+    }
+}
+
+/* The argument indices of ilqr_backward. */
+enum { BW_LX, BW_LXX, BW_A, BW_B, BW_D, BW_DU, BW_X, BW_U, BW_V, BW_EFFORT, BW_POWER, BW_SMOOTH, BW_REG, BW_TORQUE_LIMIT, BW_K, BW_KK };
+
+static void k_ilqr_backward(call *c)
+{
+    const int H = (int)(c->cols[BW_V] / PLAN_NU);
+    const double *lim = (const double *)c->a[BW_TORQUE_LIMIT];
+    const plan_weights W = {c->x[BW_EFFORT], c->x[BW_POWER], c->x[BW_SMOOTH], c->x[BW_REG], {lim[0], lim[1]}};
+    EACH ilqr_backward_one(&W, H, ROW(BW_LX), ROW(BW_LXX), ROW(BW_A), ROW(BW_B), ROW(BW_D), ROW(BW_DU), ROW(BW_X), ROW(BW_U), ROW(BW_V),
+                           ROW(BW_K), ROW(BW_KK));
 }
 
 static void k_contact_mode(call *c) { EACH *INT(5) = contact_mode_one(PAR(4), ROW(0), ROW(1), ROW(2)[0], ROW(2)[1], *ROW(3)); }

@@ -35,6 +35,7 @@
 #include "tasks.c"
 #include "draws.c"
 #include "hopper.c"
+#include "plan.c"
 #include "calls.c"
 
 typedef char leg_params_is_eleven_doubles[sizeof(leg_params) == LEG_N_PARAMS * sizeof(double) ? 1 : -1];
@@ -89,6 +90,8 @@ static int check_step(call *c);
 static int check_robot_params(call *c);
 static int check_draws(call *c);
 static int check_info(call *c);
+static int check_hop_rollout(call *c);
+static int check_ilqr_backward(call *c);
 
 #define RELEASED 1, 0
 #define HELD 0, 0
@@ -141,6 +144,26 @@ static const entry ENTRIES[] = {
      {IN(obs, HOPPER_INPUTS), IN(x0, 1), PARAMS, {"gains", 'd', '1', 'i', HOPPER_GAINS, ANY, 0}, INOUT(bias, 1), INOUT(apex, 1),
       {"phase", 'q', 'N', 'u', 1, HOP_CROUCH, HOP_RELEASE, 0}, {"was_flight", '?', 'N', 'u', 1, ANY, 0}, OUT(tau, 2),
       OUT(vx_com, 1)}},
+    {"hop_rollout", "Plans of H control steps from (q, qd, mode), the hopper's state (bias, apex, phase, was_flight) and its command and "
+                    "COM start x_ref: the hopper's law plus corrections (N, 2H) (plus, each unless None, k (N, 2H) and K (N, 2H, 10) (x - "
+                    "nominal (N, H + 1, 10), None: 0)), clipped, on hybrid_step; the states X (N, H + 1, 10), modes, actions U, "
+                    "applied corrections V, time in flight, and each unless None the closed loop's A, B, Du = D dpi/dx and the clip's "
+                    "derivative D (any given: the step's Jacobians are formed).",
+     k_hop_rollout, check_hop_rollout, RELEASED,
+     {IN(q, 5), IN(qd, 5), {"mode", 'q', 'N', 'i', 1, LEG_STICK, LEG_FLIGHT, 0}, IN(bias, 1), IN(apex, 1),
+      {"phase", 'q', 'N', 'i', 1, HOP_CROUCH, HOP_RELEASE, 0}, {"was_flight", '?', 'N', 'i', 1, ANY, 0}, IN(command, 1), IN(x_ref, 1),
+      PARAMS, {"gains", 'd', '1', 'i', HOPPER_GAINS, ANY, 0}, IN(corrections, 0), {"k", 'd', 'N', 'i', 0, ANY, OPT_NONE},
+      {"K", 'd', 'N', 'i', 0, ANY, OPT_NONE}, {"nominal", 'd', 'N', 'i', 0, ANY, OPT_NONE}, STEP_RULE, REAL(mu, 0.0, DBL_MAX, 0),
+      REAL(law_step, 0.0, DBL_MAX, OPT_OPEN), REAL(clip_smoothing, 0.0, DBL_MAX, 0), OUT(X, 0), {"modes", 'q', 'N', 'o', 0, ANY, 0},
+      OUT(U, 0), OUT(V, 0), OUT(flight_time, 0), {"A", 'd', 'N', 'o', 0, ANY, OPT_NONE}, {"B", 'd', 'N', 'o', 0, ANY, OPT_NONE},
+      {"Du", 'd', 'N', 'o', 0, ANY, OPT_NONE}, {"D", 'd', 'N', 'o', 0, ANY, OPT_NONE}}},
+    {"ilqr_backward", "The Gauss-Newton iLQR backward pass on the corrections over H steps: gains k (N, 2H) and K (N, 2H, 10) from "
+                      "the state cost's half gradient lx (N, H, 10) and Hessian lxx (N, H, 10, 10), the closed loop's A, B, D, Du, "
+                      "the states X (N, H + 1, 10), actions U and corrections V (N, 2H) and the action cost's weights.",
+     k_ilqr_backward, check_ilqr_backward, RELEASED,
+     {IN(lx, 0), IN(lxx, 0), IN(A, 0), IN(B, 0), IN(D, 0), IN(Du, 0), IN(X, 0), IN(U, 0), IN(V, 0), REAL(effort_weight, 0.0, DBL_MAX, 0),
+      REAL(power_weight, 0.0, DBL_MAX, 0), REAL(smooth_weight, 0.0, DBL_MAX, 0), REAL(regularisation, 0.0, DBL_MAX, 0),
+      {"torque_limit", 'd', '1', 'i', 2, ANY, 0}, OUT(k, 0), OUT(K, 0)}},
     {"start", "Robots put on their contact (at the nominal posture plus noise, or where the state has them if noise is None) and "
               "evaluated by the task.", k_start, check_start, HELD,
      {TASK, ENV_ARRAYS, {"noise", 'd', 'N', 'i', 6, ANY, OPT_NONE}, REAL(scale, 0.0, DBL_MAX, 0)}},
@@ -414,6 +437,40 @@ static int check_step(call *c)
     if (!(c->k[1] <= c->k[2] && c->k[2] <= c->n))
         return error(PyExc_ValueError, "rows lo .. hi must satisfy 0 <= lo <= hi <= %zd, got %zd .. %zd", c->n, c->k[1], c->k[2]);
     return env_ok(c, 3, 1);
+}
+
+/* Argument j (if not None) has `per_step` values a step of a plan of H steps, and `extra` more. */
+static int plan_cols(const call *c, int j, const char *name, Py_ssize_t H, Py_ssize_t per_step, Py_ssize_t extra)
+{
+    if (c->a[j] == NULL || c->cols[j] == per_step * H + extra)
+        return 1;
+    return error(PyExc_ValueError, "%s must have %zd columns (%zd a step of the plan's %zd, and %zd), got %zd", name, per_step * H + extra,
+                 per_step, H, extra, c->cols[j]);
+}
+
+static int check_hop_rollout(call *c)
+{
+    const Py_ssize_t H = c->cols[RO_CORRECTIONS] / PLAN_NU;
+    if (H < 1 || c->cols[RO_CORRECTIONS] % PLAN_NU != 0 || H > INT32_MAX / (PLAN_NX * PLAN_NX))
+        return error(PyExc_ValueError, "corrections must have 2 H columns (H >= 1 steps of 2 actions), got %zd", c->cols[RO_CORRECTIONS]);
+    return plan_cols(c, RO_K, "k", H, PLAN_NU, 0) && plan_cols(c, RO_KK, "K", H, PLAN_NU * PLAN_NX, 0)
+           && plan_cols(c, RO_NOMINAL, "nominal", H, PLAN_NX, PLAN_NX) && plan_cols(c, RO_X, "X", H, PLAN_NX, PLAN_NX)
+           && plan_cols(c, RO_MODES, "modes", H, 1, 1) && plan_cols(c, RO_U, "U", H, PLAN_NU, 0) && plan_cols(c, RO_V, "V", H, PLAN_NU, 0)
+           && plan_cols(c, RO_FLIGHT_TIME, "flight_time", H, 1, 0) && plan_cols(c, RO_A, "A", H, PLAN_NX * PLAN_NX, 0)
+           && plan_cols(c, RO_B, "B", H, PLAN_NX * PLAN_NU, 0) && plan_cols(c, RO_DU, "Du", H, PLAN_NU * PLAN_NX, 0)
+           && plan_cols(c, RO_D, "D", H, PLAN_NU, 0);
+}
+
+static int check_ilqr_backward(call *c)
+{
+    const Py_ssize_t H = c->cols[BW_V] / PLAN_NU;
+    if (H < 1 || c->cols[BW_V] % PLAN_NU != 0 || H > INT32_MAX / (PLAN_NX * PLAN_NX))
+        return error(PyExc_ValueError, "V must have 2 H columns (H >= 1 steps of 2 actions), got %zd", c->cols[BW_V]);
+    return plan_cols(c, BW_LX, "lx", H, PLAN_NX, 0) && plan_cols(c, BW_LXX, "lxx", H, PLAN_NX * PLAN_NX, 0)
+           && plan_cols(c, BW_A, "A", H, PLAN_NX * PLAN_NX, 0) && plan_cols(c, BW_B, "B", H, PLAN_NX * PLAN_NU, 0)
+           && plan_cols(c, BW_D, "D", H, PLAN_NU, 0) && plan_cols(c, BW_DU, "Du", H, PLAN_NU * PLAN_NX, 0)
+           && plan_cols(c, BW_X, "X", H, PLAN_NX, PLAN_NX) && plan_cols(c, BW_U, "U", H, PLAN_NU, 0)
+           && plan_cols(c, BW_K, "k", H, PLAN_NU, 0) && plan_cols(c, BW_KK, "K", H, PLAN_NU * PLAN_NX, 0);
 }
 
 /* A randomisation's spec: (F, 4) rows (the field's index among env_robot's doubles, kind, low, high), every index a

@@ -23,6 +23,11 @@ derivative (``_penalty``: a fall; the line search sees it, the backward pass doe
 tracks or pushes (``_track``, ``_load``), and in ``exact_actions`` the per-robot context ``ctx`` (a dict of ``(n, ...)``
 arrays) its law and residuals read. ``replan_every > 1`` holds a plan between replans (``_due``, ``_hold``,
 ``_follow_held``).
+
+**Compiled.** The backward pass is the compiled core's (``leg_env._core.kernels.ilqr_backward``, ``plan.c``), for
+every pilot. The rollout here (``_rollout``) steps the plans of a batch of robots together, one numpy call of the
+pilot's law and one of the step per plan step, for any pilot; a subclass whose pilot is compiled replaces it with a
+compiled one (``HopMPC``: ``kernels.hop_rollout``, the whole plan in one call), to which this one is the reference.
 """
 
 from __future__ import annotations
@@ -351,11 +356,16 @@ class PilotILQR(BatchedController):
         (``v_x = l_x + V_x``, ``v_xx = l_xx + V_xx``); ``k = -Q_vv^-1 Q_v``, ``K = -Q_vv^-1 Q_vx`` (solved); then
         ``V_x = Q_x + K^T (Q_vv k + Q_v) + Q_vx^T k``, ``V_xx = Q_xx + K^T Q_vv K + K^T Q_vx + Q_vx^T K``, symmetrised.
         """
-        V = roll["V"]
-        n, H = V.shape[:2]
         r, Jr = self._state_residuals(roll, ctx, jacobian=True)
         lx = np.einsum("nhri,nhr->nhi", Jr, r)  # half the cost's derivatives, of the state after each step
         lxx = np.einsum("nhri,nhrj->nhij", Jr, Jr)
+        return self._gains(roll, lx, lxx)
+
+    def _gains(self, roll, lx, lxx):
+        """``_backward``'s pass from the state cost's half gradient ``lx`` ``(n, H, 10)`` and Gauss-Newton Hessian
+        ``lxx`` ``(n, H, 10, 10)`` at the state after each step."""
+        V = roll["V"]
+        n, H = V.shape[:2]
         k, K = np.empty((n, H, NU)), np.empty((n, H, NU, NX))
         flat = lambda a: np.ascontiguousarray(a, dtype=np.float64).reshape(n, -1)  # noqa: E731
         kernels.ilqr_backward(flat(lx), flat(lxx), flat(roll["A"]), flat(roll["B"]), flat(roll["D"]), flat(roll["Du"]),

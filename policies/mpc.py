@@ -39,9 +39,11 @@ horizon is a hop whose apex is not charged), crouched deeper and deeper and fell
 
 The controller reads only the observation (the state is rebuilt from its entries: the base relative to the contact
 point, the angles and rates, the contact flag and the slip direction; the COM's drift), the model (``LegParams``)
-and the task (``HopConfig``). Its compute grows linearly with the horizon and the line search's steps; batched, the
-cost per robot falls with the batch (``benchmarks/bench_mpc.py``). The iLQR itself is ``policies.ilqr``'s, which the
-push task's MPC (``policies.push_mpc``) shares.
+and the task (``HopConfig``). Its plans are rolled out in the compiled core (``_rollout``: ``kernels.hop_rollout``, the
+hopper's law, its differences and the step with its Jacobians over a whole plan in one call), as is the backward
+pass; its compute grows linearly with the horizon and the line search's steps, and per robot it falls with the batch
+(``benchmarks/bench_mpc.py``). The iLQR itself is ``policies.ilqr``'s, which the push task's MPC
+(``policies.push_mpc``) shares.
 """
 
 from __future__ import annotations

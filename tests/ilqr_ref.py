@@ -10,11 +10,17 @@ import numpy as np
 def backward(mpc, roll, ctx):
     """Gains ``k`` ``(n, H, 2)``, ``K`` ``(n, H, 2, 10)`` of one Gauss-Newton iLQR backward pass on the corrections of
     the controller ``mpc`` (a ``PilotILQR``): the numpy pass its compiled one (``kernels.ilqr_backward``) is held to."""
-    X, U, V = roll["X"], roll["U"], roll["V"]
-    n, H = V.shape[:2]
     r, Jr = mpc._state_residuals(roll, ctx, jacobian=True)
     lx = np.einsum("nhri,nhr->nhi", Jr, r)  # half the cost's derivatives, of the state after each step
     lxx = np.einsum("nhri,nhrj->nhij", Jr, Jr)
+    return gains(mpc, roll, lx, lxx)
+
+
+def gains(mpc, roll, lx, lxx):
+    """``backward``'s pass from the state cost's half gradient ``lx`` ``(n, H, 10)`` and Hessian ``lxx``
+    ``(n, H, 10, 10)`` (``PilotILQR._gains``'s reference)."""
+    X, U, V = roll["X"], roll["U"], roll["V"]
+    n, H = V.shape[:2]
     ws = mpc.smooth_weight
     D, Du = roll["D"], roll["Du"]  # u = clip(pi(x) + v): du/dv = D, du/dx = D dpi/dx
     Vx = np.zeros((n, 10))

@@ -9,7 +9,7 @@ import pytest
 
 import leg_env  # noqa: F401  (registers the tasks)
 from ilqr_checks import checked_backward, checked_gradients
-from ilqr_ref import clocks
+from ilqr_ref import clocks, gains
 from policies.ilqr import PilotILQR
 from policies.hopper import HopperController
 from policies.mpc import HopMPC
@@ -64,6 +64,29 @@ def test_backward_pass_differentiates_the_closed_loop():
     assert checked_backward(mpc, mpc._pilot, q, qd, mode, ctx) < 1e-10  # the compiled pass is the numpy one
     checked = checked_gradients(mpc, mpc._pilot, q, qd, mode, ctx)
     assert checked >= 24  # most robots, every step checked with the same events at both sides
+
+
+def test_the_compiled_backward_pass_on_random_plans():
+    """``kernels.ilqr_backward`` (``PilotILQR._gains``) is the numpy pass (``tests/ilqr_ref.py``) on random plans with
+    every residual of the action active (the power charged, the clip's derivative between 0 and 1) and joints whose
+    authority differs by a factor of 30, so that either row of ``Q_vv`` pivots its solve."""
+    mpc = HopMPC(power_weight=1e-3, effort_weight=0.05, regularisation=1e-3, smooth_weight=0.01)
+    rng = np.random.default_rng(3)
+    n, H = 64, 12
+    roll = dict(A=np.eye(10) + 0.3 * rng.standard_normal((n, H, 10, 10)),
+                B=rng.standard_normal((n, H, 10, 2)) * np.where(rng.random((n, 1, 1, 2)) < 0.5, [1.0, 30.0], [30.0, 1.0]),
+                D=rng.uniform(0.0, 1.0, (n, H, 2)), Du=rng.standard_normal((n, H, 2, 10)),
+                X=rng.standard_normal((n, H + 1, 10)), U=rng.uniform(-1.0, 1.0, (n, H, 2)), V=0.1 * rng.standard_normal((n, H, 2)))
+    Jr, r = rng.standard_normal((n, H, 7, 10)), rng.standard_normal((n, H, 7))
+    lx, lxx = np.einsum("nhri,nhr->nhi", Jr, r), np.einsum("nhri,nhrj->nhij", Jr, Jr)
+    # at the last step Q_vv = B^T l_xx B + J_v^T J_v + (w_s + regularisation) I: either row's pivot is the larger
+    Quu = np.swapaxes(roll["B"][:, -1], 1, 2) @ lxx[:, -1] @ roll["B"][:, -1]
+    swapped = np.abs(Quu[:, 1, 0]) > np.abs(Quu[:, 0, 0])
+    assert 0 < swapped.sum() < n
+    k, K = mpc._gains(roll, lx, lxx)
+    k_ref, K_ref = gains(mpc, roll, lx, lxx)
+    np.testing.assert_allclose(k, k_ref, rtol=1e-9, atol=1e-9 * np.abs(k_ref).max())
+    np.testing.assert_allclose(K, K_ref, rtol=1e-9, atol=1e-9 * np.abs(K_ref).max())
 
 
 def _context(mpc, obs):

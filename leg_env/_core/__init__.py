@@ -3,7 +3,8 @@
 ``kernels`` is the extension module built from ``module.c`` (and the files it includes: ``fields.h``, ``robot.h`` and
 ``env.h`` the structs, written once as field lists; ``dynamics.c``, ``contact.c``, ``integrate.c``, ``hybrid.c`` the
 physics; ``env.c``, ``tasks.c``, ``draws.c`` the environments; ``hopper.c`` the hopping controller's law
-(``policies.hopper``); ``calls.c`` each entry point's work; ``objects.c`` its two types) by the package's build
+(``policies.hopper``); ``plan.c`` the model-predictive controllers' plan and backward pass (``policies.ilqr``);
+``calls.c`` each entry point's work; ``objects.c`` its two types) by the package's build
 backend at install. Nothing is compiled at run time. Its functions take numpy arrays and loop over robots in C with
 the GIL released; ``signatures()`` says what each takes. The public API (``leg_env.physics``) shapes the arrays
 around them, and ``leg_env.physics.layout`` builds the numpy dtypes of the C structs from the layouts the module

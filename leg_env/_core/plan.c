@@ -166,24 +166,17 @@ typedef struct {
     double effort_weight, power_weight, smooth_weight, regularisation, lim[PLAN_NU];
 } plan_weights;
 
-/* Solves M x = b in place for the 2 x 2 M and the m columns of b (rows b0 and b1): Gaussian elimination with partial
- * pivoting. */
+/* Solves M x = b in place for the 2 x 2 M and the m columns of b (its rows b0 and b1): Gaussian elimination with
+ * partial pivoting (the equations swapped where the second's pivot is the larger; the unknowns keep their rows). */
 static void plan_solve2(const double M[PLAN_NU][PLAN_NU], double *b0, double *b1, int m)
 {
-    double a00 = M[0][0], a01 = M[0][1], a10 = M[1][0], a11 = M[1][1];
-    if (fabs(a10) > fabs(a00)) {
-        double t;
-        t = a00, a00 = a10, a10 = t;
-        t = a01, a01 = a11, a11 = t;
-        double *r = b0;
-        b0 = b1, b1 = r;
-    }
+    const int swap = fabs(M[1][0]) > fabs(M[0][0]);
+    const double a00 = M[swap][0], a01 = M[swap][1], a10 = M[!swap][0], a11 = M[!swap][1];
     const double l = a10 / a00, u11 = a11 - l * a01;
     for (int c = 0; c < m; c++) {
-        const double y1 = b1[c] - l * b0[c];
-        const double x1 = y1 / u11;
-        const double x0 = (b0[c] - a01 * x1) / a00;
-        b0[c] = x0;
+        const double r0 = swap ? b1[c] : b0[c], r1 = swap ? b0[c] : b1[c];
+        const double x1 = (r1 - l * r0) / u11;
+        b0[c] = (r0 - a01 * x1) / a00;
         b1[c] = x1;
     }
 }

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from train.bars import BALANCE_BARS
-from train.curves import CurvesArgs, iqm_interval, main
+from train.curves import CurvesArgs, iqm, iqm_interval, main
 
 TINY = ["n_envs:8", "n_steps:32", "batch_size:128", "n_epochs:1"]
 
@@ -27,6 +27,24 @@ def test_iqm_is_the_mean_of_the_middle_half_and_its_interval_contains_it():
     assert low <= iqm <= high and low >= 1.0 and high <= 8.0 and high - low > 0.5
     assert iqm_interval(np.full(5, 0.7), reps=200) == pytest.approx((0.7, 0.7, 0.7))
     assert iqm_interval(scores, reps=500) == iqm_interval(scores, reps=500)  # seeded: the page is reproducible
+
+
+def test_iqm_is_rliables_to_the_bit():
+    """``train.curves.iqm`` is rliable's ``aggregate_iqm`` (SciPy's 25% trimmed mean over every entry), to the bit,
+    on matrices of any shape (the bootstrap's resamples are (seeds, 1)), ties and sizes where the quarter rounds down;
+    and the interval is rliable's own bootstrap of it."""
+    from rliable import library as rly
+    from rliable import metrics
+
+    rng = np.random.default_rng(4)
+    for n in (1, 2, 3, 4, 5, 7, 8, 11, 16):
+        for x in (rng.standard_normal((n, 1)), rng.integers(0, 3, (n, 1)).astype(float), 1e3 * rng.random((n, 3))):
+            assert iqm(x) == metrics.aggregate_iqm(x)
+    scores = rng.standard_normal(7)
+    np.random.seed(0)
+    point, interval = rly.get_interval_estimates({"ppo": scores.reshape(-1, 1)}, lambda x: np.array([metrics.aggregate_iqm(x)]),
+                                                 reps=300)
+    assert iqm_interval(scores, reps=300) == (point["ppo"][0], interval["ppo"][0, 0], interval["ppo"][1, 0])
 
 
 @pytest.mark.parametrize(

@@ -203,13 +203,11 @@ class PilotILQR(BatchedController):
     # ---- cost
 
     def _residual_jacobian(self, X, charged, ctx, eps=1e-6):
-        """``dr/dx`` ``(n, H, n_residuals, 10)`` by centred differences of the residuals (closed forms, cheap)."""
-        J = np.empty(X.shape[:2] + (self.n_residuals, NX))
-        for j in range(NX):
-            d = np.zeros(NX)
-            d[j] = eps
-            J[..., j] = (self.residuals(X + d, charged, ctx) - self.residuals(X - d, charged, ctx)) / (2 * eps)
-        return J
+        """``dr/dx`` ``(n, H, n_residuals, 10)`` by centred differences of the residuals (closed forms, cheap), every
+        coordinate's two moved states in one call of ``residuals`` (on a leading axis of 20)."""
+        d = eps * np.eye(NX)[:, None, None, :]
+        r = self.residuals(np.concatenate([X[None] + d, X[None] - d]), charged, ctx)
+        return np.moveaxis((r[:NX] - r[NX:]) / (2 * eps), 0, -1)
 
     def action_residuals(self, x: np.ndarray, u: np.ndarray):
         """The action's residuals ``(..., 4)`` at states ``x`` ``(..., 10)`` and actions ``u`` ``(..., 2)``: the effort

@@ -252,7 +252,8 @@ class HopMPC(PilotILQR):
 
     def _rollout(self, source, q, qd, mode, ctx, V, nominal=None, k=None, K=None, jacobians=False, copies=1):
         """``PilotILQR._rollout`` compiled (``leg_env._core.kernels.hop_rollout``: the hopper's law, its derivative
-        and the step inside one call per batch of plans), the same plans to rounding."""
+        and the step inside one call per batch of plans): the same plans, to the bit without the line search's
+        feedback ``k + K dx`` and to rounding with it."""
         n, H = V.shape[0], self.horizon
         tile = lambda a: np.tile(a, copies) if copies > 1 else a  # noqa: E731
         flat = lambda a: None if a is None else np.ascontiguousarray(a, dtype=np.float64).reshape(n, -1)  # noqa: E731

@@ -4,7 +4,7 @@
  *
  * policies.ilqr.PilotILQR._rollout is the same rollout in numpy for any pilot (the push MPC's stepping controller,
  * and the tests' reference for this one); policies.mpc.HopMPC calls this one. Compiled so that a plan of one robot
- * does not pay numpy's cost per step: a plan is some 70 steps of a few microseconds each.
+ * does not pay numpy's cost per step: a plan is some 70 steps of ten microseconds or so each.
  *
  * Part of the unity build of module.c: include only from there, after hybrid.c and hopper.c.
  */

@@ -176,7 +176,7 @@ class HopMPC(PilotILQR):
         self._pilot._n = n
         self._pilot._allocate(n)
         self._pilot._start(np.ones(n, dtype=bool))
-        self._probe = HopperController(self.params, self.config, **self.hopper_settings)  # for the hopper's derivative
+        self._probe = HopperController(self.params, self.config, **self.hopper_settings)  # the numpy rollout's differences
         self._allocate_held(n)
 
     def _start(self, rows: np.ndarray, batch: np.ndarray | None = None) -> None:

@@ -28,6 +28,7 @@ typedef struct {
 #define PAR(j) ((const leg_params *)c->a[j] + i * c->step[j])
 #define INT(j) ((int64_t *)c->a[j] + i * c->step[j])
 #define INT_ROW(j) ((int64_t *)c->a[j] + i * c->step[j] * c->cols[j]) /* robot i's row of int64 array argument j */
+#define OPTIONAL_ROW(j) (c->a[j] != NULL ? ROW(j) : NULL) /* ROW(j), or NULL where argument j is None */
 
 /* ------------------------------------------------------------------------- the dynamics (leg_env.physics) */
 
@@ -95,8 +96,6 @@ enum {
     RO_FLIGHT_TIME, RO_A, RO_B, RO_DU, RO_D
 };
 
-#define OPTIONAL_ROW(j) (c->a[j] != NULL ? ROW(j) : NULL)
-
 static void k_hop_rollout(call *c)
 {
     const int H = (int)(c->cols[RO_CORRECTIONS] / PLAN_NU);
@@ -162,7 +161,7 @@ static void k_rk4_jacobians(call *c)
         const leg_drive u = {ROW(2)[0], ROW(2)[1], *ROW(4), 0.0};
         leg_trig(ROW(0), &s1, &co1, &s2, &co2);
         rk4_control_jacobians(PAR(3), &u, ROW(0), ROW(1), ROW(5), c->x[6], (int)c->x[7], c->x[8], (int)c->k[9], (int)c->k[10], s1, co1,
-                              s2, co2, ROW(11), ROW(12), ROW(13), c->a[14] != NULL ? ROW(14) : NULL);
+                              s2, co2, ROW(11), ROW(12), ROW(13), OPTIONAL_ROW(14));
     }
 }
 
@@ -191,7 +190,7 @@ static void hybrid_rows(call *c, int jacobians)
         }
         int mode = (int)*INT(6);
         *INT(15) = hybrid_control_jacobians(PAR(3), &u, ROW(0), ROW(1), &mode, ROW(7), c->x[8], (int)c->x[9], c->x[10], s1, co1, s2,
-                                            co2, (int)c->k[12], &rec->tally, &rec->log, ROW(13), ROW(14), c->a[16] != NULL ? ROW(16) : NULL);
+                                            co2, (int)c->k[12], &rec->tally, &rec->log, ROW(13), ROW(14), OPTIONAL_ROW(16));
         *INT(6) = mode;
     }
 }

@@ -38,8 +38,10 @@ class ReferenceLaw:
         self.apex_gain = kw["apex_gain"]
         self.T_s, self.k_v, self.k_x = kw["stance_time"], kw["speed_gain"], kw["position_gain"]
         self.attitude_gains, self.friction_margin, self.swing_gains = kw["attitude_gains"], kw["friction_margin"], kw["swing_gains"]
+        self.dwell, self.dwell_gains = kw["dwell"], kw["dwell_gains"]
         self._x0, self._bias, self._apex = h._x0.copy(), h._bias.copy(), h._apex.copy()
         self._phase, self._was_flight = h._phase.copy(), h._was_flight.copy()
+        self._since_touchdown = h._since_touchdown.copy()
 
     def torque(self, obs: np.ndarray) -> np.ndarray:
         """Joint torques [N m] for observations ``(N, 22)``; advances the per-robot phase and apex bias."""
@@ -67,12 +69,16 @@ class ReferenceLaw:
         seen = touchdown & np.isfinite(self._apex)
         self._bias[seen] -= self.apex_gain * (self._apex[seen] - target[seen])
         self._phase[touchdown] = _CROUCH
+        self._since_touchdown[touchdown] = 0.0
         self._apex[~contact] = E_v[~contact] / (m * g)
         self._was_flight = ~contact
         E_star = m * g * (target + self._bias)
         L_low = self.L_lo - self.crouch[0] - self.crouch[1] * command
         crouch = contact & (self._phase == _CROUCH)
-        self._phase[crouch & (vy_com >= -0.05) & (L < L_low + 0.03)] = _PUSH
+        stopped = crouch & (vy_com >= -0.05) & (L < L_low + 0.03)  # at the crouch's bottom
+        self._phase[stopped & (self._since_touchdown >= self.dwell - 1e-9)] = _PUSH
+        self.dwelling = dwelling = stopped & (self._phase == _CROUCH)
+        self._since_touchdown[contact] += dt
         push = contact & (self._phase == _PUSH)
         self._phase[push & ((E_v >= E_star) | (q2 + wq2 * dt <= self.q2_lo))] = _RELEASE
         phase = self._phase
@@ -94,6 +100,8 @@ class ReferenceLaw:
         kH, kth = self.attitude_gains
         H = self._angular_momentum(wb, w1, w2, s1, c1, s2, c2)
         lam_x = (-kH * H - kth * p.I_b * thb - (rx - x_com_rel) * lam_y) / y_com
+        kp, kd = self.dwell_gains
+        lam_x = np.where(dwelling, m * (-kp * (x_com_rel - rx) - kd * vx_com), lam_x)  # the COM held over the foot
         cap = self.friction_margin * self.config.mu * lam_y
         lam_x = np.clip(lam_x, -cap, cap)
         tau_stance = self._stance_torques(obs, np.stack([lam_x, lam_y], axis=-1))

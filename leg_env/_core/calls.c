@@ -84,14 +84,14 @@ static void k_impact(call *c)
 static void k_hopper_torque(call *c)
 {
     EACH hopper_torque_one(PAR(2), (const double *)c->a[3], ROW(0), *ROW(1), ROW(4), ROW(5), INT(6),
-                           (unsigned char *)c->a[7] + i * c->step[7], ROW(8), ROW(9));
+                           (unsigned char *)c->a[7] + i * c->step[7], ROW(8), ROW(9), ROW(10));
 }
 
 /* ------------------------------------------------------------------------- the model-predictive plan (policies.ilqr) */
 
 /* The argument indices of hop_rollout (its row of module.c's table). */
 enum {
-    RO_Q, RO_QD, RO_MODE, RO_BIAS, RO_APEX, RO_PHASE, RO_WAS_FLIGHT, RO_COMMAND, RO_X_REF, RO_P, RO_GAINS, RO_CORRECTIONS, RO_K,
+    RO_Q, RO_QD, RO_MODE, RO_BIAS, RO_APEX, RO_PHASE, RO_WAS_FLIGHT, RO_SINCE_TOUCHDOWN, RO_COMMAND, RO_X_REF, RO_P, RO_GAINS, RO_CORRECTIONS, RO_K,
     RO_KK, RO_NOMINAL, RO_DT, RO_SUBSTEPS, RO_MAX_ANGLE, RO_MU, RO_LAW_STEP, RO_CLIP_SMOOTHING, RO_X, RO_MODES, RO_U, RO_V,
     RO_FLIGHT_TIME, RO_A, RO_B, RO_DU, RO_D
 };
@@ -102,7 +102,7 @@ static void k_hop_rollout(call *c)
     const plan_settings S = {c->x[RO_DT], c->x[RO_MAX_ANGLE], c->x[RO_MU], c->x[RO_LAW_STEP], c->x[RO_CLIP_SMOOTHING],
                              (int)c->x[RO_SUBSTEPS]};
     EACH {
-        const plan_pilot h = {*ROW(RO_BIAS), *ROW(RO_APEX), *INT(RO_PHASE), *((unsigned char *)c->a[RO_WAS_FLIGHT] + i)};
+        const plan_pilot h = {*ROW(RO_BIAS), *ROW(RO_APEX), *ROW(RO_SINCE_TOUCHDOWN), *INT(RO_PHASE), *((unsigned char *)c->a[RO_WAS_FLIGHT] + i)};
         hop_plan_one(PAR(RO_P), (const double *)c->a[RO_GAINS], &S, H, ROW(RO_Q), ROW(RO_QD), (int)*INT(RO_MODE), h, *ROW(RO_COMMAND),
                      *ROW(RO_X_REF), ROW(RO_CORRECTIONS), OPTIONAL_ROW(RO_K), OPTIONAL_ROW(RO_KK), OPTIONAL_ROW(RO_NOMINAL), ROW(RO_X),
                      INT_ROW(RO_MODES), ROW(RO_U), ROW(RO_V), ROW(RO_FLIGHT_TIME), OPTIONAL_ROW(RO_A), OPTIONAL_ROW(RO_B),

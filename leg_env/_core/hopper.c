@@ -37,6 +37,9 @@ enum {
     HG_LIM_KNEE,
     HG_KNEE_TD,     /* the knee angle of a leg of length L_td [rad] */
     HG_ALPHA_TD,    /* the virtual leg's angle from the thigh there [rad] */
+    HG_DWELL,       /* the shortest time from touchdown to the push [s] */
+    HG_DWELL_KP,    /* the COM's servo over the foot while it waits there [1/s^2, 1/s] */
+    HG_DWELL_KD,
     HOPPER_GAINS
 };
 
@@ -102,9 +105,9 @@ static void hop_stance_torques(const leg_params *P, const double *G, double s1, 
 
 /* One robot's torques tau (2) and its COM's horizontal velocity vx_com from the law's reading o (HOPPER_INPUTS) and
  * the COM's dead-reckoned drift x0; advances the apex bias, the last flight's apex (NaN before the first), the stance
- * phase and whether the last step was in flight. */
+ * phase, whether the last step was in flight and the time on the ground since the last touchdown. */
 static void hopper_torque_one(const leg_params *P, const double *G, const double *o, double x0, double *bias, double *apex,
-                              int64_t *phase, unsigned char *was_flight, double *tau, double *vx_com_out)
+                              int64_t *phase, unsigned char *was_flight, double *since_touchdown, double *tau, double *vx_com_out)
 {
     const leg_flight_inertia F = flight_inertia(P);
     const double m = F.m, a = F.a, b = F.b;
@@ -130,15 +133,21 @@ static void hopper_torque_one(const leg_params *P, const double *G, const double
     const int touchdown = contact && *was_flight;
     if (touchdown && isfinite(*apex))
         *bias -= G[HG_APEX_GAIN] * (*apex - target);
-    if (touchdown)
+    if (touchdown) {
         *phase = HOP_CROUCH;
+        *since_touchdown = 0.0;
+    }
     if (!contact)
         *apex = E_v / (m * g);
     *was_flight = !contact;
     const double E_star = m * g * (target + *bias);
     const double L_low = G[HG_L_LO] - G[HG_CROUCH0] - G[HG_CROUCH1] * command;
-    if (contact && *phase == HOP_CROUCH && vy_com >= -0.05 && L < L_low + 0.03)
+    const int stopped = contact && *phase == HOP_CROUCH && vy_com >= -0.05 && L < L_low + 0.03; /* the crouch's bottom */
+    if (stopped && *since_touchdown >= G[HG_DWELL] - 1e-9)
         *phase = HOP_PUSH;
+    const int dwelling = stopped && *phase == HOP_CROUCH; /* at the bottom, waiting out the dwell */
+    if (contact)
+        *since_touchdown += dt;
     if (contact && *phase == HOP_PUSH && (E_v >= E_star || q2 + wq2 * dt <= G[HG_Q2_LO]))
         *phase = HOP_RELEASE;
 
@@ -159,6 +168,8 @@ static void hopper_torque_one(const leg_params *P, const double *G, const double
     /* 3. attitude: the ground force's moment about the COM steers H and the torso angle to zero */
     const double H = hop_angular_momentum(P, m, wb, w1, w2, s1, c1, s2, c2);
     double lam_x = (-G[HG_K_H] * H - G[HG_K_TH] * P->I_b * thb - (rx - x_com_rel) * lam_y) / y_com;
+    if (dwelling) /* the COM held over the foot instead: a long stance on the point foot falls otherwise */
+        lam_x = m * (-G[HG_DWELL_KP] * (x_com_rel - rx) - G[HG_DWELL_KD] * vx_com);
     const double cap = G[HG_FRICTION] * G[HG_MU] * lam_y;
     lam_x = hop_clip(lam_x, -cap, cap);
     double tau_stance[2];

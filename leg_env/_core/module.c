@@ -139,19 +139,19 @@ static const entry ENTRIES[] = {
      {INOUT(q, 5), INOUT(qd, 5), IN(tau, 2), PARAMS, IN(load, 1), IN(anchor, 2), STEP_RULE, FLAG(stance), FLAG(follow),
       OUT(lam_mean, 2), OUT(A, 100), OUT(B, 20), {"P", 'd', 'N', 'o', 120, ANY, OPT_NONE}}},
     {"hopper_torque", "The hopping controller's torques tau (N, 2) and COM speed vx_com (N,) from its reading obs (N, 11) of the "
-                      "observation and the dead-reckoned drift x0, advancing bias, apex, phase and was_flight (policies.hopper).",
+                      "observation and the dead-reckoned drift x0, advancing bias, apex, phase, was_flight and since_touchdown (policies.hopper).",
      k_hopper_torque, NULL, RELEASED,
      {IN(obs, HOPPER_INPUTS), IN(x0, 1), PARAMS, {"gains", 'd', '1', 'i', HOPPER_GAINS, ANY, 0}, INOUT(bias, 1), INOUT(apex, 1),
-      {"phase", 'q', 'N', 'u', 1, HOP_CROUCH, HOP_RELEASE, 0}, {"was_flight", '?', 'N', 'u', 1, ANY, 0}, OUT(tau, 2),
+      {"phase", 'q', 'N', 'u', 1, HOP_CROUCH, HOP_RELEASE, 0}, {"was_flight", '?', 'N', 'u', 1, ANY, 0}, INOUT(since_touchdown, 1), OUT(tau, 2),
       OUT(vx_com, 1)}},
-    {"hop_rollout", "Plans of H control steps from (q, qd, mode), the hopper's state (bias, apex, phase, was_flight) and its command and "
+    {"hop_rollout", "Plans of H control steps from (q, qd, mode), the hopper's state (bias, apex, phase, was_flight, since_touchdown) and its command and "
                     "COM start x_ref: the hopper's law plus corrections (N, 2H) (plus, each unless None, k (N, 2H) and K (N, 2H, 10) (x - "
                     "nominal (N, H + 1, 10), None: 0)), clipped, on hybrid_step; the states X (N, H + 1, 10), modes, actions U, "
                     "applied corrections V, time in flight, and each unless None the closed loop's A, B, Du = D dpi/dx and the clip's "
                     "derivative D (any given: the step's Jacobians are formed).",
      k_hop_rollout, check_hop_rollout, RELEASED,
      {IN(q, 5), IN(qd, 5), {"mode", 'q', 'N', 'i', 1, LEG_STICK, LEG_FLIGHT, 0}, IN(bias, 1), IN(apex, 1),
-      {"phase", 'q', 'N', 'i', 1, HOP_CROUCH, HOP_RELEASE, 0}, {"was_flight", '?', 'N', 'i', 1, ANY, 0}, IN(command, 1), IN(x_ref, 1),
+      {"phase", 'q', 'N', 'i', 1, HOP_CROUCH, HOP_RELEASE, 0}, {"was_flight", '?', 'N', 'i', 1, ANY, 0}, IN(since_touchdown, 1), IN(command, 1), IN(x_ref, 1),
       PARAMS, {"gains", 'd', '1', 'i', HOPPER_GAINS, ANY, 0}, IN(corrections, 0), {"k", 'd', 'N', 'i', 0, ANY, OPT_NONE},
       {"K", 'd', 'N', 'i', 0, ANY, OPT_NONE}, {"nominal", 'd', 'N', 'i', 0, ANY, OPT_NONE}, STEP_RULE, REAL(mu, 0.0, DBL_MAX, 0),
       REAL(law_step, 0.0, DBL_MAX, OPT_OPEN), REAL(clip_smoothing, 0.0, DBL_MAX, 0), OUT(X, 0), {"modes", 'q', 'N', 'o', 0, ANY, 0},

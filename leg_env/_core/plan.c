@@ -18,7 +18,7 @@
 
 /* The hopper's per-robot state (policies.hopper.HopperController's): what a plan starts from and carries. */
 typedef struct {
-    double bias, apex;
+    double bias, apex, since_touchdown;
     int64_t phase;
     unsigned char was_flight;
 } plan_pilot;
@@ -49,7 +49,7 @@ static void plan_law(const leg_params *P, const double *G, const double *x, int 
     const double o[HOPPER_INPUTS] = {x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[1], mode != LEG_FLIGHT ? 1.0 : 0.0, command};
     double pos[2], vel[2], tau[2], vx_com;
     com_one(P, x, x + LEG_NQ, pos, vel);
-    hopper_torque_one(P, G, o, pos[0] - x_ref, &h->bias, &h->apex, &h->phase, &h->was_flight, tau, &vx_com);
+    hopper_torque_one(P, G, o, pos[0] - x_ref, &h->bias, &h->apex, &h->phase, &h->was_flight, &h->since_touchdown, tau, &vx_com);
     a[0] = tau[0] / G[HG_LIM_HIP];
     a[1] = tau[1] / G[HG_LIM_KNEE];
 }

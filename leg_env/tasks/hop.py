@@ -95,7 +95,8 @@ held-out episodes (``policies/baselines/hopper``) the hopper survives 95% with 1
 1.78 cm, a drift of 6.24 cm and a tilt of 4.6 degrees, changing its action by 0.063 a step with 14.2% of the entries
 saturated, on 43.8 W and a peak force of 2.12 body weights (over all its episodes). The model-predictive controller
 (``policies.mpc``: iLQR through the contact events around the hopper, ``policies/baselines/mpc_hop``) survives every
-episode with an apex error of 0.78 cm and a drift of 3.74 cm, on 46.7 W.
+episode with an apex error of 0.74 cm and a drift of 1.53 cm, on 39.3 W, and meets every bar: 11.2 hops an episode,
+from a dwell of 0.45 s at each crouch's bottom.
 
 ## PPO from scratch
 The configuration of ``train/hyperparams/ppo.yml`` is plain PPO with one curriculum, of the commands: 1024 envs,

@@ -37,7 +37,7 @@ FAST_PUSHES = dict(first_push=(0.05, 0.15), push_interval=(0.1, 0.2), push_force
 KWARGS = {
     "leg_env/PlanarLegStance-v0": dict(reset_noise_scale=0.05, ctrl_cost_weight=0.02),
     "leg_env/PlanarLegBalance-v1": dict(ctrl_cost_weight=0.02, params={"m_b": 9.0}),
-    "leg_env/PlanarLegPush-v2": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}),
+    "leg_env/PlanarLegPush-v2": dict(FAST_PUSHES, com_weight=2.0, params={"l2": 0.55}, quiet_share=0.4, quiet_flight_scale=3.0),
     "leg_env/PlanarLegHop-v4": dict(command_range=(0.06, 0.12), impact_weight=0.7, reset_noise_scale=0.03),
 }
 
@@ -276,6 +276,60 @@ def test_push_schedule_follows_the_config_and_is_not_observed():
         seen.append(info["push_force"])
         assert obs.shape == (21,)
     assert seen[:first] == [0.0] * first and seen[first:] == [force] * 10
+
+
+def test_quiet_episodes_have_no_push_and_leave_the_pushed_episodes_as_drawn():
+    """``quiet_share``: that share of the episodes (one more uniform, the last of the reset's draws) has no push at
+    all; the other episodes' schedules are the ones drawn without quiet episodes, and without them (the default)
+    the env draws what it always drew."""
+    plain = gym.make("leg_env/PlanarLegPush-v2").unwrapped
+    mixed = gym.make("leg_env/PlanarLegPush-v2", quiet_share=0.3).unwrapped
+    assert plain.task.draws(plain.config) == 24 and mixed.task.draws(mixed.config) == 25
+    quiet = []
+    for seed in range(300):
+        plain.reset(seed=seed)
+        mixed.reset(seed=seed)
+        assert not plain._state["quiet"][0]
+        quiet.append(bool(mixed._state["quiet"][0]))
+        if quiet[-1]:
+            assert np.all(mixed._state["push_start"][0] >= 2**30)
+        else:
+            assert np.array_equal(mixed._state["push_start"][0], plain._state["push_start"][0])
+            assert np.array_equal(mixed._state["push_force"][0], plain._state["push_force"][0])
+    assert abs(np.mean(quiet) - 0.3) < 4 * np.sqrt(0.3 * 0.7 / 300)  # a binomial share, 4 standard deviations
+    env = gym.make("leg_env/PlanarLegPush-v2", quiet_share=1.0, first_push=(0.01, 0.02), push_interval=(0.1, 0.1)).unwrapped
+    env.reset(seed=2)
+    hold = (env.nominal.tau / np.asarray(env.config.torque_limit)).astype(np.float32)
+    assert all(env.step(hold)[4]["push_force"] == 0.0 for _ in range(300))
+
+
+def test_quiet_scales_charge_flight_and_the_actions_change_in_quiet_episodes_only():
+    """In a quiet episode ``reward_unilateral`` is ``-quiet_flight_scale unilateral_weight flight_time / dt`` and
+    ``reward_action_rate`` ``quiet_change_scale`` times the task's charge; the motion and every other term are the
+    unscaled episode's. In an episode with pushes the scales change nothing."""
+    rng = np.random.default_rng(4)
+    acts = np.repeat(rng.uniform(-1.0, 1.0, size=(12, 2)), 5, axis=0).astype(np.float32)  # held 5 steps: hops
+    for share, scaled in ((1.0, True), (0.0, False)):
+        kw = dict(quiet_share=share, action_change_weight=0.1)
+        base = gym.make("leg_env/PlanarLegPush-v2", **kw).unwrapped
+        env = gym.make("leg_env/PlanarLegPush-v2", quiet_flight_scale=6.0, quiet_change_scale=3.0, **kw).unwrapped
+        base.reset(seed=9)
+        env.reset(seed=9)
+        flight = 0.0
+        for a in acts:
+            o0, r0, t0, _, i0 = base.step(a)
+            o1, r1, t1, _, i1 = env.step(a)
+            assert np.array_equal(o0, o1) and t0 == t1
+            flight += i1["flight_time"]
+            k_flight, k_change = (6.0, 3.0) if scaled else (1.0, 1.0)
+            expected = -k_flight * env.config.unilateral_weight * i1["flight_time"] / env.dt
+            assert i1["reward_unilateral"] == pytest.approx(expected, rel=1e-12, abs=0.0)
+            assert i1["reward_action_rate"] == pytest.approx(k_change * i0["reward_action_rate"], rel=1e-12, abs=0.0)
+            for name in set(env.task.reward_keys) - {"reward_unilateral", "reward_action_rate"}:
+                assert i1[name] == i0[name]
+            if t0:
+                break
+        assert flight > 0.0  # the episode did leave the ground
 
 
 def test_push_moves_the_robot_as_the_momentum_balance_says():
@@ -752,6 +806,10 @@ BAD_CONFIGS = [
     (PUSH, {"com_weight": -1.0}, ValueError, "com_weight"),
     (PUSH, {"com_weight": True}, TypeError, "com_weight"),
     (PUSH, {"com_weight": 10**400}, ValueError, "com_weight"),
+    (PUSH, {"quiet_share": 1.5}, ValueError, "quiet_share"),
+    (PUSH, {"quiet_share": float("nan")}, ValueError, "quiet_share"),
+    (PUSH, {"quiet_flight_scale": -1.0}, ValueError, "quiet_flight_scale"),
+    (PUSH, {"quiet_change_scale": "2"}, TypeError, "quiet_change_scale"),
     (PUSH, {"unilateral_weight": "0.5"}, TypeError, "unilateral_weight"),
     (PUSH, {"contact": "pinned"}, ValueError, "contact"),
     (HOP, {"contact": "pinned"}, ValueError, "contact"),

@@ -252,6 +252,10 @@ static void push_assess(const env_batch *b, Py_ssize_t i, const leg_flight_inert
     if (evaluate(b, i, shared, o->terms, PUSH_TERMS)) {
         const double dx = o->com[0] - t->x_com0;
         o->terms[PUSH_TERMS - 1] = -b->settings->task.push.w_com * dx * dx;
+        if (t->quiet) { /* an episode no push comes in: its flight (term 2) and action's change (term 5) scaled */
+            o->terms[2] *= b->settings->task.push.quiet_flight_scale;
+            o->terms[5] *= b->settings->task.push.quiet_change_scale;
+        }
         b->obs[i * b->obs_cols + OBS_PUSH_COM_DRIFT] = (float)dx;
     }
     guard_observation(b, i, kept, PUSH_TERMS);

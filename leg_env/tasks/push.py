@@ -28,6 +28,12 @@ sign is + or - with probability 1/2 and its magnitude is uniform in ``push_force
 scheduled push (at least 15 s in) there are none. The push is not in the observation; ``info["push_force"]``
 is the force held over the step, ``info["work_push"]`` its work.
 
+Quiet episodes, a training option (all off by default): with ``quiet_share`` > 0 one more uniform, drawn after the
+pushes', makes that share of the episodes quiet, with no push at all (the other episodes' pushes are the ones drawn
+without the option). In a quiet episode the flight charge and the action's change charge are multiplied by
+``quiet_flight_scale`` and ``quiet_change_scale``, so that a hop or a jitter with nothing to recover from can cost
+more than one after a push; the policy is not told which episode it is in.
+
 ## Action and Observation Spaces
 ``Box(-1, 1, (2,))`` torques, as ``PlanarLegStance``. ``Box((21,), float32)``: the 18 entries of
 ``PlanarLegStance`` on the unilateral ground; entry 18 (``leg_env.tasks.push.OBS_COM_DRIFT``): the
@@ -71,6 +77,9 @@ terminate, ``info["ending"]`` naming which; 1000 steps). Every ``PushConfig`` fi
 | `first_push`     | (0.8, 1.2)    | range of the first push's start [s]                            |
 | `push_interval`  | (2.0, 3.0)    | range of the time between push starts [s]                      |
 | `com_weight`     | 1.0           | per m^2 of whole-body COM displacement along x                 |
+| `quiet_share`    | 0.0           | share of the episodes with no push at all, in [0, 1]           |
+| `quiet_flight_scale` | 1.0       | in a quiet episode, `reward_unilateral` times this             |
+| `quiet_change_scale` | 1.0       | in a quiet episode, `reward_action_rate` times this            |
 | `unilateral_weight` | 0.5        | per unit of flight time / dt                                   |
 | `drift_angle_weight` | 10.0      | per rad^2 of torso tilt                                        |
 | `ctrl_cost_weight` | 0.05        | per unit of `|a|^2`                                            |
@@ -164,6 +173,9 @@ PUSH_RANGES = {
     "first_push": (0.0, 1.0e4, "s"),
     "push_interval": (0.0, 1.0e4, "s"),
     "com_weight": (0.0, _BIG, ""),
+    "quiet_share": (0.0, 1.0, ""),
+    "quiet_flight_scale": (0.0, _BIG, ""),
+    "quiet_change_scale": (0.0, _BIG, ""),
 }
 """Accepted ranges of the ``PushConfig`` fields (``(low, high, unit)``; ``push_duration`` and the interval
 must be positive)."""
@@ -188,6 +200,9 @@ class PushConfig(StanceConfig):
     first_push: tuple = (0.8, 1.2)  # range of the first push's start [s]
     push_interval: tuple = (2.0, 3.0)  # range of the time between push starts [s]
     com_weight: float = 1.0  # per m^2 of whole-body COM displacement along x
+    quiet_share: float = 0.0  # share of the episodes with no push at all (drawn at each reset)
+    quiet_flight_scale: float = 1.0  # in such an episode, the flight charge (reward_unilateral) times this
+    quiet_change_scale: float = 1.0  # in such an episode, the action's change charge (reward_action_rate) times this
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -197,7 +212,7 @@ class PushConfig(StanceConfig):
             if not value[0] <= value[1]:
                 raise ValueError(f"PushConfig.{name} must be (low, high) with low <= high, got {value!r}")
             object.__setattr__(self, name, value)
-        for name in ("push_duration", "com_weight"):
+        for name in ("push_duration", "com_weight", "quiet_share", "quiet_flight_scale", "quiet_change_scale"):
             lo, hi, unit = PUSH_RANGES[name]
             value = checks.real(f"PushConfig.{name}", getattr(self, name), lo, hi, lo_open=name == "push_duration", unit=unit)
             object.__setattr__(self, name, value)
@@ -212,8 +227,9 @@ class PushConfig(StanceConfig):
         return max(1, int(round(self.push_duration / self.dt)))
 
     def task_settings(self, row: np.ndarray) -> None:
-        """The push's length in control steps and the COM weight, in its ``settings`` row."""
+        """The push's length in control steps, the COM weight and the quiet episodes' scales, in its ``settings`` row."""
         row["push_steps"], row["w_com"] = self.push_steps, self.com_weight
+        row["quiet_flight_scale"], row["quiet_change_scale"] = self.quiet_flight_scale, self.quiet_change_scale
 
 
 def observation_space(params, config: PushConfig):
@@ -226,25 +242,36 @@ def observation_space(params, config: PushConfig):
 
 
 def _draws(config: PushConfig) -> int:
-    return _DRAWS_PER_PUSH * MAX_PUSHES
+    """3 uniforms a push, and with ``quiet_share`` > 0 one more, last, that decides whether the episode is quiet
+    (so that a task without quiet episodes draws what it always drew)."""
+    return _DRAWS_PER_PUSH * MAX_PUSHES + (config.quiet_share > 0)
 
 
 def _columns(draws: np.ndarray, config: PushConfig) -> dict:
-    """The schedule of ``k`` robots from their ``(k, 3 MAX_PUSHES)`` uniforms: each push's start and force.
+    """The schedule of ``k`` robots from their ``(k, _draws(config))`` uniforms: each push's start and force, and
+    whether the episode is quiet.
 
-    Push ``j`` uses draws ``3 j`` (start time), ``3 j + 1`` (sign) and ``3 j + 2`` (magnitude). Row by row
-    the same arithmetic whatever ``k`` is, so a batch's schedules are the single env's bit for bit.
+    Push ``j`` uses draws ``3 j`` (start time), ``3 j + 1`` (sign) and ``3 j + 2`` (magnitude); a quiet episode
+    (draw ``3 MAX_PUSHES`` below ``quiet_share``) has no push at all. Row by row the same arithmetic whatever ``k``
+    is, so a batch's schedules are the single env's bit for bit.
     """
     k = draws.shape[0]
-    u = draws.reshape(k, MAX_PUSHES, _DRAWS_PER_PUSH)
+    n = _DRAWS_PER_PUSH * MAX_PUSHES
+    quiet = draws[:, n] < config.quiet_share if draws.shape[1] > n else np.zeros(k, dtype=bool)
+    u = draws[:, :n].reshape(k, MAX_PUSHES, _DRAWS_PER_PUSH)
     (f0, f1), (i0, i1), (m0, m1) = config.first_push, config.push_interval, config.push_force
     gaps = np.empty((k, MAX_PUSHES))
     gaps[:, 0] = f0 + (f1 - f0) * u[:, 0, 0]
     gaps[:, 1:] = i0 + (i1 - i0) * u[:, 1:, 0]
     times = np.cumsum(gaps, axis=1)
     sign = np.where(u[:, :, 1] < 0.5, 1.0, -1.0)
+    times[quiet] = np.inf
     # the start's control step (a push past 2^30 steps, 124 days at 100 Hz, never comes)
-    return {"push_start": np.minimum(np.rint(times / config.dt), 2.0**30), "push_force": sign * (m0 + (m1 - m0) * u[:, :, 2])}
+    return {
+        "push_start": np.minimum(np.rint(times / config.dt), 2.0**30),
+        "push_force": sign * (m0 + (m1 - m0) * u[:, :, 2]),
+        "quiet": quiet,
+    }
 
 
 TASK = Task(

@@ -1,6 +1,7 @@
 """Soak: millions of env-steps of abuse through ``gymnasium.make_vec``, counting what went wrong.
 
-For each case of ``CASES`` (both contact models of ``leg_env/PlanarLegStance-v0``, the push task and every hop version, and
+For each case of ``CASES`` (both contact models of ``leg_env/PlanarLegStance-v0``, the push task (with and without quiet
+episodes) and every hop version, and
 each of them again with a robot per sub-env drawn at every reset, ``randomize=True``) and
 each action kind (``random``: uniform in [-1, 1]; ``bang_bang``: every joint at -1 or +1, each flipping
 with probability 0.1 per step), at ten times the default torque limit (``torque_limit=500``), this steps
@@ -42,6 +43,8 @@ CASES = {  # name: (env id, keyword arguments)
     "stance pinned randomised": (leg_env.ENV_ID, {"contact": "pinned", "randomize": True}),
     "stance unilateral randomised": (leg_env.ENV_ID, {"contact": "unilateral", "randomize": True}),
     "push randomised": ("leg_env/PlanarLegPush-v2", {"randomize": True}),
+    # quiet episodes (no push, flight and the action's change charged more): a training option
+    "push quiet": ("leg_env/PlanarLegPush-v2", {"quiet_share": 0.5, "quiet_flight_scale": 24.0, "quiet_change_scale": 5.0, "action_change_weight": 0.2}),
     "hop randomised": ("leg_env/PlanarLegHop-v4", {"randomize": True}),
     "hop command schedule": ("leg_env/PlanarLegHop-v4", {"command_period": 0.5}),  # the training setting
     "hop training charges": ("leg_env/PlanarLegHop-v4", {"drift_near_weight": 390.0, "drift_near_cap": 1.0, "limit_weight": 400.0}),

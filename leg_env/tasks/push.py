@@ -244,7 +244,7 @@ def observation_space(params, config: PushConfig):
 def _draws(config: PushConfig) -> int:
     """3 uniforms a push, and with ``quiet_share`` > 0 one more, last, that decides whether the episode is quiet
     (so that a task without quiet episodes draws what it always drew)."""
-    return _DRAWS_PER_PUSH * MAX_PUSHES + (config.quiet_share > 0)
+    return _DRAWS_PER_PUSH * MAX_PUSHES + int(config.quiet_share > 0)
 
 
 def _columns(draws: np.ndarray, config: PushConfig) -> dict:

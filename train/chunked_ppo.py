@@ -22,11 +22,19 @@ about speed:
 * In the rollouts, the step's infos are searched for episode statistics with one pass over the list rather than two
   dictionary lookups per env (``_update_info_buffer``, the same buffers).
 
-One option changes the update, and is off by default: ``bounds_loss_coef`` adds to the loss a charge on the policy's
-mean action beyond its box (as rl_games's ``bounds_loss_coef``). SB3 clips a sampled action to the action space, so
-where the mean lies far outside it the sampled actions are all the bound: the exploration noise does nothing there
-and the mean drifts without a signal. With the charge the mean stays near the box, where the noise still moves the
-action.
+Two options change the update, both off by default:
+
+* ``bounds_loss_coef`` adds to the loss a charge on the policy's mean action beyond its box (as rl_games's
+  ``bounds_loss_coef``). SB3 clips a sampled action to the action space, so where the mean lies far outside it the
+  sampled actions are all the bound: the exploration noise does nothing there and the mean drifts without a signal.
+  With the charge the mean stays near the box, where the noise still moves the action.
+* ``temporal_smoothness_coef`` and ``spatial_smoothness_coef`` regularise the mean action as CAPS does (Mysore et
+  al., "Regularizing Action Policies for Smooth Control with Reinforcement Learning", ICRA 2021): the distance
+  ``|mu(s_t) - mu(s_t+1)|_2`` between the mean actions of consecutive observations of an episode in the rollout, and
+  ``|mu(s) - mu(s + e)|_2`` with ``e`` Gaussian of std ``spatial_smoothness_sigma`` in the observation the policy
+  sees (normalised, where ``VecNormalize`` normalises it). A charge on the action's change in the task's reward is
+  paid on the sampled actions, exploration noise included, so it also pushes the noise down; these charge the mean
+  action only, and leave the exploration to the policy loss.
 
 ``benchmarks/bench_train.py`` measures each against SB3's own PPO in the same run
 (``benchmarks/results/train_speed.md``). Minibatches no larger than a chunk, in float32, take SB3's ``train``
@@ -43,10 +51,14 @@ from stable_baselines3.common.utils import explained_variance
 
 from train.machine import TANHS, UPDATE_PRECISIONS
 
-__all__ = ["ChunkedPPO", "FastTanh", "BOUNDS_MARGIN", "UPDATE_CHUNK"]
+__all__ = ["ChunkedPPO", "FastTanh", "BOUNDS_MARGIN", "UPDATE_CHUNK", "SMOOTHNESS_EPS"]
 
 BOUNDS_MARGIN = 1.1
 """``bounds_loss_coef`` charges a mean action beyond this many half-widths of the action box from its centre."""
+
+SMOOTHNESS_EPS = 1.0e-8
+"""Added to a squared distance under the square root of the smoothness charges: the gradient of ``|d|_2`` is
+bounded at ``d = 0``."""
 
 UPDATE_CHUNK = 4096
 """Samples per chunk and torch thread by default: on one thread the fastest of 1,024-16,384 here; on two, 8,192 was."""
@@ -110,21 +122,32 @@ class ChunkedPPO(PPO):
             ``mu`` of a ``Box`` action space beyond ``BOUNDS_MARGIN`` (1.1) times the box's half-width from its
             centre: ``sum_j max(0, mu_j - b_j)^2 + max(0, a_j - mu_j)^2`` per sample, ``[a_j, b_j]`` the widened box,
             averaged over the minibatch and added to PPO's loss; ``train/bounds_loss`` logs it. The rollouts are
-            unchanged. Every other argument is PPO's.
+            unchanged.
+        temporal_smoothness_coef: the weight (a number >= 0; 0, the default, charges nothing) of
+            ``|mu(s_t) - mu(s_t+1)|_2`` per sample whose next observation in the rollout belongs to the same episode
+            (not the rollout's last step, nor an episode's last), summed and divided by the minibatch's size;
+            ``train/temporal_smoothness`` logs its mean over those samples.
+        spatial_smoothness_coef: the weight (>= 0; 0 charges nothing) of ``|mu(s) - mu(s + e)|_2`` per sample,
+            ``e ~ N(0, spatial_smoothness_sigma^2 I)`` drawn afresh for each sample and each minibatch;
+            ``train/spatial_smoothness`` logs its mean.
+        spatial_smoothness_sigma: the std of ``e`` (a number > 0, 0.05 by default), in the units of the observation
+            the policy sees. Every other argument is PPO's.
 
     Every ``torch.nn.Tanh`` of the policy is a ``FastTanh`` (the same function, faster); a saved model is SB3's
     and loads as ``PPO`` too.
 
     Raises:
         TypeError: ``update_chunk`` is not an int, ``update_precision`` or ``tanh`` not a str, ``bounds_loss_coef``
-            not a real number.
+            or a smoothness setting not a real number.
         ValueError: ``update_chunk`` is not positive, ``update_precision`` not one of ``UPDATE_PRECISIONS``, ``tanh``
-            not one of ``TANHS``, ``bounds_loss_coef`` negative or not finite, or positive with an action space that
-            is not a ``Box``.
+            not one of ``TANHS``, ``bounds_loss_coef`` or a smoothness weight negative or not finite,
+            ``spatial_smoothness_sigma`` not positive and finite, or a charge on the mean action with an action space
+            that is not a ``Box``.
     """
 
     def __init__(self, *args, update_chunk: int | None = None, update_precision: str = "float32", tanh: str = "fast",
-                 bounds_loss_coef: float = 0.0, **kwargs):
+                 bounds_loss_coef: float = 0.0, temporal_smoothness_coef: float = 0.0, spatial_smoothness_coef: float = 0.0,
+                 spatial_smoothness_sigma: float = 0.05, **kwargs):
         if update_chunk is not None:
             if isinstance(update_chunk, bool) or not isinstance(update_chunk, (int, np.integer)):
                 raise TypeError(f"update_chunk must be an int or None, got {type(update_chunk).__name__}")
@@ -135,16 +158,28 @@ class ChunkedPPO(PPO):
             raise TypeError(f"update_precision must be a str, got {type(update_precision).__name__}")
         if update_precision not in UPDATE_PRECISIONS:
             raise ValueError(f"update_precision must be one of {UPDATE_PRECISIONS}, got {update_precision!r}")
-        if isinstance(bounds_loss_coef, bool) or not isinstance(bounds_loss_coef, (int, float, np.integer, np.floating)):
-            raise TypeError(f"bounds_loss_coef must be a real number, got {type(bounds_loss_coef).__name__}")
-        if not (np.isfinite(bounds_loss_coef) and bounds_loss_coef >= 0):
-            raise ValueError(f"bounds_loss_coef must be finite and >= 0, got {bounds_loss_coef}")
+        for name, value in (("bounds_loss_coef", bounds_loss_coef), ("temporal_smoothness_coef", temporal_smoothness_coef),
+                            ("spatial_smoothness_coef", spatial_smoothness_coef), ("spatial_smoothness_sigma", spatial_smoothness_sigma)):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        if spatial_smoothness_sigma <= 0:
+            raise ValueError(f"spatial_smoothness_sigma must be positive, got {spatial_smoothness_sigma}")
         _check_tanh(tanh)
         self.update_chunk = update_chunk
         self.update_precision = update_precision
         self.tanh = tanh
         self.bounds_loss_coef = float(bounds_loss_coef)
+        self.temporal_smoothness_coef = float(temporal_smoothness_coef)
+        self.spatial_smoothness_coef = float(spatial_smoothness_coef)
+        self.spatial_smoothness_sigma = float(spatial_smoothness_sigma)
         super().__init__(*args, **kwargs)
+
+    @property
+    def _charges_mean(self) -> bool:
+        """Whether the update charges the mean action (bounds or smoothness)."""
+        return bool(self.bounds_loss_coef or self.temporal_smoothness_coef or self.spatial_smoothness_coef)
 
     def _update_info_buffer(self, infos: list[dict], dones: np.ndarray | None = None) -> None:
         """SB3's: the ``episode`` and ``is_success`` entries of the step's infos into the episode buffers, in the same
@@ -159,8 +194,12 @@ class ChunkedPPO(PPO):
                 self.ep_success_buffer.append(maybe_is_success)
 
     def _setup_model(self) -> None:
-        if self.bounds_loss_coef > 0 and not isinstance(self.action_space, spaces.Box):
-            raise ValueError(f"bounds_loss_coef applies to a Box action space, got {type(self.action_space).__name__}")
+        charges = [name for name in ("bounds_loss_coef", "temporal_smoothness_coef", "spatial_smoothness_coef") if getattr(self, name)]
+        if charges and not isinstance(self.action_space, spaces.Box):
+            raise ValueError(f"{', '.join(charges)} appl{'ies' if len(charges) == 1 else 'y'} to a Box action space, "
+                             f"got {type(self.action_space).__name__}")
+        if self.spatial_smoothness_coef and not isinstance(self.observation_space, spaces.Box):
+            raise ValueError(f"spatial_smoothness_coef applies to a Box observation space, got {type(self.observation_space).__name__}")
         super()._setup_model()
         self.use_tanh(self.tanh)
 
@@ -184,7 +223,7 @@ class ChunkedPPO(PPO):
     def train(self) -> None:
         """One PPO update on the rollout buffer (``PPO.train``), each minibatch's gradient summed over chunks."""
         chunk_size = self.chunk
-        if self.batch_size <= chunk_size and self.update_precision == "float32" and not self.bounds_loss_coef:
+        if self.batch_size <= chunk_size and self.update_precision == "float32" and not self._charges_mean:
             return super().train()
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
@@ -194,29 +233,39 @@ class ChunkedPPO(PPO):
             clip_range_vf = self.clip_range_vf(self._current_progress_remaining)  # type: ignore[operator]
 
         entropy_losses, pg_losses, value_losses, clip_fractions, bounds_losses = [], [], [], [], []
+        temporal_sums, spatial_sums = np.zeros(2), np.zeros(2)  # (sum of distances, samples)
         approx_kl_divs: list[float] = []
         loss_value = float("nan")
         continue_training = True
+        successors = self._successors() if self.temporal_smoothness_coef else None
         for epoch in range(self.n_epochs):
             approx_kl_divs = []
-            for rollout_data in self.rollout_buffer.get(self.batch_size):
+            for rollout_data, rows in self._minibatches(successors is not None):
                 batch = len(rollout_data.advantages)
+                nexts = None
+                if successors is not None:
+                    nexts = successors[0][rows], successors[1][rows]
                 advantages = rollout_data.advantages
                 if self.normalize_advantage and batch > 1:
                     advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
                 self.policy.optimizer.zero_grad()
-                sums = np.zeros(6)  # policy loss, value loss, entropy loss, clipped samples, KL estimate, bounds loss: sums over the minibatch
+                # sums over the minibatch: policy loss, value loss, entropy loss, clipped samples, KL estimate, bounds loss,
+                # temporal distances and their samples, spatial distances
+                sums = np.zeros(9)
                 for start in range(0, batch, chunk_size):
                     chunk = slice(start, start + chunk_size)
-                    sums += self._chunk_backward(rollout_data, advantages, chunk, batch, clip_range, clip_range_vf)
-                policy_loss, value_loss, entropy_loss, clipped, kl, bounds_loss = sums / batch
+                    sums += self._chunk_backward(rollout_data, advantages, chunk, batch, clip_range, clip_range_vf, nexts)
+                policy_loss, value_loss, entropy_loss, clipped, kl, bounds_loss = sums[:6] / batch
+                temporal_sums += sums[6:8]
+                spatial_sums += (sums[8], batch)
                 pg_losses.append(policy_loss)
                 value_losses.append(value_loss)
                 entropy_losses.append(entropy_loss)
                 clip_fractions.append(clipped)
                 approx_kl_divs.append(kl)
                 bounds_losses.append(bounds_loss)
-                loss_value = policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss + self.bounds_loss_coef * bounds_loss
+                loss_value = (policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss + self.bounds_loss_coef * bounds_loss
+                              + (self.temporal_smoothness_coef * sums[6] + self.spatial_smoothness_coef * sums[8]) / batch)
                 if self.target_kl is not None and kl > 1.5 * self.target_kl:
                     continue_training = False
                     if self.verbose >= 1:
@@ -237,6 +286,10 @@ class ChunkedPPO(PPO):
         self.logger.record("train/loss", loss_value)
         if self.bounds_loss_coef:
             self.logger.record("train/bounds_loss", np.mean(bounds_losses))
+        if self.temporal_smoothness_coef and temporal_sums[1]:
+            self.logger.record("train/temporal_smoothness", temporal_sums[0] / temporal_sums[1])
+        if self.spatial_smoothness_coef:
+            self.logger.record("train/spatial_smoothness", spatial_sums[0] / spatial_sums[1])
         self.logger.record("train/explained_variance", explained_var)
         if hasattr(self.policy, "log_std"):
             self.logger.record("train/std", th.exp(self.policy.log_std).mean().item())
@@ -245,10 +298,48 @@ class ChunkedPPO(PPO):
         if clip_range_vf is not None:
             self.logger.record("train/clip_range_vf", clip_range_vf)
 
+    def _minibatches(self, with_rows: bool):
+        """``(samples, rows)`` per minibatch of one epoch: ``RolloutBuffer.get``'s minibatches, and where ``with_rows``
+        the rows of the flattened buffer each holds (drawn as ``get`` draws them; else None)."""
+        if not with_rows:
+            for samples in self.rollout_buffer.get(self.batch_size):
+                yield samples, None
+            return
+        buffer = self.rollout_buffer
+        total = buffer.buffer_size * buffer.n_envs
+        if not buffer.generator_ready:
+            next(buffer.get(total))  # flattens the buffer's arrays in place, as get's first minibatch does
+        rows = np.random.permutation(total)
+        for start in range(0, total, self.batch_size):
+            chosen = rows[start:start + self.batch_size]
+            yield buffer._get_samples(chosen), chosen
+
+    def _successors(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(next_observations, has_next)`` of the rollout buffer's samples in its flattened order (env-major, as
+        ``RolloutBuffer.swap_and_flatten``): the observation the policy saw at the next step of the same env, and
+        whether that step exists in the rollout and belongs to the same episode (else the row is a copy, unused)."""
+        buffer = self.rollout_buffer
+        if buffer.generator_ready:
+            raise RuntimeError("the rollout buffer was already flattened: the successors are taken before")
+        obs = buffer.observations  # (n_steps, n_envs, *shape)
+        following = np.concatenate([obs[1:], obs[-1:]], axis=0)
+        has_next = np.zeros(buffer.episode_starts.shape, dtype=bool)
+        has_next[:-1] = buffer.episode_starts[1:] == 0
+        flat = buffer.swap_and_flatten
+        return flat(following), flat(has_next[..., None]).reshape(-1)
+
+    def _mean_actions(self, observations: th.Tensor) -> th.Tensor:
+        """The policy's mean action at ``observations``, its hidden layers in ``update_precision``."""
+        policy = self.policy
+        features = policy.extract_features(observations)
+        with th.autocast("cpu", dtype=th.bfloat16, enabled=self.update_precision == "bfloat16"):
+            latent_pi = policy.mlp_extractor.forward_actor(features if policy.share_features_extractor else features[0])
+        return policy.action_net(latent_pi.float())
+
     def _evaluate_actions(self, observations: th.Tensor, actions: th.Tensor):
         """``policy.evaluate_actions`` (the same operations), its hidden layers in ``update_precision``; also the
-        mean action when ``bounds_loss_coef`` charges it (else None)."""
-        if self.update_precision == "float32" and not self.bounds_loss_coef:
+        mean action when the update charges it (else None)."""
+        if self.update_precision == "float32" and not self._charges_mean:
             return (*self.policy.evaluate_actions(observations, actions), None)
         policy = self.policy
         features = policy.extract_features(observations)
@@ -260,7 +351,7 @@ class ChunkedPPO(PPO):
                 latent_vf = policy.mlp_extractor.forward_critic(features[1])
         distribution = policy._get_action_dist_from_latent(latent_pi.float())
         values = policy.value_net(latent_vf.float())
-        mean = distribution.distribution.mean if self.bounds_loss_coef else None
+        mean = distribution.distribution.mean if self._charges_mean else None
         return values, distribution.log_prob(actions), distribution.entropy(), mean
 
     def _bounds_loss(self, mean: th.Tensor) -> th.Tensor:
@@ -272,10 +363,12 @@ class ChunkedPPO(PPO):
         return ((mean - upper).clamp(min=0) ** 2 + (lower - mean).clamp(min=0) ** 2).sum()
 
     def _chunk_backward(self, data, advantages: th.Tensor, chunk: slice, batch: int, clip_range: float,
-                        clip_range_vf: float | None) -> np.ndarray:
+                        clip_range_vf: float | None, nexts: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """Back-propagate one chunk's share of the minibatch loss (its sums divided by the minibatch size ``batch``);
-        returns the chunk's sums of the policy loss, the value loss, the entropy loss, the clipped samples and the
-        KL estimate."""
+        returns the chunk's sums of the policy loss, the value loss, the entropy loss, the clipped samples, the KL
+        estimate, the bounds loss, the temporal distances and the samples they cover, and the spatial distances.
+        ``nexts``: the minibatch's next observations and whether each has one (``_successors``), with
+        ``temporal_smoothness_coef``."""
         actions = data.actions[chunk]
         if isinstance(self.action_space, spaces.Discrete):
             actions = actions.long().flatten()
@@ -290,13 +383,32 @@ class ChunkedPPO(PPO):
         value_loss = ((data.returns[chunk] - values_pred) ** 2).sum()
         entropy_loss = log_prob.sum() if entropy is None else -entropy.sum()
         loss = policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss
-        bounds_loss = 0.0
-        if mean is not None:
-            bounds_loss = self._bounds_loss(mean)
-            loss = loss + self.bounds_loss_coef * bounds_loss
-            bounds_loss = bounds_loss.item()
+        bounds_loss, temporal, covered, spatial = 0.0, 0.0, 0.0, 0.0
+        if self.bounds_loss_coef:
+            charge = self._bounds_loss(mean)
+            loss = loss + self.bounds_loss_coef * charge
+            bounds_loss = charge.item()
+        if nexts is not None:
+            has_next = th.as_tensor(nexts[1][chunk], device=mean.device)
+            if bool(has_next.any()):
+                following = self.rollout_buffer.to_torch(nexts[0][chunk][nexts[1][chunk]])
+                charge = _distances(mean[has_next], self._mean_actions(following)).sum()
+                loss = loss + self.temporal_smoothness_coef * charge
+                temporal, covered = charge.item(), float(has_next.sum())
+        if self.spatial_smoothness_coef:
+            observations = data.observations[chunk]
+            shifted = observations + self.spatial_smoothness_sigma * th.randn_like(observations)
+            charge = _distances(mean, self._mean_actions(shifted)).sum()
+            loss = loss + self.spatial_smoothness_coef * charge
+            spatial = charge.item()
         (loss / batch).backward()
         with th.no_grad():
             clipped = (th.abs(ratio - 1) > clip_range).sum()
             kl = ((ratio - 1) - log_ratio).sum()
-        return np.array([policy_loss.item(), value_loss.item(), entropy_loss.item(), clipped.item(), kl.item(), bounds_loss])
+        return np.array([policy_loss.item(), value_loss.item(), entropy_loss.item(), clipped.item(), kl.item(), bounds_loss,
+                         temporal, covered, spatial])
+
+
+def _distances(a: th.Tensor, b: th.Tensor) -> th.Tensor:
+    """``|a_i - b_i|_2`` per row, smoothed at 0 by ``SMOOTHNESS_EPS``."""
+    return th.sqrt(((a - b) ** 2).sum(dim=-1) + SMOOTHNESS_EPS)

@@ -34,6 +34,9 @@ PPO_KEYS = (
     "stats_window_size",
     "policy_kwargs",
     "bounds_loss_coef",  # train.chunked_ppo.ChunkedPPO's: a charge on the mean action beyond the action box
+    "temporal_smoothness_coef",  # ChunkedPPO's: the mean action's change between consecutive observations (CAPS)
+    "spatial_smoothness_coef",  # ChunkedPPO's: the mean action's change under a small noise on the observation (CAPS)
+    "spatial_smoothness_sigma",  # ChunkedPPO's: that noise's std
 )
 
 

@@ -137,7 +137,8 @@ _MAPPED = {
     "vf_coef": "vf_loss_coeff",
     "max_grad_norm": "grad_clip",
 }
-_REFUSED = ("target_kl", "use_sde", "sde_sample_freq", "callback", "bounds_loss_coef")
+_REFUSED = ("target_kl", "use_sde", "sde_sample_freq", "callback", "bounds_loss_coef", "temporal_smoothness_coef",
+            "spatial_smoothness_coef", "spatial_smoothness_sigma")
 
 
 def resolve_config(args: RLlibArgs) -> dict:

@@ -156,7 +156,10 @@ def test_unmapped_keys_are_errors_or_recorded(tmp_path):
         resolve_config(RLlibArgs(out=tmp_path, params=["callback:train.callbacks.ConfigSchedule"]))
     with pytest.raises(ValueError, match="bounds_loss_coef"):  # ChunkedPPO's charge on the mean action
         resolve_config(RLlibArgs(out=tmp_path, params=["bounds_loss_coef:0.05"]))
-    resolve_config(RLlibArgs(out=tmp_path, params=["bounds_loss_coef:0.0", "target_kl:null", "use_sde:false"]))  # off: nothing to refuse
+    with pytest.raises(ValueError, match="temporal_smoothness_coef"):  # ChunkedPPO's smoothness charge
+        resolve_config(RLlibArgs(out=tmp_path, params=["temporal_smoothness_coef:0.1"]))
+    resolve_config(RLlibArgs(out=tmp_path, params=["bounds_loss_coef:0.0", "target_kl:null", "use_sde:false",
+                                                   "temporal_smoothness_coef:0", "spatial_smoothness_coef:0"]))  # off: nothing to refuse
     with pytest.raises(ValueError, match="norm_obs"):
         resolve_config(RLlibArgs(out=tmp_path, params=["normalize:{norm_obs: true}"]))
     with pytest.raises(ValueError, match="clip_range must be a number"):  # a Zoo schedule of it has no counterpart

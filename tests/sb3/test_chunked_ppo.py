@@ -309,3 +309,138 @@ def test_bad_tanh(tanh, error):
     with pytest.raises(error, match="tanh"):
         model.use_tanh(tanh)
     assert model.tanh == "fast" and any(type(m) is FastTanh for m in model.policy.modules())
+
+
+class _RolloutCopy:
+    """An SB3 callback that keeps, at the end of each rollout (before the update), the buffer's observations and
+    episode starts and the policy's mean actions at them, computed by SB3's own ``get_distribution``, and a copy of
+    the policy."""
+
+    def __new__(cls):
+        import copy
+
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        class Copy(BaseCallback):
+            def _on_step(self) -> bool:
+                return True
+
+            def _on_rollout_end(self) -> None:
+                buffer = self.model.rollout_buffer
+                obs = torch.as_tensor(buffer.observations.reshape(-1, buffer.observations.shape[-1]))
+                with torch.no_grad():
+                    mean = self.model.policy.get_distribution(obs).distribution.mean.numpy()
+                self.copies.append((buffer.observations.copy(), buffer.episode_starts.copy(), mean.reshape(*buffer.observations.shape[:2], -1)))
+                self.policies.append(copy.deepcopy(self.model.policy))
+
+        keeper = Copy()
+        keeper.copies, keeper.policies = [], []
+        return keeper
+
+
+def _smoothed(temporal: float = 0.0, spatial: float = 0.0, sigma: float = 0.05, rollouts: int = 1, epochs: int = 1, lr: float = 1e-3):
+    """A model after ``rollouts`` rollouts of the push task, each followed by one update of ``epochs`` epochs on the
+    whole rollout as one minibatch, in chunks of 128; and the ``_RolloutCopy`` that kept the rollouts."""
+    torch.set_num_threads(1)
+    venv = make_sb3_vec_env(N_ENVS, seed=3, env_id="leg_env/PlanarLegPush-v2", per_env_info=False)
+    model = ChunkedPPO("MlpPolicy", venv, n_steps=N_STEPS, batch_size=N_ENVS * N_STEPS, n_epochs=epochs, learning_rate=lr,
+                       seed=0, device="cpu", update_chunk=128, temporal_smoothness_coef=temporal, spatial_smoothness_coef=spatial,
+                       spatial_smoothness_sigma=sigma, policy_kwargs={"net_arch": [32, 32]})
+    keeper = _RolloutCopy()
+    model.learn(rollouts * N_ENVS * N_STEPS, callback=keeper)
+    venv.close()
+    return model, keeper
+
+
+def _temporal_distance(obs, starts, mean) -> float:
+    """The mean of ``|mu(s_t) - mu(s_t+1)|_2`` (smoothed at 0 by ``SMOOTHNESS_EPS``, as charged) over the consecutive
+    steps of one episode in a rollout, from its arrays ``(n_steps, n_envs, ...)``."""
+    from train.chunked_ppo import SMOOTHNESS_EPS
+
+    d = np.sqrt(((mean[1:] - mean[:-1]) ** 2).sum(axis=-1) + SMOOTHNESS_EPS)
+    same = starts[1:] == 0
+    return float(d[same].mean())
+
+
+def test_temporal_smoothness_is_the_mean_actions_change_within_episodes():
+    """The logged charge of the first update's one minibatch (taken before the step) is the mean distance between the
+    mean actions of consecutive observations of an episode, computed here from the rollout with SB3's own
+    ``get_distribution``; the rollout holds episode ends, which the charge must skip."""
+    model, keeper = _smoothed(temporal=0.5)
+    obs, starts, mean = keeper.copies[0]
+    assert starts[1:].sum() > 0  # some episodes ended within the rollout
+    expected = _temporal_distance(obs, starts, mean)
+    all_pairs = float(np.linalg.norm(mean[1:] - mean[:-1], axis=-1).mean())
+    assert abs(all_pairs - expected) > 1e-3 * expected  # skipping the episode ends matters here
+    np.testing.assert_allclose(model.logger.name_to_value["train/temporal_smoothness"], expected, rtol=1e-5)
+
+
+@pytest.mark.parametrize("option", ["temporal", "spatial"])
+def test_smoothness_charges_make_the_mean_action_smooth(option):
+    """Weighted far above PPO's loss, each charge drives the mean action's change (between consecutive observations of
+    the last rollout, or under a noise of std 0.05 on its observations) far below what the same training without it
+    leaves."""
+    plain, plain_kept = _smoothed(rollouts=4, epochs=4)
+    charged, charged_kept = _smoothed(rollouts=4, epochs=4, **{option: 20.0})
+    if option == "temporal":
+        after_plain, after = (_temporal_distance(*kept.copies[-1]) for kept in (plain_kept, charged_kept))
+    else:
+        after_plain, after = (_spatial_distance(model.policy, kept.copies[-1][0], 0.05) for model, kept in
+                              ((plain, plain_kept), (charged, charged_kept)))
+    assert after_plain > 1e-3
+    assert after < 0.3 * after_plain, (after_plain, after)
+
+
+def _spatial_distance(policy, obs: np.ndarray, sigma: float, seed: int = 1) -> float:
+    """The mean over ``obs`` of ``|mu(s) - mu(s + e)|_2``, ``e ~ N(0, sigma^2 I)`` drawn here."""
+    obs = torch.as_tensor(obs.reshape(-1, obs.shape[-1]))
+    shifted = obs + sigma * torch.randn(obs.shape, generator=torch.Generator().manual_seed(seed))
+    with torch.no_grad():
+        a, b = (policy.get_distribution(x).distribution.mean for x in (obs, shifted))
+    return float(torch.linalg.norm(a - b, dim=-1).mean())
+
+
+@pytest.mark.parametrize("sigma", [0.05, 1.0])
+def test_spatial_smoothness_is_the_change_under_the_noise(sigma):
+    """The logged charge of the first update's one minibatch (taken before the step) is the mean action's change under
+    a noise of std ``sigma`` on the observation: a Monte Carlo estimate of it from the rollout with the policy before
+    the update, with noise drawn here, agrees within its sampling error (512 samples); a noise of another size does
+    not."""
+    model, keeper = _smoothed(spatial=0.5, sigma=sigma)
+    logged = model.logger.name_to_value["train/spatial_smoothness"]
+    policy, obs = keeper.policies[0], keeper.copies[0][0]
+    np.testing.assert_allclose(logged, _spatial_distance(policy, obs, sigma), rtol=0.15)
+    assert not np.isclose(logged, _spatial_distance(policy, obs, sigma / 4), rtol=0.3)
+
+
+def test_no_smoothness_charge_leaves_the_update_alone():
+    """Weights of 0 are the update without the options, bit for bit, and log nothing of them."""
+    torch.set_num_threads(1)
+    reference = _one_update(ChunkedPPO, update_chunk=128)
+    zero = _one_update(ChunkedPPO, update_chunk=128, temporal_smoothness_coef=0.0, spatial_smoothness_coef=0.0)
+    assert "train/temporal_smoothness" not in zero.logger.name_to_value
+    after_ref, after = _parameters(reference), _parameters(zero)
+    for name in after_ref:
+        assert torch.equal(after[name], after_ref[name]), name
+
+
+@pytest.mark.parametrize("name", ["temporal_smoothness_coef", "spatial_smoothness_coef", "spatial_smoothness_sigma"])
+@pytest.mark.parametrize("value, error", [(-0.1, ValueError), (float("nan"), ValueError), (float("inf"), ValueError),
+                                          ("0.1", TypeError), (True, TypeError), (None, TypeError)])
+def test_bad_smoothness_settings(name, value, error):
+    with pytest.raises(error, match=name):
+        ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), n_steps=8, batch_size=16, device="cpu", **{name: value})
+
+
+def test_smoothness_needs_box_spaces_and_survives_save_and_load(tmp_path):
+    import gymnasium as gym
+
+    with pytest.raises(ValueError, match="temporal_smoothness_coef applies to a Box"):
+        ChunkedPPO("MlpPolicy", gym.make("CartPole-v1"), temporal_smoothness_coef=0.1, n_steps=8, batch_size=8, device="cpu")
+    with pytest.raises(ValueError, match="spatial_smoothness_sigma must be positive"):
+        ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), spatial_smoothness_sigma=0.0, n_steps=8, batch_size=16, device="cpu")
+    model = ChunkedPPO("MlpPolicy", make_sb3_vec_env(2, seed=0), temporal_smoothness_coef=0.25, spatial_smoothness_coef=0.5,
+                       spatial_smoothness_sigma=0.1, n_steps=8, batch_size=16, device="cpu")
+    model.save(tmp_path / "model.zip")
+    loaded = ChunkedPPO.load(tmp_path / "model.zip", device="cpu")
+    assert (loaded.temporal_smoothness_coef, loaded.spatial_smoothness_coef, loaded.spatial_smoothness_sigma) == (0.25, 0.5, 0.1)

@@ -43,6 +43,8 @@ unchanged.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch as th
 from gymnasium import spaces
@@ -131,7 +133,11 @@ class ChunkedPPO(PPO):
             ``e ~ N(0, spatial_smoothness_sigma^2 I)`` drawn afresh for each sample and each minibatch;
             ``train/spatial_smoothness`` logs its mean.
         spatial_smoothness_sigma: the std of ``e`` (a number > 0, 0.05 by default), in the units of the observation
-            the policy sees. Every other argument is PPO's.
+            the policy sees.
+        smoothness_share: the share of each minibatch's samples (in (0, 1], 1 by default) the smoothness charges are
+            computed on, a random subset (the same whatever ``update_chunk``) scaled up to the minibatch's mean: each
+            charged sample costs one more pass of the actor per charge, so a share of 0.25 keeps most of the update's
+            speed. Every other argument is PPO's.
 
     Every ``torch.nn.Tanh`` of the policy is a ``FastTanh`` (the same function, faster); a saved model is SB3's
     and loads as ``PPO`` too.
@@ -147,7 +153,7 @@ class ChunkedPPO(PPO):
 
     def __init__(self, *args, update_chunk: int | None = None, update_precision: str = "float32", tanh: str = "fast",
                  bounds_loss_coef: float = 0.0, temporal_smoothness_coef: float = 0.0, spatial_smoothness_coef: float = 0.0,
-                 spatial_smoothness_sigma: float = 0.05, **kwargs):
+                 spatial_smoothness_sigma: float = 0.05, smoothness_share: float = 1.0, **kwargs):
         if update_chunk is not None:
             if isinstance(update_chunk, bool) or not isinstance(update_chunk, (int, np.integer)):
                 raise TypeError(f"update_chunk must be an int or None, got {type(update_chunk).__name__}")
@@ -166,6 +172,10 @@ class ChunkedPPO(PPO):
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
         if spatial_smoothness_sigma <= 0:
             raise ValueError(f"spatial_smoothness_sigma must be positive, got {spatial_smoothness_sigma}")
+        if isinstance(smoothness_share, bool) or not isinstance(smoothness_share, (int, float, np.integer, np.floating)):
+            raise TypeError(f"smoothness_share must be a real number, got {type(smoothness_share).__name__}")
+        if not 0 < smoothness_share <= 1:
+            raise ValueError(f"smoothness_share must be in (0, 1], got {smoothness_share}")
         _check_tanh(tanh)
         self.update_chunk = update_chunk
         self.update_precision = update_precision
@@ -174,6 +184,7 @@ class ChunkedPPO(PPO):
         self.temporal_smoothness_coef = float(temporal_smoothness_coef)
         self.spatial_smoothness_coef = float(spatial_smoothness_coef)
         self.spatial_smoothness_sigma = float(spatial_smoothness_sigma)
+        self.smoothness_share = float(smoothness_share)
         super().__init__(*args, **kwargs)
 
     @property
@@ -250,14 +261,14 @@ class ChunkedPPO(PPO):
                     advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
                 self.policy.optimizer.zero_grad()
                 # sums over the minibatch: policy loss, value loss, entropy loss, clipped samples, KL estimate, bounds loss,
-                # temporal distances and their samples, spatial distances
-                sums = np.zeros(9)
+                # temporal distances and their samples, spatial distances and their samples, weighted smoothness charges
+                sums = np.zeros(11)
                 for start in range(0, batch, chunk_size):
                     chunk = slice(start, start + chunk_size)
                     sums += self._chunk_backward(rollout_data, advantages, chunk, batch, clip_range, clip_range_vf, nexts)
                 policy_loss, value_loss, entropy_loss, clipped, kl, bounds_loss = sums[:6] / batch
                 temporal_sums += sums[6:8]
-                spatial_sums += (sums[8], batch)
+                spatial_sums += sums[8:10]
                 pg_losses.append(policy_loss)
                 value_losses.append(value_loss)
                 entropy_losses.append(entropy_loss)
@@ -265,7 +276,7 @@ class ChunkedPPO(PPO):
                 approx_kl_divs.append(kl)
                 bounds_losses.append(bounds_loss)
                 loss_value = (policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss + self.bounds_loss_coef * bounds_loss
-                              + (self.temporal_smoothness_coef * sums[6] + self.spatial_smoothness_coef * sums[8]) / batch)
+                              + sums[10] / batch)
                 if self.target_kl is not None and kl > 1.5 * self.target_kl:
                     continue_training = False
                     if self.verbose >= 1:
@@ -288,7 +299,7 @@ class ChunkedPPO(PPO):
             self.logger.record("train/bounds_loss", np.mean(bounds_losses))
         if self.temporal_smoothness_coef and temporal_sums[1]:
             self.logger.record("train/temporal_smoothness", temporal_sums[0] / temporal_sums[1])
-        if self.spatial_smoothness_coef:
+        if self.spatial_smoothness_coef and spatial_sums[1]:
             self.logger.record("train/spatial_smoothness", spatial_sums[0] / spatial_sums[1])
         self.logger.record("train/explained_variance", explained_var)
         if hasattr(self.policy, "log_std"):
@@ -366,7 +377,8 @@ class ChunkedPPO(PPO):
                         clip_range_vf: float | None, nexts: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """Back-propagate one chunk's share of the minibatch loss (its sums divided by the minibatch size ``batch``);
         returns the chunk's sums of the policy loss, the value loss, the entropy loss, the clipped samples, the KL
-        estimate, the bounds loss, the temporal distances and the samples they cover, and the spatial distances.
+        estimate, the bounds loss, the temporal distances and the samples they cover, the spatial distances and their
+        samples, and the weighted smoothness charges scaled to the whole chunk.
         ``nexts``: the minibatch's next observations and whether each has one (``_successors``), with
         ``temporal_smoothness_coef``."""
         actions = data.actions[chunk]
@@ -388,25 +400,35 @@ class ChunkedPPO(PPO):
             charge = self._bounds_loss(mean)
             loss = loss + self.bounds_loss_coef * charge
             bounds_loss = charge.item()
+        # the smoothness charges on the minibatch's first ceil(share * batch) samples (a random subset: the minibatch is
+        # shuffled), whatever the chunks, scaled up to the minibatch's mean; `charged` of them in this chunk
+        size = len(mean) if mean is not None else 0
+        subset = max(1, math.ceil(self.smoothness_share * batch))
+        charged = max(0, min(size, subset - chunk.start))
+        scale, smooth_loss, sampled = batch / subset, 0.0, 0.0
+        if not charged:
+            nexts = None
         if nexts is not None:
-            has_next = th.as_tensor(nexts[1][chunk], device=mean.device)
-            if bool(has_next.any()):
-                following = self.rollout_buffer.to_torch(nexts[0][chunk][nexts[1][chunk]])
-                charge = _distances(mean[has_next], self._mean_actions(following)).sum()
-                loss = loss + self.temporal_smoothness_coef * charge
-                temporal, covered = charge.item(), float(has_next.sum())
-        if self.spatial_smoothness_coef:
-            observations = data.observations[chunk]
+            rows = nexts[1][chunk][:charged]
+            if rows.any():
+                following = self.rollout_buffer.to_torch(nexts[0][chunk][:charged][rows])
+                charge = _distances(mean[:charged][th.as_tensor(rows)], self._mean_actions(following)).sum()
+                loss = loss + self.temporal_smoothness_coef * scale * charge
+                temporal, covered = charge.item(), float(rows.sum())
+                smooth_loss += self.temporal_smoothness_coef * scale * temporal
+        if self.spatial_smoothness_coef and charged:
+            observations = data.observations[chunk][:charged]
             shifted = observations + self.spatial_smoothness_sigma * th.randn_like(observations)
-            charge = _distances(mean, self._mean_actions(shifted)).sum()
-            loss = loss + self.spatial_smoothness_coef * charge
-            spatial = charge.item()
+            charge = _distances(mean[:charged], self._mean_actions(shifted)).sum()
+            loss = loss + self.spatial_smoothness_coef * scale * charge
+            spatial, sampled = charge.item(), float(charged)
+            smooth_loss += self.spatial_smoothness_coef * scale * spatial
         (loss / batch).backward()
         with th.no_grad():
             clipped = (th.abs(ratio - 1) > clip_range).sum()
             kl = ((ratio - 1) - log_ratio).sum()
         return np.array([policy_loss.item(), value_loss.item(), entropy_loss.item(), clipped.item(), kl.item(), bounds_loss,
-                         temporal, covered, spatial])
+                         temporal, covered, spatial, sampled, smooth_loss])
 
 
 def _distances(a: th.Tensor, b: th.Tensor) -> th.Tensor:

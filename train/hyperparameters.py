@@ -37,6 +37,7 @@ PPO_KEYS = (
     "temporal_smoothness_coef",  # ChunkedPPO's: the mean action's change between consecutive observations (CAPS)
     "spatial_smoothness_coef",  # ChunkedPPO's: the mean action's change under a small noise on the observation (CAPS)
     "spatial_smoothness_sigma",  # ChunkedPPO's: that noise's std
+    "smoothness_share",  # ChunkedPPO's: the share of the samples the smoothness charges are computed on
 )
 
 

@@ -138,7 +138,7 @@ _MAPPED = {
     "max_grad_norm": "grad_clip",
 }
 _REFUSED = ("target_kl", "use_sde", "sde_sample_freq", "callback", "bounds_loss_coef", "temporal_smoothness_coef",
-            "spatial_smoothness_coef", "spatial_smoothness_sigma")
+            "spatial_smoothness_coef", "spatial_smoothness_sigma", "smoothness_share")
 
 
 def resolve_config(args: RLlibArgs) -> dict:

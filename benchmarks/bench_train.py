@@ -71,9 +71,15 @@ ALGOS = ("chunked", "bfloat16", "sb3")
 (``--update-precision bfloat16``; timed only on a CPU with bfloat16 arithmetic), SB3's ``PPO`` (the reference)."""
 
 
+SMOOTHING = {"temporal_smoothness_coef": 0.1, "spatial_smoothness_coef": 0.1}
+"""The smoothness charges ``algo="smooth-<share>"`` adds (``benchmarks/bench_smoothness.py``)."""
+
+
 def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") -> dict:
     """PPO as ``train.ppo`` builds it for ``env_id`` (``algo="bfloat16"``: its update in bfloat16; ``"sb3"``: SB3's
-    ``PPO`` instead of ``ChunkedPPO``), timed over ``rollouts`` rollouts after a warm-up one."""
+    ``PPO`` instead of ``ChunkedPPO``; ``"smooth-<share>"``: ``ChunkedPPO`` with ``SMOOTHING`` on that share of the
+    samples, in place of the configuration's own smoothness settings), timed over ``rollouts`` rollouts after a
+    warm-up one."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
@@ -101,11 +107,14 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
     inner.step_wait = timed_step_wait
     if config["normalize"] is not False:  # as train.ppo wraps it; SB3's own class for SB3's PPO
         venv = (VecNormalize if algo == "sb3" else BatchVecNormalize)(venv, **config["normalize"])
-    precision = {"chunked": config["update_precision"], "bfloat16": "bfloat16", "sb3": "float32"}[algo]
+    kwargs = ppo_kwargs(config)
+    if algo.startswith("smooth-"):
+        kwargs.update(SMOOTHING, smoothness_share=float(algo[len("smooth-"):]))
+    precision = {"bfloat16": "bfloat16", "sb3": "float32"}.get(algo, config["update_precision"])
     if algo == "sb3":
-        model = PPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, **ppo_kwargs(config))
+        model = PPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, **kwargs)
     else:
-        model = ChunkedPPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, update_precision=precision, **ppo_kwargs(config))
+        model = ChunkedPPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, update_precision=precision, **kwargs)
     rollout_steps = n_envs * model.n_steps
 
     class Phases(BaseCallback):

@@ -160,7 +160,7 @@ def test_bad_update_chunk(chunk, error):
 def test_training_speed_benchmark_runs_one_case():
     """``benchmarks/bench_train.py`` measures one case in a fresh process and reports its shares (tiny budget)."""
     script = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_train.py"
-    for algo in ("chunked", "bfloat16", "sb3"):
+    for algo in ("chunked", "bfloat16", "sb3", "smooth-0.25"):  # the last: benchmarks/bench_smoothness.py's case
         done = subprocess.run([sys.executable, str(script), "--one", "leg_env/PlanarLegHop-v4", "1", algo, "--rollouts", "2"],
                               capture_output=True, text=True, timeout=300, check=False)
         assert done.returncode == 0, done.stderr[-2000:]

@@ -77,9 +77,10 @@ SMOOTHING = {"temporal_smoothness_coef": 0.1, "spatial_smoothness_coef": 0.1}
 
 def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") -> dict:
     """PPO as ``train.ppo`` builds it for ``env_id`` (``algo="bfloat16"``: its update in bfloat16; ``"sb3"``: SB3's
-    ``PPO`` instead of ``ChunkedPPO``; ``"smooth-<share>"``: ``ChunkedPPO`` with ``SMOOTHING`` on that share of the
-    samples, in place of the configuration's own smoothness settings), timed over ``rollouts`` rollouts after a
-    warm-up one."""
+    ``PPO`` instead of ``ChunkedPPO``, without the configuration's ``ChunkedPPO`` terms, which SB3's has not;
+    ``"smooth-<share>"``: ``ChunkedPPO`` with ``SMOOTHING`` on that share of the samples, ``"smooth-0"`` with no
+    smoothness charge, in place of the configuration's own smoothness settings), timed over ``rollouts`` rollouts after
+    a warm-up one."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
@@ -88,6 +89,7 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
     from leg_env.sb3 import make_sb3_vec_env
     from train.chunked_ppo import ChunkedPPO
     from train.normalize import BatchVecNormalize
+    from train.hyperparameters import CHUNKED_PPO_KEYS
     from train.ppo import TrainArgs, ppo_kwargs, resolve_config
 
     torch.set_num_threads(threads)
@@ -109,7 +111,14 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
         venv = (VecNormalize if algo == "sb3" else BatchVecNormalize)(venv, **config["normalize"])
     kwargs = ppo_kwargs(config)
     if algo.startswith("smooth-"):
-        kwargs.update(SMOOTHING, smoothness_share=float(algo[len("smooth-"):]))
+        share = float(algo[len("smooth-"):])
+        for key in (*SMOOTHING, "smoothness_share"):
+            kwargs.pop(key, None)
+        if share > 0.0:
+            kwargs.update(SMOOTHING, smoothness_share=share)
+    if algo == "sb3":
+        kwargs = {key: value for key, value in kwargs.items() if key not in CHUNKED_PPO_KEYS}
+    extra = sorted(key for key in CHUNKED_PPO_KEYS if kwargs.get(key))  # the ChunkedPPO terms of the trainer timed
     precision = {"bfloat16": "bfloat16", "sb3": "float32"}.get(algo, config["update_precision"])
     if algo == "sb3":
         model = PPO(config["policy"], venv, seed=SEED, device="cpu", verbose=0, **kwargs)
@@ -159,6 +168,7 @@ def train_rate(env_id: str, rollouts: int, threads: int, algo: str = "chunked") 
         "update": spent["update"] / wall,
         "gradient_steps": ppo["n_epochs"] * rollout_steps // ppo["batch_size"],
         "env_kwargs": config["env_kwargs"],
+        "chunked_terms": extra,
     }
 
 
@@ -209,10 +219,12 @@ def main(argv: list[str] | None = None) -> None:
         medians = {case: _median(runs[case]) for case in cases}
         results = [medians[(k, "chunked")] for k in threads]
         reference = env_rate(env_id, results[0]["n_envs"], results[0]["env_kwargs"])
+        terms = results[0]["chunked_terms"]
+        with_terms = f" (ChunkedPPO with the configuration's own terms {', '.join(terms)}, which SB3's PPO has not)" if terms else ""
         for k in threads:
             for algo in algos[:-1]:
                 ratios.append(f"  {env_id}, torch on {k} thread{'s' * (k > 1)}: ChunkedPPO ({medians[(k, algo)]['precision']}) / SB3 PPO, "
-                              f"medians of {args.repeats} runs: {medians[(k, algo)]['rate'] / medians[(k, 'sb3')]['rate']:.2f}x")
+                              f"medians of {args.repeats} runs: {medians[(k, algo)]['rate'] / medians[(k, 'sb3')]['rate']:.2f}x{with_terms}")
         for r in medians.values():
             trainer = {"chunked": "ChunkedPPO", "bfloat16": "ChunkedPPO, --update-precision bfloat16", "sb3": "SB3 PPO (reference)"}[r["algo"]]
             rows.append(
@@ -236,7 +248,8 @@ def main(argv: list[str] | None = None) -> None:
         f"`ChunkedPPO` (`train.chunked_ppo`: SB3's PPO with each minibatch's gradient summed over chunks of {UPDATE_CHUNK:,} samples per torch thread, "
         "its tanh computed as 2 sigmoid(2x) - 1), the same with its update's hidden layers in bfloat16 (`--update-precision bfloat16`, "
         "on a CPU with bfloat16 arithmetic), both over `train.normalize.BatchVecNormalize` as `train.ppo` wraps the env, "
-        "and SB3's `PPO` over SB3's `VecNormalize` as the reference. "
+        "and SB3's `PPO` over SB3's `VecNormalize` as the reference (without a configuration's `ChunkedPPO` terms, the "
+        "smoothness and bounds charges, which SB3's PPO has not: `benchmarks/bench_smoothness.py` times what they cost). "
         "Shares of the wall-clock: the rollout (policy forward pass, env step, rollout buffer), of which the env step "
         "(the `leg_env.sb3` adapter), and the update (the gradient steps). The last column: the native batch alone "
         "under random actions, in the same run.",

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import yaml
 
-__all__ = ["DEFAULT_HYPERPARAMS", "ZOO_KEYS", "PPO_KEYS", "parse_override", "load_hyperparams", "linear_schedule_start",
+__all__ = ["DEFAULT_HYPERPARAMS", "ZOO_KEYS", "PPO_KEYS", "CHUNKED_PPO_KEYS", "parse_override", "load_hyperparams", "linear_schedule_start",
            "class_at", "display_path"]
 
 DEFAULT_HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams" / "ppo.yml"
@@ -39,6 +39,10 @@ PPO_KEYS = (
     "spatial_smoothness_sigma",  # ChunkedPPO's: that noise's std
     "smoothness_share",  # ChunkedPPO's: the share of the samples the smoothness charges are computed on
 )
+CHUNKED_PPO_KEYS = ("bounds_loss_coef", "temporal_smoothness_coef", "spatial_smoothness_coef", "spatial_smoothness_sigma",
+                    "smoothness_share")
+"""The keys of ``PPO_KEYS`` that are ``train.chunked_ppo.ChunkedPPO``'s own terms of the update: SB3's ``PPO``, the Zoo and
+RLlib's PPO have none of them."""
 
 
 def parse_override(item: str) -> tuple[str, object]:

@@ -66,7 +66,7 @@ from typing import ClassVar
 import yaml
 
 from train.checkpoints import checkpoint_dirs, set_aside, write_checkpoint, write_json_atomic
-from train.hyperparameters import linear_schedule_start, load_hyperparams
+from train.hyperparameters import CHUNKED_PPO_KEYS, linear_schedule_start, load_hyperparams
 from train.run import Every, Run, RunArgs, machine, main as run_main, notice, open_run
 from train.runfolder import RunKind
 
@@ -137,8 +137,7 @@ _MAPPED = {
     "vf_coef": "vf_loss_coeff",
     "max_grad_norm": "grad_clip",
 }
-_REFUSED = ("target_kl", "use_sde", "sde_sample_freq", "callback", "bounds_loss_coef", "temporal_smoothness_coef",
-            "spatial_smoothness_coef", "spatial_smoothness_sigma", "smoothness_share")
+_REFUSED = ("target_kl", "use_sde", "sde_sample_freq", "callback", *CHUNKED_PPO_KEYS)
 
 
 def resolve_config(args: RLlibArgs) -> dict:

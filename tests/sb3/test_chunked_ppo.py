@@ -167,6 +167,25 @@ def test_training_speed_benchmark_runs_one_case():
         result = json.loads([line for line in done.stdout.splitlines() if line.startswith("RESULT ")][-1][len("RESULT "):])
         assert result["algo"] == algo and result["precision"] in ("float32", "bfloat16") and result["rate"] > 0 and result["gradient_steps"] == 8  # 4 epochs of 2 minibatches
         assert abs(result["rollout"] + result["update"] - 1.0) < 0.05 and 0.0 < result["env"] < result["rollout"]
+        assert result["chunked_terms"] == (["smoothness_share", "spatial_smoothness_coef", "temporal_smoothness_coef"] if algo == "smooth-0.25" else [])
+
+
+def test_training_speed_benchmark_takes_a_configuration_with_chunked_terms():
+    """The balance configuration holds ``ChunkedPPO``'s own terms: timed as it is, SB3's reference runs without them
+    (SB3's ``PPO`` takes none), and the smoothness benchmark's reference without its smoothness charges."""
+    from train.hyperparameters import CHUNKED_PPO_KEYS, load_hyperparams
+
+    root = Path(__file__).resolve().parents[2]
+    own = sorted(k for k in CHUNKED_PPO_KEYS if load_hyperparams(root / "train" / "hyperparams" / "ppo.yml", "leg_env/PlanarLegBalance-v1").get(k))
+    assert own  # else this test tests nothing
+    script = root / "benchmarks" / "bench_train.py"
+    expected = {"chunked": own, "sb3": [], "smooth-0": [k for k in own if k == "bounds_loss_coef"]}
+    for algo, terms in expected.items():
+        done = subprocess.run([sys.executable, str(script), "--one", "leg_env/PlanarLegBalance-v1", "1", algo, "--rollouts", "2"],
+                              capture_output=True, text=True, timeout=300, check=False)
+        assert done.returncode == 0, done.stderr[-2000:]
+        result = json.loads([line for line in done.stdout.splitlines() if line.startswith("RESULT ")][-1][len("RESULT "):])
+        assert result["chunked_terms"] == terms, algo
 
 
 def test_default_chunk_is_per_torch_thread():
